@@ -1,0 +1,47 @@
+"""On-disk formats: task directory, hidden targets, suite manifest, trajectory JSONL, final.json.
+
+Every reader validates and raises :class:`FormatError` naming the file and the problem.
+The schemas are documented in ``docs/formats.md``.
+"""
+
+from aw.formats.errors import FormatError
+from aw.formats.suite import SuiteEntry, SuiteManifest, read_manifest, write_manifest
+from aw.formats.targets import PartTarget, Targets, read_targets, write_targets
+from aw.formats.task import CONVENTIONS, Task, TaskPart, read_task, write_task
+from aw.formats.trajectory import (
+    Trajectory,
+    TrajectoryCall,
+    TrajectoryEnd,
+    TrajectoryHeader,
+    TrajectoryWriter,
+    FinalState,
+    read_final,
+    read_trajectory,
+    write_final,
+)
+
+__all__ = [
+    "FormatError",
+    "CONVENTIONS",
+    "Task",
+    "TaskPart",
+    "read_task",
+    "write_task",
+    "PartTarget",
+    "Targets",
+    "read_targets",
+    "write_targets",
+    "SuiteEntry",
+    "SuiteManifest",
+    "read_manifest",
+    "write_manifest",
+    "Trajectory",
+    "TrajectoryHeader",
+    "TrajectoryCall",
+    "TrajectoryEnd",
+    "TrajectoryWriter",
+    "FinalState",
+    "read_trajectory",
+    "read_final",
+    "write_final",
+]

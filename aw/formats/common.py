@@ -1,0 +1,25 @@
+"""Field types shared by the schemas."""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated
+
+from pydantic import AfterValidator
+
+PART_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+SOURCES = ("partnet", "ikea_manual", "assemblybench", "fantastic_breaks")
+CONDITIONS = ("none", "image", "manual")
+
+
+def _check_pose(values: list[float]) -> list[float]:
+    if len(values) != 7:
+        raise ValueError(f"a pose is [x, y, z, qw, qx, qy, qz]: 7 numbers, got {len(values)}")
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError("pose contains non-finite values")
+    if math.sqrt(sum(v * v for v in values[3:])) < 1e-9:
+        raise ValueError("pose quaternion has zero length")
+    return [float(v) for v in values]
+
+
+PoseList = Annotated[list[float], AfterValidator(_check_pose)]

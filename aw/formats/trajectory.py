@@ -1,0 +1,228 @@
+"""Episode recordings: ``trajectory.jsonl`` (append-only, flushed per line) and ``final.json``.
+
+Line types, in order: one ``header``, any number of ``call`` lines, at most one ``end``.
+A call line carries ``poses`` (every part's pose after the call) only when some pose changed.
+A checkpoint for scoring is the initial state plus the state after every pose-changing call.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import orjson
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from aw.formats.common import PoseList
+from aw.formats.errors import FormatError
+from aw.formats.io import describe_validation_error, parse_model, read_model, write_json_atomic
+
+TRAJECTORY_FORMAT = "assemblyworld.trajectory"
+END_REASONS = ("finished", "timeout", "error", "disconnect", "interrupted")
+
+
+class CameraState(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    target: list[float] = Field(min_length=3, max_length=3)
+    yaw: float
+    pitch: float
+    distance: float = Field(gt=0)
+
+
+class TrajectoryHeader(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    type: Literal["header"] = "header"
+    format: Literal["assemblyworld.trajectory"] = TRAJECTORY_FORMAT
+    format_version: Literal[1] = 1
+    task_id: str
+    system: str = ""
+    started_at: str = Field(description="ISO 8601 UTC time of start_episode (or of the server start)")
+    part_ids: list[str] = Field(min_length=1)
+    initial_poses: dict[str, PoseList]
+    camera: CameraState | None = None
+
+
+class TrajectoryCall(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    type: Literal["call"] = "call"
+    seq: int = Field(ge=1)
+    t: float = Field(description="seconds since start_episode (negative before it)")
+    tool: str
+    args: dict[str, Any] = Field(default_factory=dict)
+    ok: bool
+    error: str | None = None
+    changed: list[str] = Field(default_factory=list)
+    poses: dict[str, PoseList] | None = None
+    camera: CameraState | None = None
+    image: str | None = Field(default=None, description="captured PNG, relative to the run dir")
+    episode_active: bool = True
+
+
+class TrajectoryEnd(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    type: Literal["end"] = "end"
+    reason: Literal["finished", "timeout", "error", "disconnect", "interrupted"]
+    t: float
+    message: str = ""
+    poses: dict[str, PoseList]
+
+
+class FinalState(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    format: Literal["assemblyworld.final"] = "assemblyworld.final"
+    format_version: Literal[1] = 1
+    task_id: str
+    reason: Literal["finished", "timeout", "error", "disconnect", "interrupted"]
+    poses: dict[str, PoseList]
+
+
+@dataclass
+class Checkpoint:
+    """A scorable state: ``seq`` 0 is the initial state."""
+
+    seq: int
+    t: float
+    poses: dict[str, list[float]]
+
+
+@dataclass
+class Trajectory:
+    path: Path
+    header: TrajectoryHeader
+    calls: list[TrajectoryCall] = field(default_factory=list)
+    end: TrajectoryEnd | None = None
+    truncated: bool = False
+    problems: list[str] = field(default_factory=list)
+
+    def checkpoints(self) -> list[Checkpoint]:
+        """Initial state, then the state after every pose-changing call, in order."""
+        out = [Checkpoint(0, 0.0, dict(self.header.initial_poses))]
+        for c in self.calls:
+            if c.poses is not None:
+                out.append(Checkpoint(c.seq, c.t, dict(c.poses)))
+        return out
+
+    def final_poses(self) -> dict[str, list[float]]:
+        """The end line's poses if the episode closed, else the last recorded state."""
+        if self.end is not None:
+            return dict(self.end.poses)
+        return self.checkpoints()[-1].poses
+
+
+def _parse_line(raw: bytes, lineno: int, path: Path) -> BaseModel:
+    obj = orjson.loads(raw)
+    if not isinstance(obj, dict) or "type" not in obj:
+        raise FormatError(path, f"line {lineno}: not a trajectory record (no 'type')")
+    model = {"header": TrajectoryHeader, "call": TrajectoryCall, "end": TrajectoryEnd}.get(obj["type"])
+    if model is None:
+        raise FormatError(path, f"line {lineno}: unknown record type {obj['type']!r}")
+    try:
+        return model.model_validate(obj)
+    except ValidationError as exc:
+        raise FormatError(path, f"line {lineno}: {describe_validation_error(exc)}") from None
+
+
+def read_trajectory(path: str | Path) -> Trajectory:
+    """Read a trajectory. A last line cut mid-write is dropped (``truncated=True``); any other
+    malformed line raises :class:`FormatError` naming the file and line."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise FormatError(path, "file not found") from None
+    lines = data.split(b"\n")
+    complete_tail = data.endswith(b"\n")
+    if complete_tail:
+        lines = lines[:-1]
+    traj: Trajectory | None = None
+    truncated = False
+    for i, raw in enumerate(lines, start=1):
+        if not raw.strip():
+            continue
+        is_last = i == len(lines)
+        try:
+            rec = _parse_line(raw, i, path)
+        except orjson.JSONDecodeError:
+            if is_last and not complete_tail:
+                truncated = True
+                break
+            raise FormatError(path, f"line {i}: not valid JSON") from None
+        if traj is None:
+            if not isinstance(rec, TrajectoryHeader):
+                raise FormatError(path, f"line {i}: the first record must be the header")
+            traj = Trajectory(path=path, header=rec)
+            continue
+        if traj.end is not None:
+            raise FormatError(path, f"line {i}: record after the end record")
+        if isinstance(rec, TrajectoryHeader):
+            raise FormatError(path, f"line {i}: a second header")
+        if isinstance(rec, TrajectoryCall):
+            if traj.calls and rec.seq <= traj.calls[-1].seq:
+                raise FormatError(path, f"line {i}: sequence number {rec.seq} is not increasing")
+            traj.calls.append(rec)
+        else:
+            traj.end = rec
+    if traj is None:
+        raise FormatError(path, "empty or truncated before the header line")
+    traj.truncated = truncated or (traj.end is None)
+    if truncated:
+        traj.problems.append("last line was cut mid-write and was dropped")
+    if traj.end is None:
+        traj.problems.append("no end record (the episode did not close)")
+    return traj
+
+
+class TrajectoryWriter:
+    """Appends records and flushes each one, so a crash loses at most the call in flight.
+
+    Thread-safe; ``close`` is idempotent.
+    """
+
+    def __init__(self, path: str | Path, header: TrajectoryHeader):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._fh = open(self.path, "ab")
+        self._lock = threading.Lock()
+        self._closed = False
+        self._write(header)
+
+    def _write(self, rec: BaseModel) -> None:
+        line = orjson.dumps(rec.model_dump(mode="json", exclude_none=True), option=orjson.OPT_SERIALIZE_NUMPY)
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("trajectory already closed")
+            self._fh.write(line + b"\n")
+            self._fh.flush()
+            os.fsync(self._fh.fileno())
+
+    def call(self, rec: TrajectoryCall) -> None:
+        self._write(rec)
+
+    def end(self, rec: TrajectoryEnd) -> None:
+        self._write(rec)
+        self.close()
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def close(self) -> None:
+        with self._lock:
+            if not self._closed:
+                self._closed = True
+                self._fh.close()
+
+
+def read_final(path: str | Path) -> FinalState:
+    return read_model(FinalState, path)
+
+
+def write_final(path: str | Path, final: FinalState) -> None:
+    write_json_atomic(path, final)
+
+
+def parse_final(data: Any, path: str | Path) -> FinalState:
+    return parse_model(FinalState, data, path)

@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Installs AssemblyWorld into .venv/ at the repository root, with the system libraries that
+# offscreen rendering needs. Safe to re-run: it skips what is already there.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+need_pkgs=()
+for lib in libEGL.so.1 libOSMesa.so.8 libGL.so.1 libgbm.so.1 libOpenGL.so.0; do
+  ldconfig -p 2>/dev/null | grep -q "$lib" || need_pkgs+=("$lib")
+done
+if [ ${#need_pkgs[@]} -gt 0 ]; then
+  debs="libegl1 libegl-mesa0 libgl1-mesa-dri libgbm1 libopengl0 libgl1 libosmesa6"
+  if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null; then
+    echo "[install] offscreen rendering libraries missing (${need_pkgs[*]}): apt-get install $debs"
+    (apt-get install -y -q $debs >/dev/null 2>&1) || { apt-get update -q >/dev/null && apt-get install -y -q $debs >/dev/null; }
+  else
+    echo "[install] ERROR: offscreen rendering needs these libraries: ${need_pkgs[*]}" >&2
+    echo "[install] Install them as root:  apt-get install -y $debs" >&2
+    exit 1
+  fi
+fi
+
+PY=${PYTHON:-python3}
+"$PY" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)' || {
+  echo "[install] ERROR: Python 3.11+ is needed ($PY is $("$PY" --version 2>&1))" >&2; exit 1; }
+if [ ! -x .venv/bin/python ]; then
+  echo "[install] creating .venv"
+  "$PY" -m venv .venv
+fi
+stamp=.venv/.aw-installed
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+  echo "[install] installing AssemblyWorld and its dependencies into .venv (first time: a few minutes)"
+  .venv/bin/python -m pip install -q --upgrade pip >/dev/null
+  .venv/bin/python -m pip install -q -e ".[test]"
+  touch "$stamp"
+fi
+echo "[install] ready: $(.venv/bin/python --version), .venv/bin/aw-*"
