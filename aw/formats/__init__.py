@@ -5,6 +5,7 @@ The schemas are documented in ``docs/formats.md``.
 """
 
 from aw.formats.errors import FormatError
+from aw.formats.run import RunInfo, TokenUsage, read_run_info, write_run_info
 from aw.formats.suite import SuiteEntry, SuiteManifest, read_manifest, write_manifest
 from aw.formats.targets import PartTarget, Targets, read_targets, write_targets
 from aw.formats.task import CONVENTIONS, Task, TaskPart, read_task, write_task
@@ -21,6 +22,10 @@ from aw.formats.trajectory import (
 )
 
 __all__ = [
+    "RunInfo",
+    "TokenUsage",
+    "read_run_info",
+    "write_run_info",
     "FormatError",
     "CONVENTIONS",
     "Task",

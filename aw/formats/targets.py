@@ -39,6 +39,12 @@ class Targets(BaseModel):
         default=None, description="dataset-provided groups of interchangeable parts (informational)"
     )
     scale: float = Field(gt=0, description="normalization scale applied to the source geometry")
+    eval_divisor: float | None = Field(
+        default=None,
+        gt=0,
+        description="evaluation scale divisor in baked-mesh units; set when it must not be recomputed "
+        "from the task's parts (missing-part variants keep the original object's scale)",
+    )
     seed: int = 0
     variant: Variant = Field(default_factory=Variant)
 
