@@ -33,6 +33,21 @@ class Camera:
     pitch: float = DEFAULT_PITCH_DEG
     distance: float = 3.0
 
+    def __post_init__(self) -> None:
+        # Validate once here so that every derived axis is finite (pitch +-90 has no "right").
+        try:
+            target = np.array(self.target, dtype=np.float64).reshape(3)
+            yaw, pitch, distance = float(self.yaw), float(self.pitch), float(self.distance)
+        except (TypeError, ValueError):
+            raise ValueError("camera needs a target of 3 numbers and numeric yaw, pitch, distance") from None
+        if not (np.all(np.isfinite(target)) and np.isfinite([yaw, pitch, distance]).all()):
+            raise ValueError("camera target, yaw, pitch and distance must be finite")
+        if not abs(pitch) < 90.0:
+            raise ValueError(f"camera pitch must lie strictly between -90 and 90 degrees, got {pitch:g}")
+        if not distance > 0:
+            raise ValueError(f"camera distance must be positive, got {distance:g}")
+        self.target, self.yaw, self.pitch, self.distance = target, yaw, pitch, distance
+
     @classmethod
     def framing(cls, lo: np.ndarray, hi: np.ndarray, margin: float = 1.15) -> "Camera":
         """Default view that fits the axis-aligned box ``[lo, hi]`` in the frame."""

@@ -53,6 +53,8 @@ def as_finite(values, shape_tail: tuple[int, ...] | None = None, name: str = "ar
 
     ``shape_tail``: required trailing shape, e.g. ``(3,)`` or ``(4,)``.
     """
+    if values is None:
+        raise ValueError(f"{name} must be numeric, got None")
     try:
         arr = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -155,7 +157,9 @@ def quat_from_axis_angle(axis, angle_rad) -> np.ndarray:
     if np.any(n < 1e-12):
         raise ValueError("axis has zero length")
     half = 0.5 * angle[..., None]
-    return np.concatenate([np.cos(half), np.sin(half) * axis / n], axis=-1)
+    vec = np.sin(half) * axis / n
+    w = np.broadcast_to(np.cos(half), vec.shape[:-1] + (1,))
+    return np.concatenate([w, vec], axis=-1)
 
 
 def quat_to_axis_angle(q) -> tuple[np.ndarray, np.ndarray]:
@@ -201,6 +205,7 @@ def euler_xyz_from_matrix(m) -> np.ndarray:
     the Z angle is set to 0 and X absorbs the rest.
     """
     m = as_finite(m, (3, 3), "rotation matrix")
+    _check_rotation(m, "rotation matrix")
     # R = Rx Ry Rz: R[0,2] = sin(b); R[1,2] = -sin(a)cos(b); R[2,2] = cos(a)cos(b);
     # R[0,1] = -cos(b)sin(c); R[0,0] = cos(b)cos(c).
     sb = np.clip(m[..., 0, 2], -1.0, 1.0)
@@ -316,14 +321,17 @@ def matrices_to_poses(m) -> np.ndarray:
     return np.concatenate([m[..., :3, 3], matrix_to_quat(m[..., :3, :3])], axis=-1)
 
 
-def _fix_sign(axis: np.ndarray, centred: np.ndarray, tol: float) -> np.ndarray:
+def _fix_sign(axis: np.ndarray, centred: np.ndarray, tol: float, abs_tol: float) -> np.ndarray:
     """Flip ``axis`` so the centred points' third moment along it is positive.
 
     Symmetric sets (third moment ~ 0) use the first point, in order, with a clearly non-zero
-    projection: deterministic and computed from the points themselves.
+    projection: deterministic and computed from the points themselves. If every projection is
+    below ``abs_tol`` (the points have no extent along ``axis``) the axis is kept as given.
     """
     proj = centred @ axis
-    scale = max(float(np.abs(proj).max()), 1e-300)
+    scale = float(np.abs(proj).max())
+    if scale <= abs_tol:
+        return axis
     m3 = float(np.mean((proj / scale) ** 3))
     if abs(m3) > tol:
         return axis if m3 > 0 else -axis
@@ -333,60 +341,83 @@ def _fix_sign(axis: np.ndarray, centred: np.ndarray, tol: float) -> np.ndarray:
     return axis
 
 
+def _first_component(centred: np.ndarray, basis: np.ndarray, min_norm: float) -> np.ndarray | None:
+    """Unit direction of the first point (in order) whose component in span(``basis`` columns)
+    is longer than ``min_norm``; None if there is none."""
+    comp = centred @ basis
+    norms = np.linalg.norm(comp, axis=1)
+    idx = np.flatnonzero(norms > min_norm)
+    if not idx.size:
+        return None
+    v = basis @ comp[idx[0]]
+    return v / np.linalg.norm(v)
+
+
+def _fixed_orthogonal(e1: np.ndarray) -> np.ndarray:
+    """A unit vector orthogonal to ``e1`` by a fixed rule: the world axis least aligned with it
+    (first of X, Y, Z on ties), orthogonalized. Used only when the points give no direction."""
+    c = np.eye(3)[int(np.argmin(np.abs(e1)))]
+    v = c - (c @ e1) * e1
+    return v / np.linalg.norm(v)
+
+
 def pca_frame(points, rel_tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
     """Right-handed PCA frame of ``points: (n, 3)``.
 
-    Returns ``(origin (3,), axes (3, 3))`` where ``axes[:, k]`` is the k-th principal axis in
-    descending eigenvalue order (so the smallest-variance axis is local Z), and
-    ``axes = [e1, e2, e1 x e2]`` is always a proper rotation. Local coordinates of a point ``p``
-    are ``axes.T @ (p - origin)``.
+    Returns ``(origin (3,), axes (3, 3))`` where ``origin`` is the mean, ``axes[:, k]`` is the
+    k-th principal axis in descending eigenvalue order (so the smallest-variance axis is local
+    Z), and ``axes = [e1, e2, e1 x e2]`` is always a proper rotation. Local coordinates of a
+    point ``p`` are ``axes.T @ (p - origin)``.
 
-    Determinism: each axis's sign makes the third moment of the projections positive (ties:
-    the first point with a non-zero projection lies on the positive side). Inside a repeated
-    eigenspace the basis is fixed from the points: the first axis points along the first point
-    (in order) with a non-zero component in that eigenspace.
+    Determinism (all from the centred points, in order, so the frame moves with the points):
+
+    - signs: e1, then e2, point so that the third moment of the projections is positive; if it
+      vanishes (symmetric sets), so that the first point with a non-zero projection is positive;
+    - eigenvalues equal within ``1e3 * rel_tol`` of the largest are a repeated eigenspace: inside
+      it, the first axis is the direction of the first point with a non-zero component there,
+      and (for a 3D eigenspace) the second is the first point's component orthogonal to it.
+
+    Degenerate sets: coincident points (no extent) give the identity axes; for collinear points
+    e1 is the line and e2 follows a fixed rule (the world axis least aligned with e1,
+    orthogonalized), since the points do not define it.
     """
     pts = as_finite(points, (3,), "points")
     if pts.ndim != 2 or pts.shape[0] < 1:
         raise ValueError(f"points must have shape (n, 3) with n >= 1, got {pts.shape}")
     origin = pts.mean(axis=0)
     centred = pts - origin
-    scatter = centred.T @ centred
-    evals, evecs = np.linalg.eigh(scatter)
+    spread = float(np.sqrt(np.mean(np.sum(centred**2, axis=1))))
+    # Below this the points have no extent (rounding of the mean alone is ~1e-16 * |origin|).
+    floor = 1e-12 * max(1.0, float(np.abs(pts).max()))
+    if spread <= floor:
+        return origin, np.eye(3)
+    min_norm = 1e-6 * spread
+
+    evals, evecs = np.linalg.eigh(centred.T @ centred)
     order = np.argsort(-evals, kind="stable")
     evals, evecs = evals[order], evecs[:, order]
-    top = max(float(evals[0]), 1e-300)
-    spread = float(np.sqrt(np.mean(np.sum(centred**2, axis=1)))) or 1.0
-
+    tie = 1e3 * rel_tol * float(evals[0])
     e1, e2 = evecs[:, 0], evecs[:, 1]
-    # Repeated leading eigenvalues: choose e1 inside the eigenspace from the points.
-    if abs(evals[0] - evals[1]) <= rel_tol * top * 1e3:
-        span = evecs[:, :2] if abs(evals[1] - evals[2]) > rel_tol * top * 1e3 else np.eye(3)
-        comp = centred @ span
-        norms = np.linalg.norm(comp, axis=1)
-        idx = np.flatnonzero(norms > 1e-6 * spread)
-        if idx.size:
-            e1 = span @ comp[idx[0]]
-            e1 /= np.linalg.norm(e1)
-            if span.shape[1] == 2:
-                e2 = np.cross(evecs[:, 2], e1)
-            else:
-                rest = centred - np.outer(centred @ e1, e1)
-                rn = np.linalg.norm(rest, axis=1)
-                j = np.flatnonzero(rn > 1e-6 * spread)
-                e2 = rest[j[0]] / rn[j[0]] if j.size else np.cross(e1, [0.0, 0.0, 1.0] if abs(e1[2]) < 0.9 else [1.0, 0, 0])
-                e2 /= np.linalg.norm(e2)
-    elif abs(evals[1] - evals[2]) <= rel_tol * top * 1e3:
-        # Repeated trailing eigenvalues: e2 from the first point with a component orthogonal to e1.
+    if evals[0] - evals[1] <= tie:
+        # Repeated leading eigenvalues: the basis inside the eigenspace comes from the points.
+        span = evecs[:, :2] if evals[1] - evals[2] > tie else np.eye(3)
+        v = _first_component(centred, span, min_norm)
+        e1 = v if v is not None else e1
+        if span.shape[1] == 2:
+            e2 = np.cross(evecs[:, 2], e1)
+        else:
+            rest = centred - np.outer(centred @ e1, e1)
+            v = _first_component(rest, np.eye(3), min_norm)
+            e2 = v if v is not None else _fixed_orthogonal(e1)
+    elif evals[1] - evals[2] <= tie:
+        # Repeated trailing eigenvalues (collinear sets included): e2 from the first point with a
+        # component orthogonal to e1, else the fixed rule.
         rest = centred - np.outer(centred @ e1, e1)
-        rn = np.linalg.norm(rest, axis=1)
-        j = np.flatnonzero(rn > 1e-6 * spread)
-        if j.size:
-            e2 = rest[j[0]] / rn[j[0]]
-    e1 = _fix_sign(e1, centred, 1e-6)
+        v = _first_component(rest, np.eye(3), min_norm)
+        e2 = v if v is not None else _fixed_orthogonal(e1)
+    e1 = _fix_sign(e1 / np.linalg.norm(e1), centred, 1e-6, min_norm)
     e2 = e2 - (e2 @ e1) * e1
-    e2 /= np.linalg.norm(e2)
-    e2 = _fix_sign(e2, centred, 1e-6)
+    e2 = _fix_sign(e2 / np.linalg.norm(e2), centred, 1e-6, min_norm)
     axes = np.stack([e1, e2, np.cross(e1, e2)], axis=1)
     return origin, axes
 

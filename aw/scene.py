@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -90,6 +90,22 @@ def _axis_rotation(axis: np.ndarray, angle_deg: float) -> np.ndarray:
     return np.eye(3) + np.sin(a) * kx + (1 - np.cos(a)) * (kx @ kx)
 
 
+def _initial_pose(value, pid: str) -> np.ndarray:
+    p = _finite_vector(value, 7, f"initial pose of {pid}", 1e6)
+    n = float(np.linalg.norm(p[3:]))
+    if n < 1e-9:
+        raise SceneError(f"initial pose of {pid} has a zero-length quaternion")
+    q = p[3:] / n
+    p[3:] = q if q[0] >= 0 else -q
+    return p
+
+
+def _check_space(space) -> str:
+    if not isinstance(space, str) or space not in SPACES:
+        raise SceneError(f"space must be 'world' or 'camera', got {space!r}")
+    return space
+
+
 class Scene:
     """Part poses (wire form ``[x, y, z, qw, qx, qy, qz]``), named groups and the camera."""
 
@@ -104,8 +120,12 @@ class Scene:
         self.parts: dict[str, PartInfo] = {p.id: p for p in parts}
         if len(self.parts) != len(parts):
             raise SceneError("part ids must be unique")
+        poses = dict(poses or {})
+        unknown = [pid for pid in poses if pid not in self.parts]
+        if unknown:
+            raise SceneError(f"poses given for unknown part ids {unknown}")
         self.poses: dict[str, np.ndarray] = {
-            pid: np.array(poses[pid] if poses and pid in poses else IDENTITY_POSE, dtype=float) for pid in self.parts
+            pid: _initial_pose(poses[pid], pid) if pid in poses else IDENTITY_POSE.copy() for pid in self.parts
         }
         self.groups: dict[str, Group] = {}
         self._next_group = 1
@@ -157,8 +177,7 @@ class Scene:
         return changed
 
     def _frame(self, space) -> np.ndarray:
-        if space not in SPACES:
-            raise SceneError(f"space must be 'world' or 'camera', got {space!r}")
+        _check_space(space)
         return np.eye(3) if space == "world" else self.camera.axes()
 
     def translate(self, ids, delta, space: str = "world") -> list[str]:
@@ -192,6 +211,8 @@ class Scene:
             c = np.mean([self.poses[pid][:3] for pid in sel], axis=0)
         else:
             c = _finite_vector(pivot, 3, "pivot", MAX_COORDINATE)
+        if np.array_equal(rot, np.eye(3)):
+            return []  # zero angles: leave the poses bit-identical (no float noise from the pivot)
         q = matrix_to_quat(rot)
         new = {}
         for pid in sel:
@@ -245,6 +266,8 @@ class Scene:
         """Remove groups; nothing moves."""
         if isinstance(ids, str) or not isinstance(ids, Sequence) or len(ids) == 0:
             raise SceneError("ids must be a non-empty list of group ids")
+        if not all(isinstance(i, str) for i in ids):
+            raise SceneError("ids must be strings")
         if len(set(ids)) != len(ids):
             raise SceneError("ids must be unique")
         bad = [i for i in ids if i not in self.groups]
@@ -257,12 +280,15 @@ class Scene:
     # ---------------------------------------------------------------- camera
     def move_camera(self, yaw=0.0, pitch=0.0, zoom=1.0, right=0.0, up=0.0) -> Camera:
         """Orbit by relative ``yaw``/``pitch`` degrees, multiply the distance by ``zoom``, and pan
-        the look-at point by ``right``/``up`` scene units along the camera's axes."""
-        yaw = _finite_scalar(yaw, "yaw", *YAW_RANGE)
-        pitch = _finite_scalar(pitch, "pitch", *PITCH_RANGE)
-        zoom = _finite_scalar(zoom, "zoom", *ZOOM_RANGE)
-        right = _finite_scalar(right, "right", -MAX_COORDINATE, MAX_COORDINATE)
-        up = _finite_scalar(up, "up", -MAX_COORDINATE, MAX_COORDINATE)
+        the look-at point by ``right``/``up`` scene units along the camera's axes (None: not given).
+
+        The pan uses the axes of the view before the orbit; the pitch stays within +-85 degrees
+        (clamped), the yaw wraps to (-180, 180]. Returns the new camera."""
+        yaw = 0.0 if yaw is None else _finite_scalar(yaw, "yaw", *YAW_RANGE)
+        pitch = 0.0 if pitch is None else _finite_scalar(pitch, "pitch", *PITCH_RANGE)
+        zoom = 1.0 if zoom is None else _finite_scalar(zoom, "zoom", *ZOOM_RANGE)
+        right = 0.0 if right is None else _finite_scalar(right, "right", -MAX_COORDINATE, MAX_COORDINATE)
+        up = 0.0 if up is None else _finite_scalar(up, "up", -MAX_COORDINATE, MAX_COORDINATE)
         cam = self.camera.copy()
         # Pan in the current view's axes, then orbit about the panned target.
         target = cam.target + right * cam.right + up * cam.up

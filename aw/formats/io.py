@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
-from typing import TypeVar
+from typing import TypeVar, get_args
 
 import orjson
 from pydantic import BaseModel, ValidationError
@@ -25,23 +26,71 @@ def describe_validation_error(exc: ValidationError) -> str:
     return "; ".join(lines)
 
 
+class _DuplicateKey(ValueError):
+    pass
+
+
+def _no_duplicates(pairs: list[tuple[str, object]]) -> dict:
+    out = {}
+    for k, v in pairs:
+        if k in out:
+            raise _DuplicateKey(f"duplicate key {k!r}")
+        out[k] = v
+    return out
+
+
+def _no_constants(name: str) -> object:
+    raise ValueError(f"{name} is not valid JSON")
+
+
+def parse_json_text(raw: bytes) -> object:
+    """Strict JSON: UTF-8, no NaN/Infinity, no duplicate keys (a duplicate id would otherwise
+    silently replace the first). Raises ``ValueError`` with the position."""
+    text = raw.decode("utf-8")  # UnicodeDecodeError is a ValueError
+    return json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constants)
+
+
 def load_json(path: str | Path) -> object:
     path = Path(path)
     try:
         raw = path.read_bytes()
     except FileNotFoundError:
         raise FormatError(path, "file not found") from None
+    except IsADirectoryError:
+        raise FormatError(path, "is a directory, not a file") from None
     except OSError as exc:
         raise FormatError(path, f"cannot be read ({exc.strerror})") from None
     try:
-        return orjson.loads(raw)
-    except orjson.JSONDecodeError as exc:
+        return parse_json_text(raw)
+    except _DuplicateKey as exc:
+        raise FormatError(path, f"not valid: {exc}") from None
+    except ValueError as exc:
         raise FormatError(path, f"not valid JSON ({exc})") from None
 
 
+def check_format_tag(model: type[BaseModel], data: object) -> str | None:
+    """A clear message if ``data`` names another format or an unsupported version of ``model``'s."""
+    fields = model.model_fields
+    if not isinstance(data, dict) or "format" not in fields or "format_version" not in fields:
+        return None
+    expected = fields["format"].default
+    supported = get_args(fields["format_version"].annotation)
+    if "format" in data and data["format"] != expected:
+        return f"format is {data['format']!r}, expected {expected!r}"
+    if "format_version" in data and data["format_version"] not in supported:
+        versions = ", ".join(str(v) for v in supported)
+        return f"unsupported format_version {data['format_version']!r} (this reader knows {versions})"
+    return None
+
+
 def parse_model(model: type[M], data: object, path: str | Path) -> M:
+    problem = check_format_tag(model, data)
+    if problem:
+        raise FormatError(path, problem)
     try:
-        return model.model_validate(data)
+        # Strict on read: a file must hold the right JSON types ("no" is not a boolean, "3" not
+        # an integer); Python callers constructing models keep pydantic's usual coercions.
+        return model.model_validate(data, strict=True)
     except ValidationError as exc:
         raise FormatError(path, describe_validation_error(exc)) from None
 

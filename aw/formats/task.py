@@ -109,9 +109,14 @@ def read_task(task_dir: str | Path, check_files: bool = True) -> Task:
     task = read_model(Task, path)
     task._root = task_dir
     if check_files:
+        root = task_dir.resolve()
         for rel in [p.mesh for p in task.parts] + list(task.references):
-            if not (task_dir / rel).is_file():
+            target = task_dir / rel
+            if not target.is_file():
                 raise FormatError(path, f"listed file {rel} is missing from the task directory")
+            # A symlink must not lead out of the task directory (the server serves only this dir).
+            if not target.resolve().is_relative_to(root):
+                raise FormatError(path, f"listed file {rel} resolves outside the task directory")
     return task
 
 

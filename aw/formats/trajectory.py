@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from aw.formats.common import PoseList
 from aw.formats.errors import FormatError
-from aw.formats.io import describe_validation_error, parse_model, read_model, write_json_atomic
+from aw.formats.io import check_format_tag, describe_validation_error, parse_json_text, parse_model, read_model, write_json_atomic
 
 TRAJECTORY_FORMAT = "assemblyworld.trajectory"
 END_REASONS = ("finished", "timeout", "error", "disconnect", "interrupted")
@@ -112,17 +112,43 @@ class Trajectory:
         return self.checkpoints()[-1].poses
 
 
+_RECORDS: dict[str, type[BaseModel]] = {"header": TrajectoryHeader, "call": TrajectoryCall, "end": TrajectoryEnd}
+
+
+class _BadJSON(Exception):
+    def __init__(self, detail: str):
+        self.detail = detail
+
+
 def _parse_line(raw: bytes, lineno: int, path: Path) -> BaseModel:
-    obj = orjson.loads(raw)
-    if not isinstance(obj, dict) or "type" not in obj:
-        raise FormatError(path, f"line {lineno}: not a trajectory record (no 'type')")
-    model = {"header": TrajectoryHeader, "call": TrajectoryCall, "end": TrajectoryEnd}.get(obj["type"])
-    if model is None:
-        raise FormatError(path, f"line {lineno}: unknown record type {obj['type']!r}")
     try:
-        return model.model_validate(obj)
+        obj = parse_json_text(raw)
+    except ValueError as exc:
+        raise _BadJSON(str(exc)) from None
+    kind = obj.get("type") if isinstance(obj, dict) else None
+    if not isinstance(kind, str):
+        raise FormatError(path, f"line {lineno}: not a trajectory record (no 'type')")
+    model = _RECORDS.get(kind)
+    if model is None:
+        raise FormatError(path, f"line {lineno}: unknown record type {kind!r}")
+    if kind == "header":
+        problem = check_format_tag(TrajectoryHeader, obj)
+        if problem:
+            raise FormatError(path, f"line {lineno}: {problem}")
+    try:
+        return model.model_validate(obj, strict=True)
     except ValidationError as exc:
         raise FormatError(path, f"line {lineno}: {describe_validation_error(exc)}") from None
+
+
+def _check_pose_ids(poses: dict | None, part_ids: list[str], what: str, path: Path) -> None:
+    """Every recorded pose set names exactly the header's parts."""
+    if poses is None:
+        return
+    if set(poses) != set(part_ids):
+        missing = sorted(set(part_ids) - set(poses))
+        extra = sorted(set(poses) - set(part_ids))
+        raise FormatError(path, f"{what}: poses do not match the header's part ids (missing {missing}, unknown {extra})")
 
 
 def read_trajectory(path: str | Path) -> Trajectory:
@@ -133,6 +159,10 @@ def read_trajectory(path: str | Path) -> Trajectory:
         data = path.read_bytes()
     except FileNotFoundError:
         raise FormatError(path, "file not found") from None
+    except IsADirectoryError:
+        raise FormatError(path, "is a directory, not a file") from None
+    except OSError as exc:
+        raise FormatError(path, f"cannot be read ({exc.strerror})") from None
     lines = data.split(b"\n")
     complete_tail = data.endswith(b"\n")
     if complete_tail:
@@ -145,21 +175,30 @@ def read_trajectory(path: str | Path) -> Trajectory:
         is_last = i == len(lines)
         try:
             rec = _parse_line(raw, i, path)
-        except orjson.JSONDecodeError:
+        except _BadJSON as exc:
             if is_last and not complete_tail:
                 truncated = True
                 break
-            raise FormatError(path, f"line {i}: not valid JSON") from None
+            raise FormatError(path, f"line {i}: not valid JSON ({exc.detail})") from None
         if traj is None:
             if not isinstance(rec, TrajectoryHeader):
                 raise FormatError(path, f"line {i}: the first record must be the header")
+            if len(set(rec.part_ids)) != len(rec.part_ids):
+                raise FormatError(path, f"line {i}: duplicate part ids in the header")
+            _check_pose_ids(rec.initial_poses, rec.part_ids, f"line {i}", path)
             traj = Trajectory(path=path, header=rec)
             continue
         if traj.end is not None:
             raise FormatError(path, f"line {i}: record after the end record")
         if isinstance(rec, TrajectoryHeader):
             raise FormatError(path, f"line {i}: a second header")
+        _check_pose_ids(rec.poses, traj.header.part_ids, f"line {i}", path)
         if isinstance(rec, TrajectoryCall):
+            unknown = [c for c in rec.changed if c not in traj.header.part_ids]
+            if unknown:
+                raise FormatError(path, f"line {i}: changed names unknown part ids {unknown}")
+            if rec.changed and rec.poses is None:
+                raise FormatError(path, f"line {i}: parts changed but the poses after the call are missing")
             if traj.calls and rec.seq <= traj.calls[-1].seq:
                 raise FormatError(path, f"line {i}: sequence number {rec.seq} is not increasing")
             traj.calls.append(rec)
@@ -184,6 +223,9 @@ class TrajectoryWriter:
     def __init__(self, path: str | Path, header: TrajectoryHeader):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        if self.path.exists() and self.path.stat().st_size > 0:
+            # Appending a second episode would make the file unreadable (a second header).
+            raise FormatError(self.path, "already holds a recording; a trajectory file is written once")
         self._fh = open(self.path, "ab")
         self._lock = threading.Lock()
         self._closed = False

@@ -1,0 +1,20 @@
+"""Baseline agents that speak only MCP (the oracle also reads the hidden targets: calibration only).
+
+``AGENTS`` maps a name to the agent's ``run(tools, ctx)`` coroutine function.
+"""
+
+from __future__ import annotations
+
+from aw.agents import heuristic, idle, oracle, random_agent
+from aw.agents.base import AgentContext, AgentFn, AgentOutcome
+
+AGENTS: dict[str, AgentFn] = {
+    "idle": idle.run,
+    "random": random_agent.run,
+    "oracle": oracle.run,
+    "heuristic": heuristic.run,
+}
+# Agents that must be handed the hidden targets file (never a benchmark result).
+NEEDS_TARGETS = frozenset({"oracle"})
+
+__all__ = ["AGENTS", "NEEDS_TARGETS", "AgentContext", "AgentOutcome", "AgentFn"]

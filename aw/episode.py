@@ -1,0 +1,479 @@
+"""One recorded assembly episode: the scene, its budget, captures, and the run directory.
+
+This is the logic behind ``aw-serve`` that has nothing to do with MCP: every environment tool
+of Table A-2 is a method reached through :meth:`Episode.call`, which validates, executes,
+records one ``trajectory.jsonl`` line (ok or error) and returns a result that is safe to show
+an agent (no vertices, faces, targets or file paths). The MCP adapter in ``aw_server`` only
+turns these results and :class:`EpisodeError` into MCP content and tool errors.
+
+Timing and recording rules (also in ``docs/harnesses.md``):
+
+- The header line is written when the episode object is created (server start); its
+  ``started_at`` is that time.
+- The first ``start_episode`` call starts the episode clock and the execution budget; later
+  calls are idempotent (recorded, nothing changes). Calls before it are recorded with
+  ``episode_active: false`` and ``t = 0`` (the clock has not started), so ``t`` never decreases
+  along a trajectory.
+- After the budget runs out, pose and group edits are refused with an error (queries, camera
+  moves and captures still work), the state is kept, ``final.json`` is written at once with
+  reason ``timeout``, and the closing line says ``timeout``.
+- :meth:`Episode.close` writes the closing line and ``final.json``; it is idempotent and is
+  called however the session ends (client disconnect, signal, crash).
+"""
+
+from __future__ import annotations
+
+import inspect
+import io
+import logging
+import math
+import shutil
+import threading
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aw.camera import IMAGE_HEIGHT, IMAGE_WIDTH, VERTICAL_FOV_DEG
+from aw.formats import FinalState, Task, TrajectoryCall, TrajectoryEnd, TrajectoryHeader, TrajectoryWriter, write_final
+from aw.formats.trajectory import CameraState
+from aw.scene import (
+    MAX_ANGLE_DEG,
+    MAX_COORDINATE,
+    MAX_GROUP_NAME,
+    PITCH_RANGE,
+    YAW_RANGE,
+    ZOOM_RANGE,
+    Scene,
+    SceneError,
+    scene_from_meshes,
+)
+
+log = logging.getLogger(__name__)
+
+TRAJECTORY_FILE = "trajectory.jsonl"
+FINAL_FILE = "final.json"
+CAPTURE_DIR = "captures"
+# Tools whose effect is a pose or group edit: refused once the budget is exhausted.
+EDIT_TOOLS = frozenset({"translate_objects", "rotate_objects", "set_object_pose", "group_objects", "ungroup_objects"})
+# Recorded arguments are the agent's own input; cap their size so a runaway call cannot bloat the file.
+MAX_RECORDED_ARGS_CHARS = 20_000
+PNG_COMPRESS_LEVEL = 3
+
+
+class EpisodeError(Exception):
+    """A refused or failed call. The message is meant for the agent: it says what was wrong and
+    what is allowed, and never contains geometry, targets or file paths."""
+
+
+class RunDirError(Exception):
+    """The run directory cannot be used (it already holds a recording, or is not writable)."""
+
+
+@dataclass
+class Capture:
+    """A rendered view: ``png`` bytes, and ``path`` of the kept copy relative to the run dir."""
+
+    png: bytes
+    path: str
+    width: int
+    height: int
+    camera: dict
+
+
+@dataclass
+class _Outcome:
+    result: Any
+    changed: list[str] = field(default_factory=list)
+    image: str | None = None
+
+
+def _utc_now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+
+
+def _jsonable_args(args: Mapping[str, Any]) -> dict[str, Any]:
+    """The call's arguments as plain JSON (NaN/inf become strings; oversized input is cut)."""
+
+    def clean(v):
+        if isinstance(v, float) and not math.isfinite(v):
+            return repr(v)
+        if isinstance(v, (str, int, float, bool)) or v is None:
+            return v
+        if isinstance(v, Mapping):
+            return {str(k): clean(x) for k, x in v.items()}
+        if isinstance(v, (list, tuple)):
+            return [clean(x) for x in v]
+        if isinstance(v, np.ndarray):
+            return clean(v.tolist())
+        return repr(v)
+
+    out = {str(k): clean(v) for k, v in dict(args).items()}
+    size = len(repr(out))
+    if size > MAX_RECORDED_ARGS_CHARS:
+        return {"_truncated": f"arguments of {size} characters were not recorded"}
+    return out
+
+
+class Episode:
+    """The scene of one task plus its recorder and budget.
+
+    ``meshes``: the baked part meshes in ``task.parts`` order (``aw.meshes.load_task_meshes``).
+    ``renderer_factory(meshes)`` returns an object with ``render(poses (P, 7), camera) ->
+    PIL.Image`` and ``close()``; it is called on the first capture (default:
+    ``aw.render.OffscreenRenderer``). ``budget_minutes`` defaults to the task's budget.
+    ``clock`` is a monotonic seconds counter.
+    """
+
+    def __init__(
+        self,
+        task: Task,
+        meshes: Sequence,
+        run_dir: str | Path,
+        *,
+        system: str = "",
+        budget_minutes: float | None = None,
+        renderer_factory: Callable[[list], Any] | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        overwrite: bool = False,
+    ):
+        if len(meshes) != len(task.parts):
+            raise ValueError(f"{len(meshes)} meshes for {len(task.parts)} parts")
+        budget = task.budget_minutes if budget_minutes is None else float(budget_minutes)
+        if not (math.isfinite(budget) and budget > 0):
+            raise ValueError(f"budget_minutes must be a positive number, got {budget_minutes!r}")
+        self.task = task
+        self.part_ids = task.part_ids
+        self.budget_s = 60.0 * budget
+        self.run_dir = Path(run_dir)
+        self._meshes = list(meshes)
+        self._renderer_factory = renderer_factory
+        self._renderer = None
+        self._clock = clock
+        self._lock = threading.RLock()
+        self._seq = 0
+        self._t0: float | None = None
+        self._timed_out = False
+        self._closed = False
+        self._timer: threading.Timer | None = None
+        self.end_reason: str | None = None
+
+        self.scene: Scene = scene_from_meshes(self.part_ids, self._meshes)
+        self._prepare_run_dir(overwrite)
+        header = TrajectoryHeader(
+            task_id=task.task_id,
+            system=system,
+            started_at=_utc_now(),
+            part_ids=self.part_ids,
+            initial_poses=self.scene.pose_dict(),
+            camera=CameraState(**self.scene.camera.to_dict()),
+        )
+        self._writer = TrajectoryWriter(self.run_dir / TRAJECTORY_FILE, header)
+        self._handlers: dict[str, Callable[..., _Outcome]] = {
+            "list_objects": self._list_objects,
+            "get_object": self._get_object,
+            "get_scene": self._get_scene,
+            "get_state": self._get_state,
+            "translate_objects": self._translate,
+            "rotate_objects": self._rotate,
+            "set_object_pose": self._set_pose,
+            "group_objects": self._group,
+            "ungroup_objects": self._ungroup,
+            "capture_scene": self._capture,
+            "move_camera": self._move_camera,
+            "start_episode": self._start,
+        }
+
+    # ------------------------------------------------------------------ run dir
+    def _prepare_run_dir(self, overwrite: bool) -> None:
+        existing = [n for n in (TRAJECTORY_FILE, FINAL_FILE, CAPTURE_DIR) if (self.run_dir / n).exists()]
+        if existing and not overwrite:
+            raise RunDirError(
+                f"{self.run_dir} already holds a recording ({', '.join(existing)}); use a fresh run directory "
+                "or pass overwrite=True (aw-serve --overwrite)"
+            )
+        for n in existing:
+            p = self.run_dir / n
+            shutil.rmtree(p) if p.is_dir() else p.unlink()
+        try:
+            (self.run_dir / CAPTURE_DIR).mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise RunDirError(f"cannot create {self.run_dir / CAPTURE_DIR}: {exc.strerror}") from None
+
+    # ------------------------------------------------------------------ state
+    @property
+    def tools(self) -> list[str]:
+        return list(self._handlers)
+
+    @property
+    def started(self) -> bool:
+        return self._t0 is not None
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def elapsed(self) -> float:
+        """Seconds since ``start_episode`` (0 before it)."""
+        return 0.0 if self._t0 is None else self._clock() - self._t0
+
+    @property
+    def timed_out(self) -> bool:
+        with self._lock:
+            self._check_budget()
+            return self._timed_out
+
+    def _check_budget(self) -> None:
+        if self._t0 is not None and not self._timed_out and not self._closed and self.elapsed() >= self.budget_s:
+            self._expire()
+
+    def _expire(self) -> None:
+        with self._lock:
+            if self._timed_out or self._closed:
+                return
+            self._timed_out = True
+            # Keep the final state now, in case the process is killed before it can close.
+            self._write_final("timeout")
+            log.info("execution budget of %.4g min exhausted; edits are refused from now on", self.budget_s / 60)
+
+    def _on_timer(self) -> None:
+        with self._lock:
+            self._check_budget()
+
+    def poses_array(self) -> np.ndarray:
+        """``(P, 7)`` current poses in ``task.parts`` order."""
+        return np.array([self.scene.poses[pid] for pid in self.part_ids])
+
+    def episode_info(self) -> dict:
+        return {
+            "started": self.started,
+            "elapsed_s": round(self.elapsed(), 3),
+            "budget_minutes": self.budget_s / 60.0,
+            "remaining_s": round(max(0.0, self.budget_s - self.elapsed()), 3),
+            "timed_out": self._timed_out,
+        }
+
+    # ------------------------------------------------------------------ dispatch
+    def call(self, tool: str, args: Mapping[str, Any] | None = None) -> Any:
+        """Execute one tool call and record it. ``args`` are the validated keyword arguments
+        (optional ones may be ``None``, meaning "not given"). Raises :class:`EpisodeError`."""
+        args = {k: v for k, v in dict(args or {}).items() if v is not None}
+        with self._lock:
+            if self._closed:
+                raise EpisodeError("the episode has ended; no further calls are accepted")
+            handler = self._handlers.get(tool)
+            if handler is None:
+                msg = f"unknown tool {tool!r}; the tools are: {', '.join(self._handlers)}"
+                self._record(tool, args, ok=False, error=msg)
+                raise EpisodeError(msg)
+            try:
+                inspect.signature(handler).bind(**args)
+            except TypeError as exc:
+                # Unknown or missing keyword: the adapter's closed schema normally catches this first.
+                msg = f"invalid arguments for {tool}: {exc}"
+                self._record(tool, args, ok=False, error=msg)
+                raise EpisodeError(msg) from None
+            self._check_budget()
+            try:
+                if tool in EDIT_TOOLS and self._timed_out:
+                    raise EpisodeError(
+                        f"the execution budget of {self.budget_s / 60:.4g} minutes is exhausted: edits are refused "
+                        "and the final state is kept; queries, camera moves and captures still work"
+                    )
+                out = handler(**args)
+            except (SceneError, EpisodeError) as exc:
+                self._record(tool, args, ok=False, error=str(exc))
+                raise EpisodeError(str(exc)) from None
+            except Exception as exc:  # a bug or a renderer failure: keep serving, say nothing internal
+                log.exception("internal error in %s", tool)
+                self._record(tool, args, ok=False, error=f"internal error: {type(exc).__name__}: {exc}")
+                raise EpisodeError(f"{tool} failed with an internal error; the scene is unchanged") from None
+            self._record(tool, args, ok=True, changed=out.changed, image=out.image)
+            return out.result
+
+    def reject(self, tool: str, raw_args: Mapping[str, Any] | Any, message: str) -> None:
+        """Record a call that the adapter refused before it reached the scene (schema errors)."""
+        args = raw_args if isinstance(raw_args, Mapping) else {"_raw": raw_args}
+        with self._lock:
+            if not self._closed:
+                self._record(tool, args, ok=False, error=message)
+
+    def _record(self, tool: str, args: Mapping[str, Any], *, ok: bool, error: str | None = None,
+                changed: Sequence[str] = (), image: str | None = None) -> None:
+        self._seq += 1
+        rec = TrajectoryCall(
+            seq=self._seq,
+            t=round(self.elapsed(), 6),
+            tool=tool,
+            args=_jsonable_args(args),
+            ok=ok,
+            error=error,
+            changed=list(changed),
+            poses=self.scene.pose_dict() if changed else None,
+            camera=CameraState(**self.scene.camera.to_dict()),
+            image=image,
+            episode_active=self.started,
+        )
+        self._writer.call(rec)
+
+    # ------------------------------------------------------------------ ending
+    def close(self, reason: str = "disconnect", message: str = "") -> str:
+        """Write the closing line and ``final.json``; idempotent. Returns the recorded reason
+        (``timeout`` wins if the budget ran out)."""
+        with self._lock:
+            if self._closed:
+                return self.end_reason or reason
+            self._check_budget()
+            final_reason = "timeout" if self._timed_out else reason
+            self._closed = True
+            self.end_reason = final_reason
+            if self._timer is not None:
+                self._timer.cancel()
+            try:
+                self._writer.end(
+                    TrajectoryEnd(reason=final_reason, t=round(self.elapsed(), 6), message=message,
+                                  poses=self.scene.pose_dict())
+                )
+            finally:
+                self._write_final(final_reason)
+            renderer, self._renderer = self._renderer, None
+        if renderer is not None:
+            try:
+                renderer.close()
+            except Exception:
+                log.exception("renderer close failed")
+        return final_reason
+
+    def _write_final(self, reason: str) -> None:
+        write_final(self.run_dir / FINAL_FILE, FinalState(task_id=self.task.task_id, reason=reason,
+                                                          poses=self.scene.pose_dict()))
+
+    # ------------------------------------------------------------------ queries
+    def _object_or_group(self, id) -> dict:
+        if not isinstance(id, str):
+            raise SceneError("id must be a string")
+        if id in self.scene.parts:
+            return {"type": "object", **self.scene.object_record(id)}
+        if id in self.scene.groups:
+            return {"type": "group", **self.scene.group_record(id)}
+        raise SceneError(f"unknown id {id!r}; use list_objects for the object and group ids")
+
+    def _list_objects(self) -> _Outcome:
+        return _Outcome({
+            "objects": [{"id": pid, "name": self.scene.parts[pid].name} for pid in self.part_ids],
+            "groups": self.scene.groups_list(),
+        })
+
+    def _get_object(self, id) -> _Outcome:
+        return _Outcome(self._object_or_group(id))
+
+    def settings(self) -> dict:
+        return {
+            "image_size": [IMAGE_WIDTH, IMAGE_HEIGHT],
+            "vertical_fov_deg": VERTICAL_FOV_DEG,
+            "max_coordinate": MAX_COORDINATE,
+            "max_angle_deg": MAX_ANGLE_DEG,
+            "max_group_name_chars": MAX_GROUP_NAME,
+            "move_camera_ranges": {"yaw": list(YAW_RANGE), "pitch": list(PITCH_RANGE), "zoom": list(ZOOM_RANGE)},
+            "default_rotation_pivot": "mean of the selected objects' body origins",
+            "rotation": "angles in degrees applied about the X, then Y, then Z axes of the chosen space "
+                        "(world X/Y/Z, or camera right/up/forward), right-hand rule",
+            "camera_space_axes": "right, up, forward (forward points from the camera into the scene)",
+            "initial_poses": "identity: initial placements are baked into the part meshes, so body origins "
+                             "need not coincide with visual part centers",
+        }
+
+    def _get_scene(self) -> _Outcome:
+        return _Outcome({
+            "units": self.task.conventions.get("units", "normalized scene units"),
+            "conventions": dict(self.task.conventions),
+            "settings": self.settings(),
+            "reference": {"condition": self.task.condition, "images": len(self.task.references)},
+            "objects": [self.scene.object_record(pid) for pid in self.part_ids],
+            "groups": self.scene.groups_list(),
+            "camera": self.scene.camera.describe(),
+            "episode": self.episode_info(),
+        })
+
+    def _get_state(self) -> _Outcome:
+        poses = {pid: {"position": [float(v) for v in p[:3]], "quaternion": [float(v) for v in p[3:]]}
+                 for pid, p in self.scene.poses.items()}
+        return _Outcome({
+            "poses": poses,
+            "groups": self.scene.groups_list(),
+            "camera": self.scene.camera.describe(),
+            "episode": self.episode_info(),
+        })
+
+    # ------------------------------------------------------------------ edits
+    @staticmethod
+    def _status(changed: list[str]) -> dict:
+        return {"status": "ok", "changed": changed}
+
+    def _translate(self, ids, delta, space="world") -> _Outcome:
+        changed = self.scene.translate(ids, delta, space)
+        return _Outcome(self._status(changed), changed)
+
+    def _rotate(self, ids, angles, space="world", pivot=None) -> _Outcome:
+        changed = self.scene.rotate(ids, angles, space, pivot)
+        return _Outcome(self._status(changed), changed)
+
+    def _set_pose(self, id, position=None, quaternion=None) -> _Outcome:
+        changed = self.scene.set_pose(id, position, quaternion)
+        return _Outcome(self._status(changed), changed)
+
+    def _group(self, ids, name=None) -> _Outcome:
+        g = self.scene.group(ids, name)
+        return _Outcome({"status": "ok", "group": self.scene.group_record(g.id), "changed": []})
+
+    def _ungroup(self, ids) -> _Outcome:
+        removed = self.scene.ungroup(ids)
+        return _Outcome({"status": "ok", "removed": removed, "changed": []})
+
+    def _move_camera(self, yaw=0.0, pitch=0.0, zoom=1.0, right=0.0, up=0.0) -> _Outcome:
+        cam = self.scene.move_camera(yaw, pitch, zoom, right, up)
+        return _Outcome({"status": "ok", "camera": cam.describe()})
+
+    def _start(self, task=None) -> _Outcome:
+        if task is not None and (not isinstance(task, str) or len(task) > MAX_GROUP_NAME):
+            raise SceneError(f"task must be a string of at most {MAX_GROUP_NAME} characters")
+        if self._t0 is not None:
+            return _Outcome({
+                "status": "ok",
+                "message": f"the episode was already started {self.elapsed():.1f} s ago; nothing changed",
+                "episode": self.episode_info(),
+            })
+        self._t0 = self._clock()
+        self._timer = threading.Timer(self.budget_s + 0.05, self._on_timer)
+        self._timer.daemon = True
+        self._timer.start()
+        return _Outcome({
+            "status": "ok",
+            "message": f"episode started; the execution budget is {self.budget_s / 60:.4g} minutes",
+            "episode": self.episode_info(),
+        })
+
+    # ------------------------------------------------------------------ capture
+    def _render_png(self) -> tuple[bytes, int, int]:
+        if self._renderer is None:
+            factory = self._renderer_factory
+            if factory is None:
+                from aw.render import OffscreenRenderer  # lazy: GL set-up only when a capture is asked for
+
+                factory = OffscreenRenderer
+            self._renderer = factory(self._meshes)
+        image = self._renderer.render(self.poses_array(), self.scene.camera)
+        buf = io.BytesIO()
+        image.save(buf, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
+        return buf.getvalue(), image.width, image.height
+
+    def _capture(self) -> _Outcome:
+        png, w, h = self._render_png()
+        rel = f"{CAPTURE_DIR}/{self._seq + 1:06d}.png"
+        (self.run_dir / rel).write_bytes(png)
+        cap = Capture(png=png, path=rel, width=w, height=h, camera=self.scene.camera.describe())
+        return _Outcome(cap, image=rel)

@@ -1,0 +1,1 @@
+"""The episode runner: ``aw-run`` drives baseline agents or agent harnesses through ``aw-serve``."""

@@ -1,0 +1,466 @@
+"""Run a system on the tasks of a suite: one supervised process per episode, ``jobs`` at a time.
+
+Leaves ``OUT/<system>/<task_id>/`` as ``aw-score`` reads it: ``trajectory.jsonl``, ``final.json``
+and ``captures/`` (written by ``aw-serve``), and ``run.json`` (written here). An episode that
+crashes, hangs or runs out of time is recorded as such and the batch goes on.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import sys
+import tempfile
+import threading
+import time
+from collections import Counter
+from concurrent.futures import ThreadPoolExecutor, as_completed
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Callable
+
+from aw.formats import FormatError, RunInfo, read_manifest, read_task, read_trajectory, write_run_info
+from aw.formats.suite import suite_paths
+from aw.formats.trajectory import FinalState, write_final
+from aw.runner.supervise import MARKER_VAR, WorkerProcess, new_marker, run_supervised
+
+DEFAULT_AGENT_TIMEOUT_MIN = 10.0
+DEFAULT_HARNESS_TIMEOUT_MIN = 65.0  # the paper's 60-minute budget plus startup and export
+
+
+class RunnerError(ValueError):
+    """Bad arguments or inputs for a batch (said before anything runs)."""
+
+
+def aw_serve_command() -> list[str]:
+    """The command that starts ``aw-serve``: the entry point beside this interpreter if installed,
+    else one on PATH, else the module through this interpreter."""
+    beside = Path(sys.executable).with_name("aw-serve")
+    if beside.is_file() and os.access(beside, os.X_OK):
+        return [str(beside)]
+    found = shutil.which("aw-serve")
+    if found:
+        return [found]
+    return [sys.executable, "-c", "import sys; from aw_server.cli import main; sys.exit(main())"]
+
+
+def episode_env() -> dict[str, str]:
+    """Environment for servers: ours, with the offscreen GL platform chosen once for all episodes
+    (otherwise every server would probe EGL on its own)."""
+    env = dict(os.environ)
+    if not env.get("PYOPENGL_PLATFORM"):
+        try:
+            from aw.render_platform import select_platform
+
+            env["PYOPENGL_PLATFORM"] = select_platform()
+        except Exception:  # the server will choose (or explain) on its own
+            pass
+    return env
+
+
+@dataclass
+class BatchConfig:
+    """One system on a suite. Exactly one of ``agent`` (a baseline agent) or ``harness``."""
+
+    suite_dir: Path
+    system: str
+    out_dir: Path
+    agent: str | None = None
+    harness: str | None = None
+    jobs: int = 1
+    tasks: list[str] | None = None
+    seed: int = 0
+    noise: float | None = None
+    timeout_minutes: float | None = None
+    budget_minutes: float | None = None
+    think_seconds: float = 0.0
+    call_timeout: float = 120.0
+    overwrite: bool = False
+    agent_options: dict[str, Any] = field(default_factory=dict)
+    harness_bin: str | None = None
+    harness_model: str | None = None
+    harness_args: list[str] = field(default_factory=list)
+    price_table: Path | None = None
+    progress: bool = True
+
+    @property
+    def limit_seconds(self) -> float:
+        default = DEFAULT_HARNESS_TIMEOUT_MIN if self.harness else DEFAULT_AGENT_TIMEOUT_MIN
+        return 60.0 * (self.timeout_minutes if self.timeout_minutes is not None else default)
+
+
+@dataclass
+class Episode:
+    task_id: str
+    task_dir: Path
+    targets_path: Path
+    run_dir: Path
+
+
+def _check_config(cfg: BatchConfig) -> None:
+    from aw.agents import AGENTS
+    from aw.runner.harness import HARNESSES
+
+    if (cfg.agent is None) == (cfg.harness is None):
+        raise RunnerError("give exactly one of --agent or --harness")
+    if cfg.agent is not None and cfg.agent not in AGENTS:
+        raise RunnerError(f"unknown agent {cfg.agent!r}; available: {', '.join(sorted(AGENTS))}")
+    if cfg.harness is not None and cfg.harness not in HARNESSES:
+        raise RunnerError(f"unknown harness {cfg.harness!r}; available: {', '.join(sorted(HARNESSES))}")
+    if cfg.noise is not None and cfg.agent != "oracle":
+        raise RunnerError("--noise applies to the oracle agent only")
+    if cfg.noise is not None and not (cfg.noise >= 0 and cfg.noise < float("inf")):
+        raise RunnerError(f"--noise must be a finite number >= 0, got {cfg.noise}")
+    if cfg.jobs < 1:
+        raise RunnerError("--jobs must be at least 1")
+    if not (cfg.limit_seconds > 0):
+        raise RunnerError("--timeout-minutes must be positive")
+    if cfg.budget_minutes is not None and not cfg.budget_minutes > 0:
+        raise RunnerError("--budget-minutes must be positive")
+    if cfg.think_seconds < 0 or cfg.call_timeout <= 0:
+        raise RunnerError("--think-seconds must be >= 0 and --call-timeout positive")
+    if not cfg.system or "/" in cfg.system or cfg.system in (".", ".."):
+        raise RunnerError(f"--system must be a plain name (it becomes a directory), got {cfg.system!r}")
+
+
+def plan_episodes(cfg: BatchConfig) -> list[Episode]:
+    """The suite's tasks (or the ``tasks`` subset, in suite order), checked before anything runs."""
+    try:
+        manifest = read_manifest(cfg.suite_dir)
+    except FormatError as exc:
+        raise RunnerError(str(exc)) from None
+    ids = [t.task_id for t in manifest.tasks]
+    if cfg.tasks:
+        unknown = [t for t in cfg.tasks if t not in ids]
+        if unknown:
+            raise RunnerError(f"tasks not in the suite: {', '.join(unknown)}")
+        wanted = set(cfg.tasks)
+        ids = [t for t in ids if t in wanted]
+    out = []
+    for tid in ids:
+        task_dir, targets = suite_paths(cfg.suite_dir, tid)
+        if not task_dir.is_dir():
+            raise RunnerError(f"task directory missing: {task_dir}")
+        if cfg.agent == "oracle" and not targets.is_file():
+            raise RunnerError(f"the oracle needs the targets file, missing: {targets}")
+        out.append(Episode(tid, task_dir.resolve(), targets.resolve(), (cfg.out_dir / cfg.system / tid).resolve()))
+    return out
+
+
+def _server_args(cfg: BatchConfig, ep: Episode) -> list[str]:
+    args = [str(ep.task_dir), "--record", str(ep.run_dir), "--system", cfg.system]
+    if cfg.budget_minutes is not None:
+        args += ["--budget-minutes", f"{cfg.budget_minutes:g}"]
+    return args
+
+
+def _progress_state(path: Path) -> dict[str, Any] | None:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def _trajectory_facts(run_dir: Path) -> dict[str, Any]:
+    """Server-side truth about the episode: call counts, end reason, final poses."""
+    path = run_dir / "trajectory.jsonl"
+    if not path.is_file():
+        return {}
+    try:
+        traj = read_trajectory(path)
+    except FormatError as exc:
+        return {"trajectory_problem": str(exc)}
+    counts = Counter(c.tool for c in traj.calls)
+    return {
+        "traj": traj,
+        "call_counts": dict(counts),
+        "tool_errors": sum(1 for c in traj.calls if not c.ok),
+        "n_calls": len(traj.calls),
+        "edits": sum(1 for c in traj.calls if c.poses is not None),
+        "server_end": traj.end.reason if traj.end else None,
+        "episode_seconds": traj.end.t if traj.end else (traj.calls[-1].t if traj.calls else 0.0),
+    }
+
+
+def _ensure_final(run_dir: Path, facts: dict[str, Any], task_id: str) -> str | None:
+    """Where final.json came from: the server, or (if it was killed before writing it) the last
+    state its trajectory recorded. None if there is no record at all."""
+    if (run_dir / "final.json").is_file():
+        return "server"
+    traj = facts.get("traj")
+    if traj is None:
+        return None
+    write_final(run_dir / "final.json", FinalState(task_id=task_id, reason="interrupted", poses=traj.final_poses()))
+    return "runner: last state recorded in trajectory.jsonl"
+
+
+def new_worker(env: dict[str, str]) -> WorkerProcess:
+    """A worker process for baseline-agent episodes. Its own stderr (anything before the first
+    episode redirects it to that episode's ``agent.log``) goes to a temporary file that is
+    removed when the worker closes, unless it has something in it."""
+    fd, log = tempfile.mkstemp(prefix="aw-run-worker-", suffix=".log")
+    os.close(fd)
+    return WorkerProcess([sys.executable, "-m", "aw.runner.episode", "--worker"], env, Path(log))
+
+
+def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worker: WorkerProcess) -> RunInfo:
+    from aw.runner.episode import EpisodeResult, EpisodeSpec
+
+    work = ep.run_dir / ".runner"
+    work.mkdir(parents=True, exist_ok=True)
+    episode_marker = new_marker()
+    options = dict(cfg.agent_options)
+    if cfg.noise is not None:
+        options["noise"] = cfg.noise
+    spec = EpisodeSpec(
+        task_id=ep.task_id,
+        agent=cfg.agent,
+        server_command=aw_serve_command() + _server_args(cfg, ep),
+        server_env={**env, MARKER_VAR: episode_marker},
+        server_log=str(ep.run_dir / "server.log"),
+        agent_log=str(ep.run_dir / "agent.log"),
+        seed=cfg.seed,
+        think_seconds=cfg.think_seconds,
+        options=options,
+        targets_path=str(ep.targets_path) if cfg.agent == "oracle" else None,
+        call_timeout=cfg.call_timeout,
+        progress_path=str(work / "progress.json"),
+        result_path=str(work / "result.json"),
+    )
+    started = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    sup = worker.run(spec.model_dump_json(), cfg.limit_seconds, episode_marker)
+    result: EpisodeResult | None = None
+    if Path(spec.result_path).is_file():
+        result = EpisodeResult.model_validate_json(Path(spec.result_path).read_bytes())
+    extra: dict[str, Any] = {"seed": cfg.seed, "think_seconds": cfg.think_seconds, "limit_seconds": cfg.limit_seconds}
+    if options:
+        extra["options"] = options
+    if sup.timed_out:
+        state = _progress_state(Path(spec.progress_path)) or {"in_flight": "connect", "since": 0.0}
+        in_flight = state.get("in_flight")
+        stalled = time.time() - float(state.get("since", 0.0))
+        hung_after = min(60.0, 0.25 * cfg.limit_seconds)
+        if in_flight and stalled > hung_after:
+            ended, error = "hung", f"killed at the {cfg.limit_seconds:g} s limit; {in_flight} had been waiting for the server for {stalled:.0f} s"
+        else:
+            ended, error = "timeout", f"killed at the {cfg.limit_seconds:g} s limit while the agent was still working"
+        extra["killed_pids"] = sup.killed
+    elif result is None:
+        ended = "crashed"
+        tail = ""
+        try:
+            tail = (ep.run_dir / "agent.log").read_text(errors="replace")[-1500:].strip()
+        except OSError:
+            pass
+        error = f"the agent process died (exit code {sup.returncode}) without a result" + (f":\n{tail}" if tail else "")
+    else:
+        ended, error = result.ended, result.error
+    facts = _trajectory_facts(ep.run_dir)
+    final_source = _ensure_final(ep.run_dir, facts, ep.task_id)
+    extra.update(
+        {
+            "call_counts": facts.get("call_counts", result.call_counts if result else {}),
+            "client_call_counts": result.call_counts if result else {},
+            "tool_errors": facts.get("tool_errors"),
+            "edits": facts.get("edits"),
+            "server_end": facts.get("server_end"),
+            "episode_seconds": facts.get("episode_seconds"),
+            "final_source": final_source,
+            "exit_code": sup.returncode,
+        }
+    )
+    if result is not None:
+        extra["agent_stats"] = result.stats
+    if "trajectory_problem" in facts:
+        extra["trajectory_problem"] = facts["trajectory_problem"]
+    return RunInfo(
+        system=cfg.system,
+        task_id=ep.task_id,
+        agent=cfg.agent or "",
+        harness=None,
+        started_at=started,
+        wall_seconds=round(sup.wall_seconds, 3),
+        mcp_calls=facts.get("n_calls", sum(result.call_counts.values()) if result else None),
+        ended=ended,
+        error=error,
+        declared_complete=result.declared_complete if result else None,
+        report=result.report if result else None,
+        extra=extra,
+    )
+
+
+def _run_harness_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str]) -> RunInfo:
+    from aw.runner.harness import HARNESSES, HarnessOptions
+
+    adapter = HARNESSES[cfg.harness]
+    opts = HarnessOptions(
+        binary=cfg.harness_bin,
+        model=cfg.harness_model,
+        extra_args=list(cfg.harness_args),
+        price_table=cfg.price_table,
+    )
+    work = ep.run_dir / ".runner"
+    work.mkdir(parents=True, exist_ok=True)
+    marker = new_marker()
+    prepared = adapter.prepare(ep.task_dir, aw_serve_command(), _server_args(cfg, ep), env, marker, opts)
+    started = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    sup = run_supervised(
+        prepared.command,
+        env=prepared.env,
+        marker=marker,
+        limit_seconds=cfg.limit_seconds,
+        cwd=prepared.cwd,
+        stdin_data=prepared.stdin,
+        stdout_path=ep.run_dir / adapter.transcript_name,
+        stderr_path=ep.run_dir / "harness.log",
+    )
+    usage = adapter.parse(ep.run_dir / adapter.transcript_name, opts)
+    shutil.rmtree(prepared.cwd, ignore_errors=True)
+    facts = _trajectory_facts(ep.run_dir)
+    final_source = _ensure_final(ep.run_dir, facts, ep.task_id)
+    if sup.timed_out:
+        ended, error = "timeout", f"killed at the {cfg.limit_seconds:g} s limit"
+    elif sup.returncode == 0 and not usage.is_error:
+        ended, error = "finished", None
+    elif sup.returncode is not None and sup.returncode < 0:
+        ended, error = "crashed", f"the harness died from signal {-sup.returncode}"
+    else:
+        ended = "error"
+        error = usage.error or f"the harness exited with code {sup.returncode}"
+        if not usage.error:
+            try:
+                tail = (ep.run_dir / "harness.log").read_text(errors="replace")[-1500:].strip()
+                error += f":\n{tail}" if tail else ""
+            except OSError:
+                pass
+    extra: dict[str, Any] = {
+        "harness_command": prepared.display_command,
+        "call_counts": facts.get("call_counts", {}),
+        "tool_errors": facts.get("tool_errors"),
+        "edits": facts.get("edits"),
+        "server_end": facts.get("server_end"),
+        "episode_seconds": facts.get("episode_seconds"),
+        "final_source": final_source,
+        "exit_code": sup.returncode,
+        "limit_seconds": cfg.limit_seconds,
+        "transcript": adapter.transcript_name,
+        **usage.extra,
+    }
+    if sup.killed:
+        extra["killed_pids"] = sup.killed
+    return RunInfo(
+        system=cfg.system,
+        task_id=ep.task_id,
+        agent=usage.model or cfg.harness_model or "",
+        harness=adapter.label(usage),
+        started_at=started,
+        wall_seconds=round(sup.wall_seconds, 3),
+        mcp_calls=facts.get("n_calls"),
+        ended=ended,
+        error=error,
+        tokens=usage.tokens,
+        cost_usd=usage.cost_usd,
+        declared_complete=None,
+        report=usage.report,
+        extra=extra,
+    )
+
+
+def run_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worker: WorkerProcess | None = None) -> RunInfo:
+    """Run one episode from a clean run directory and write its ``run.json``. Baseline agents
+    run in ``worker`` (one is started for this episode alone if none is given)."""
+    if ep.run_dir.exists():
+        shutil.rmtree(ep.run_dir)
+    ep.run_dir.mkdir(parents=True)
+    try:
+        if cfg.harness:
+            info = _run_harness_episode(cfg, ep, env)
+        elif worker is not None:
+            info = _run_agent_episode(cfg, ep, env, worker)
+        else:
+            own = new_worker(env)
+            try:
+                info = _run_agent_episode(cfg, ep, env, own)
+            finally:
+                own.close()
+    except Exception as exc:  # the runner's own failure for this episode: record it, go on
+        info = RunInfo(
+            system=cfg.system,
+            task_id=ep.task_id,
+            agent=cfg.agent or cfg.harness_model or "",
+            harness=cfg.harness,
+            ended="error",
+            error=f"runner failed: {type(exc).__name__}: {exc}",
+        )
+    write_run_info(ep.run_dir / "run.json", info)
+    shutil.rmtree(ep.run_dir / ".runner", ignore_errors=True)
+    return info
+
+
+@dataclass
+class BatchResult:
+    runs: list[RunInfo]
+    skipped: list[str]
+    wall_seconds: float
+
+    def endings(self) -> Counter[str]:
+        return Counter(r.ended for r in self.runs)
+
+
+def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None) -> BatchResult:
+    """Run every planned episode, ``cfg.jobs`` at a time, with a progress bar."""
+    _check_config(cfg)
+    episodes = plan_episodes(cfg)
+    skipped = []
+    if not cfg.overwrite:
+        todo = []
+        for ep in episodes:
+            if (ep.run_dir / "run.json").is_file():
+                skipped.append(ep.task_id)
+            else:
+                todo.append(ep)
+        episodes = todo
+    (cfg.out_dir / cfg.system).mkdir(parents=True, exist_ok=True)
+    env = episode_env()
+    t0 = time.monotonic()
+    runs: list[RunInfo] = []
+    lock = threading.Lock()
+    bar = None
+    if cfg.progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(episodes), desc=cfg.system, unit="task", dynamic_ncols=True, file=sys.stderr)
+    counts: Counter[str] = Counter()
+    workers: list[WorkerProcess] = []
+    local = threading.local()
+
+    def job(ep: Episode) -> RunInfo:
+        if cfg.agent is None:
+            return run_episode(cfg, ep, env)
+        if getattr(local, "worker", None) is None:
+            local.worker = new_worker(env)
+            with lock:
+                workers.append(local.worker)
+        return run_episode(cfg, ep, env, local.worker)
+
+    with ThreadPoolExecutor(max_workers=cfg.jobs) as pool:
+        futures = [pool.submit(job, ep) for ep in episodes]
+        for fut in as_completed(futures):
+            info = fut.result()
+            with lock:
+                runs.append(info)
+                counts[info.ended] += 1
+                if bar is not None:
+                    bar.set_postfix({k: v for k, v in sorted(counts.items())}, refresh=False)
+                    bar.update(1)
+            if on_done is not None:
+                on_done(info)
+    for w in workers:
+        w.close()
+    if bar is not None:
+        bar.close()
+    order = {ep.task_id: i for i, ep in enumerate(episodes)}
+    runs.sort(key=lambda r: order.get(r.task_id, 0))
+    return BatchResult(runs=runs, skipped=skipped, wall_seconds=time.monotonic() - t0)

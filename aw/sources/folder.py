@@ -1,0 +1,166 @@
+"""Import a folder of assembled objects: the universal way to bring one's own objects.
+
+Layout::
+
+    SRC/
+      <object>/                   one folder per object (sorted by name)
+        <part>.obj|.ply|.stl|.glb|.gltf|.off   one mesh per part, in the assembled frame
+        meta.json                 optional, see :class:`ObjectMeta`
+        ...                       reference images named in meta.json
+
+Part names are the file stems. Parts may also live in a ``parts/`` subfolder (then only that
+folder is read). Every error names the offending file.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from aw.assembly import AssembledObject, SourcePart, y_up_to_z_up
+from aw.formats import FormatError
+from aw.formats.io import read_model
+from aw.meshes import load_mesh
+
+__all__ = ["MESH_SUFFIXES", "ObjectMeta", "FolderObject", "load_object", "scan_folder"]
+
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
+Condition = Literal["none", "image", "manual"]
+
+
+class ObjectMeta(BaseModel):
+    """``meta.json`` of one object folder (every field optional).
+
+    ``conditions`` (or a single ``condition``) defaults to the conditions that have
+    ``references``, else ``["none"]``; ``["none", "image"]`` builds paired tasks as for PartNet. A
+    condition ``image`` or ``manual`` without references gets rendered ones (manual pages follow
+    ``steps``, lists of part names, else one part per page). ``references`` paths are relative
+    to the object folder. ``up_axis: "y"`` turns Y-up meshes Z-up with (x, y, z) -> (x, -z, y).
+    """
+
+    model_config = ConfigDict(extra="forbid")
+
+    object_id: str | None = Field(default=None, min_length=1, max_length=100)
+    source: str | None = Field(default=None, min_length=1, max_length=64)
+    dataset: str = Field(default="folder", min_length=1)
+    category: str = ""
+    condition: Condition | None = None
+    conditions: list[Condition] | None = Field(default=None, min_length=1)
+    references: dict[Literal["image", "manual"], list[str]] = Field(default_factory=dict)
+    equivalence: list[list[str]] | None = None
+    steps: list[list[str]] | None = None
+    up_axis: Literal["z", "y"] = "z"
+
+    @model_validator(mode="after")
+    def _one_condition_field(self) -> "ObjectMeta":
+        if self.condition is not None and self.conditions is not None:
+            raise ValueError("give either condition or conditions, not both")
+        return self
+
+
+class FolderObject(BaseModel):
+    """An object folder found by :func:`scan_folder`: where it is and what to build from it."""
+
+    path: str
+    object_id: str
+    conditions: list[str]
+
+
+def _part_files(obj_dir: Path) -> list[Path]:
+    base = obj_dir / "parts" if (obj_dir / "parts").is_dir() else obj_dir
+    files = sorted(p for p in base.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
+    if not files:
+        raise FormatError(base, f"no part meshes ({', '.join(MESH_SUFFIXES)}) in this object folder")
+    stems = [p.stem for p in files]
+    dup = sorted({s for s in stems if stems.count(s) > 1})
+    if dup:
+        raise FormatError(base, f"several mesh files share the part name(s) {dup}; part names are file stems and must be unique")
+    return files
+
+
+def read_meta(obj_dir: Path) -> ObjectMeta:
+    path = obj_dir / "meta.json"
+    return read_model(ObjectMeta, path) if path.exists() else ObjectMeta()
+
+
+def _conditions(meta: ObjectMeta) -> list[str]:
+    if meta.condition:
+        return [meta.condition]
+    if meta.conditions:
+        return list(dict.fromkeys(meta.conditions))
+    return [c for c in ("image", "manual") if meta.references.get(c)] or ["none"]
+
+
+def load_object(obj_dir: str | Path, default_source: str = "custom") -> AssembledObject:
+    """Read one object folder into an :class:`AssembledObject` (``meta`` carries ``conditions``)."""
+    obj_dir = Path(obj_dir)
+    if not obj_dir.is_dir():
+        raise FormatError(obj_dir, "object folder not found")
+    meta = read_meta(obj_dir)
+    meta_path = obj_dir / "meta.json"
+    parts = []
+    for f in _part_files(obj_dir):
+        mesh = load_mesh(f)
+        if meta.up_axis == "y":
+            mesh = y_up_to_z_up(mesh)
+        extent = np.ptp(np.asarray(mesh.vertices), axis=0)
+        if not np.any(extent > 0):
+            raise FormatError(f, "all vertices coincide; a part needs extent")
+        parts.append(SourcePart(f.stem, mesh))
+    names = {p.name for p in parts}
+    for field_name, groups in (("equivalence", meta.equivalence), ("steps", meta.steps)):
+        for group in groups or []:
+            unknown = [n for n in group if n not in names]
+            if unknown:
+                raise FormatError(meta_path, f"{field_name} names unknown parts {unknown}; parts are {sorted(names)}")
+    references: dict[str, list[Path]] = {}
+    for cond, rels in meta.references.items():
+        paths = []
+        for rel in rels:
+            p = obj_dir / rel
+            if Path(rel).is_absolute() or ".." in Path(rel).parts:
+                raise FormatError(meta_path, f"reference {rel!r} must be a path inside the object folder")
+            if not p.is_file():
+                raise FormatError(p, f"reference image listed in {meta_path.name} not found")
+            paths.append(p)
+        if paths:
+            references[cond] = paths
+    extra = {"conditions": _conditions(meta), "folder": str(obj_dir)}
+    if meta.steps:
+        extra["steps"] = meta.steps
+    return AssembledObject(
+        object_id=meta.object_id or obj_dir.name,
+        source=meta.source or default_source,
+        dataset=meta.dataset,
+        category=meta.category,
+        parts=parts,
+        references=references,
+        equivalence=meta.equivalence,
+        meta=extra,
+    )
+
+
+def scan_folder(src: str | Path) -> list[FolderObject]:
+    """The object folders of ``src`` (sorted), with ids and conditions read from ``meta.json``.
+
+    Raises :class:`FormatError` for a missing source, an empty one, a bad ``meta.json`` or two
+    objects with the same id.
+    """
+    src = Path(src)
+    if not src.is_dir():
+        raise FormatError(src, "source folder not found")
+    dirs = sorted(p for p in src.iterdir() if p.is_dir() and not p.name.startswith("."))
+    if not dirs:
+        raise FormatError(src, "contains no object folders (one subfolder per object is expected)")
+    found = []
+    for d in dirs:
+        meta = read_meta(d)
+        found.append(FolderObject(path=str(d), object_id=meta.object_id or d.name, conditions=_conditions(meta)))
+    ids = [f.object_id for f in found]
+    dup = sorted({i for i in ids if ids.count(i) > 1})
+    if dup:
+        raise FormatError(src, f"several object folders have the object id(s) {dup}")
+    return found

@@ -1,0 +1,143 @@
+"""``aw-prepare``: synthetic and folder suites, determinism across workers, errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+import trimesh
+
+from aw.cli.prepare import main
+from aw.formats import read_manifest, read_targets, read_task
+from aw.formats.suite import suite_paths
+from aw.meshes import load_task_meshes
+
+
+def _tree(root) -> dict[str, bytes]:
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def _check_suite(out):
+    manifest = read_manifest(out)
+    for t in manifest.tasks:
+        task_dir, targets_path = suite_paths(out, t.task_id)
+        task = read_task(task_dir)
+        targets = read_targets(targets_path)
+        assert task.task_id == t.task_id and task.condition == t.condition and task.source == t.source
+        assert sorted(targets.parts) == task.part_ids
+        assert len(load_task_meshes(task)) == t.n_parts
+    return manifest
+
+
+@pytest.fixture(scope="module")
+def small_suite(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "suite"
+    assert main(["synthetic", "--out", str(out), "--per-source", "2", "--jobs", "1", "--no-progress"]) == 0
+    return out
+
+
+def test_synthetic_suite_has_every_block_and_pairs_partnet(small_suite, capsys):
+    manifest = _check_suite(small_suite)
+    by_source = {}
+    for t in manifest.tasks:
+        by_source.setdefault(t.source, []).append(t)
+    assert {s: len(v) for s, v in by_source.items()} == {"partnet": 4, "ikea_manual": 2, "assemblybench": 2, "fantastic_breaks": 2}
+    assert {t.condition for t in by_source["partnet"]} == {"none", "image"}
+    assert {t.condition for t in by_source["ikea_manual"] + by_source["assemblybench"]} == {"manual"}
+    assert {t.condition for t in by_source["fantastic_breaks"]} == {"none"}
+    assert all(t.n_parts == 2 for t in by_source["fantastic_breaks"])
+    for t in by_source["ikea_manual"] + by_source["assemblybench"]:
+        assert len(read_task(suite_paths(small_suite, t.task_id)[0]).references) >= 2
+
+
+def test_summary_is_printed(tmp_path, capsys):
+    out = tmp_path / "s"
+    assert main(["synthetic", "--out", str(out), "--per-source", "3", "--blocks", "fantastic_breaks", "--jobs", "1", "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "fantastic_breaks" in text and "size ratio median" in text and "2/2/2" in text
+    assert "wrote 3 tasks of 3 objects" in text
+
+
+def test_parallel_build_is_byte_identical(small_suite, tmp_path):
+    out = tmp_path / "par"
+    args = ["synthetic", "--out", str(out), "--per-source", "2", "--blocks", "partnet,fantastic_breaks", "--jobs", "2", "--no-progress"]
+    assert main(args) == 0
+    tasks = read_manifest(out).tasks
+    assert [t for t in read_manifest(small_suite).tasks if t.source in ("partnet", "fantastic_breaks")] == tasks
+    for t in tasks:
+        for a, b in zip(suite_paths(out, t.task_id), suite_paths(small_suite, t.task_id)):
+            assert (_tree(a) if a.is_dir() else a.read_bytes()) == (_tree(b) if b.is_dir() else b.read_bytes())
+
+
+def test_existing_suite_needs_force(small_suite, tmp_path, capsys):
+    out = tmp_path / "again"
+    args = ["synthetic", "--out", str(out), "--per-source", "1", "--blocks", "fantastic_breaks", "--jobs", "1", "--no-progress"]
+    assert main(args) == 0
+    (out / "notes.txt").write_text("mine")
+    assert main(args) == 1
+    assert "already holds a suite" in capsys.readouterr().err
+    assert main(args + ["--force"]) == 0
+    assert (out / "notes.txt").read_text() == "mine"  # --force removes only the suite's own files
+
+
+def test_bad_arguments_give_one_line_errors(tmp_path, capsys):
+    assert main(["synthetic", "--out", str(tmp_path / "a"), "--per-source", "0"]) == 1
+    assert "--per-source" in capsys.readouterr().err
+    assert main(["synthetic", "--out", str(tmp_path / "b"), "--blocks", "lego"]) == 1
+    assert "unknown block" in capsys.readouterr().err
+    (tmp_path / "file").write_text("x")
+    assert main(["synthetic", "--out", str(tmp_path / "file"), "--per-source", "1", "--blocks", "fantastic_breaks"]) == 1
+    assert "not a directory" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["nonsense"])
+
+
+def _folder(root):
+    for name, meta in (("desk", {"category": "desk", "conditions": ["none", "image"], "source": "partnet"}),
+                       ("lamp", {"source": "partnet"}), ("vase", None)):
+        d = root / name
+        d.mkdir(parents=True)
+        for k in range(3):
+            trimesh.creation.box(extents=(0.3 + 0.2 * k, 0.2, 0.1 + 0.05 * k)).apply_translation((0, 0, 0.2 * k)).export(d / f"part{k}.obj")
+        if meta:
+            (d / "meta.json").write_text(json.dumps(meta))
+    return root
+
+
+def test_folder_suite(tmp_path, capsys):
+    src = _folder(tmp_path / "src")
+    out = tmp_path / "suite"
+    assert main(["folder", str(src), "--out", str(out), "--source", "mine", "--jobs", "1", "--no-progress", "--variants", "1"]) == 0
+    manifest = _check_suite(out)
+    originals = sorted((t.source, t.object_id, t.condition) for t in manifest.tasks if t.variant == "original")
+    assert originals == [("mine", "vase", "none"), ("partnet", "desk", "image"), ("partnet", "desk", "none"), ("partnet", "lamp", "none")]
+    # variants for the first object of each source; the lone "mine" object has no donor
+    desk_variants = sorted(t.variant for t in manifest.tasks if t.object_id == "desk" and t.condition == "none")
+    assert desk_variants == ["distractor", "layout", "layout", "missing", "original"]
+    vase_variants = sorted(t.variant for t in manifest.tasks if t.object_id == "vase")
+    assert vase_variants == ["layout", "layout", "missing", "original"]
+    assert "partnet" in capsys.readouterr().out
+
+
+def test_folder_errors_name_the_file(tmp_path, capsys):
+    src = _folder(tmp_path / "src")
+    (src / "lamp" / "part1.obj").write_text("garbage\n")
+    assert main(["folder", str(src), "--out", str(tmp_path / "o"), "--jobs", "1", "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "lamp/part1.obj" in err and "no triangles" in err
+    assert main(["folder", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 1
+    assert "source folder not found" in capsys.readouterr().err
+
+
+def test_entry_point_runs(tmp_path):
+    out = tmp_path / "ep"
+    proc = subprocess.run(
+        [sys.executable, "-m", "aw.cli.prepare", "synthetic", "--out", str(out), "--per-source", "1", "--blocks", "fantastic_breaks", "--jobs", "1"],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "preparing objects" in proc.stderr  # tqdm progress goes to stderr
+    assert "fantastic_breaks" in proc.stdout
+    assert len(read_manifest(out).tasks) == 1

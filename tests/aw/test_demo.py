@@ -1,0 +1,44 @@
+"""``aw-demo`` end to end on the smallest suite it can build (one fracture pair)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from aw.demo import summary_from_report, systems
+from aw.formats import read_run_info
+
+
+def test_demo_runs_the_whole_loop(tmp_path):
+    demo = Path(sys.executable).with_name("aw-demo")
+    out = tmp_path / "demo"
+    proc = subprocess.run(
+        [str(demo), "--out", str(out), "--per-source", "1", "--blocks", "fantastic_breaks", "--jobs", "2"],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    for n in range(1, 5):
+        assert f"[{n}/4]" in proc.stdout
+    labels = [s[0] for s in systems((0.5, 1.5))]
+    for label in labels:
+        (run_dir,) = (out / "runs" / label).iterdir()
+        assert read_run_info(run_dir / "run.json").ended == "finished"
+        assert label in proc.stdout  # every system is in the printed summary
+    report = out / "report" / "report.md"
+    assert report.is_file() and str(report) in proc.stdout
+    assert list((out / "report").rglob("*.png"))
+    assert "never results" in proc.stdout
+    # A second run reuses the suite and every finished episode.
+    again = subprocess.run(
+        [str(demo), "--out", str(out), "--per-source", "1", "--blocks", "fantastic_breaks", "--jobs", "2"],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert again.returncode == 0 and "reusing the suite" in again.stdout
+
+
+def test_summary_is_the_first_section_with_a_table(tmp_path):
+    md = tmp_path / "r.md"
+    md.write_text("# Report\n\nintro\n\n## Table 1\n\n| system | PA |\n|---|---|\n| idle | 0.0 |\n\n## Other\n\n| a |\n|---|\n")
+    s = summary_from_report(md)
+    assert s.startswith("## Table 1") and "| idle | 0.0 |" in s and "Other" not in s
