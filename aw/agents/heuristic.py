@@ -50,6 +50,8 @@ class _Placer:
         self.n = 0
 
     async def place(self, o: ObjectInfo, rot: np.ndarray, box_min: np.ndarray) -> None:
+        # Re-read the part first, as an agent checks the state it is about to change.
+        o = ObjectInfo.from_record((await self.tools.call("get_object", {"id": o.id})).data)
         lo, _ = _world_box(rot, o.bounds_min, o.bounds_max)
         position = box_min - lo  # body origin so that the rotated box starts at box_min
         self.n += 1
@@ -71,7 +73,7 @@ async def run(tools: ToolSession, ctx: AgentContext) -> AgentOutcome:
     await begin(tools, ctx)
     await tools.call("get_scene")
     objects = await inspect_objects(tools)
-    await look_around(tools, [{"yaw": 90.0}, {"pitch": 30.0}])
+    await look_around(tools, [{"yaw": 90.0, "pitch": 15.0}])
     if len(objects) == 1:
         return AgentOutcome(False, "Only one part; nothing to assemble.")
 
@@ -123,7 +125,7 @@ async def run(tools: ToolSession, ctx: AgentContext) -> AgentOutcome:
             await tools.call("capture_scene")
 
     await aim_camera(tools, [0.0, 0.0, 0.5 * top], radius=0.5 * float(np.linalg.norm([2 * half[0], 2 * half[1], top])))
-    await look_around(tools, [{"yaw": 90.0}, {"yaw": 90.0, "pitch": -20.0}])
+    await look_around(tools, [{"yaw": 120.0, "pitch": -10.0}])
     await tools.call("get_state")
     return AgentOutcome(
         declared_complete=True,

@@ -10,8 +10,8 @@ fixed viewpoint framing the whole normalized assembly.
   carries "Step k / K". Steps come from ``obj.meta["steps"]`` (lists of part names), else one
   part per step in source order.
 
-One renderer per object serves every page (uploading meshes and compiling shaders once is most
-of the cost of a page).
+One renderer per object serves every page: a new renderer compiles its shaders on its first
+picture, which on a CPU costs about as much again as the picture itself.
 """
 
 from __future__ import annotations

@@ -174,9 +174,14 @@ def build_suite(
             ctx = multiprocessing.get_context("spawn")
             with ProcessPoolExecutor(max_workers=min(jobs, len(specs)), mp_context=ctx) as pool:
                 futures = {pool.submit(_build_one, i, spec, settings[i]): i for i, spec in enumerate(specs)}
-                for fut in as_completed(futures):
-                    results[futures[fut]] = fut.result()
-                    bar.update(1)
+                try:
+                    for fut in as_completed(futures):
+                        results[futures[fut]] = fut.result()
+                        bar.update(1)
+                except BaseException:
+                    # first failure (or Ctrl-C): drop the queued objects instead of building them
+                    pool.shutdown(wait=True, cancel_futures=True)
+                    raise
     finally:
         bar.close()
 

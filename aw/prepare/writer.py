@@ -16,6 +16,7 @@ from aw.formats.suite import suite_paths
 from aw.formats.targets import Variant
 from aw.prepare.objfile import write_obj
 from aw.prepare.standardize import PreparedObject
+from aw.prompt import task_prompt
 
 __all__ = ["safe_id", "task_id_for", "write_prepared", "png_bytes"]
 
@@ -52,12 +53,6 @@ def png_bytes(ref: Any) -> bytes:
             return png_bytes(im.convert("RGBA" if im.mode in ("RGBA", "LA", "P") else "RGB"))
     except Exception as exc:  # PIL raises many types for broken files
         raise FormatError(path, f"cannot be read as an image ({type(exc).__name__})") from None
-
-
-def _prompt(condition: str) -> str:
-    from aw.prompt import task_prompt
-
-    return task_prompt(condition)
 
 
 def write_prepared(
@@ -103,7 +98,7 @@ def write_prepared(
         category=obj.category,
         object_id=obj.object_id,
         condition=condition,
-        prompt=_prompt(condition),
+        prompt=task_prompt(condition),
         parts=[TaskPart(id=p.part_id, mesh=f"parts/{p.part_id}.obj") for p in prep.parts],
         references=ref_names,
     )

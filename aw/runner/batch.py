@@ -24,7 +24,7 @@ from typing import Any, Callable
 from aw.formats import FormatError, RunInfo, read_manifest, read_task, read_trajectory, write_run_info
 from aw.formats.suite import suite_paths
 from aw.formats.trajectory import FinalState, write_final
-from aw.runner.supervise import MARKER_VAR, WorkerProcess, new_marker, run_supervised
+from aw.runner.supervise import MARKER_VAR, WorkerProcess, kill_everything, new_marker, run_supervised
 
 DEFAULT_AGENT_TIMEOUT_MIN = 10.0
 DEFAULT_HARNESS_TIMEOUT_MIN = 65.0  # the paper's 60-minute budget plus startup and export
@@ -238,7 +238,8 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
     if options:
         extra["options"] = options
     if sup.timed_out:
-        state = _progress_state(Path(spec.progress_path)) or {"in_flight": "connect", "since": 0.0}
+        # No progress file yet: the agent was still connecting to the server.
+        state = _progress_state(Path(spec.progress_path)) or {"in_flight": "connect", "since": time.time() - sup.wall_seconds}
         in_flight = state.get("in_flight")
         stalled = time.time() - float(state.get("since", 0.0))
         hung_after = min(60.0, 0.25 * cfg.limit_seconds)
@@ -368,9 +369,16 @@ def _run_harness_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str]) -> 
     )
 
 
-def run_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worker: WorkerProcess | None = None) -> RunInfo:
+def run_episode(
+    cfg: BatchConfig,
+    ep: Episode,
+    env: dict[str, str],
+    worker: WorkerProcess | None = None,
+    cancel: threading.Event | None = None,
+) -> RunInfo:
     """Run one episode from a clean run directory and write its ``run.json``. Baseline agents
-    run in ``worker`` (one is started for this episode alone if none is given)."""
+    run in ``worker`` (one is started for this episode alone if none is given). An episode cut
+    short by ``cancel`` (Ctrl-C) leaves no run directory, so that a rerun resumes with it."""
     if ep.run_dir.exists():
         shutil.rmtree(ep.run_dir)
     ep.run_dir.mkdir(parents=True)
@@ -394,6 +402,9 @@ def run_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worker: Work
             ended="error",
             error=f"runner failed: {type(exc).__name__}: {exc}",
         )
+    if cancel is not None and cancel.is_set():
+        shutil.rmtree(ep.run_dir, ignore_errors=True)
+        return info
     write_run_info(ep.run_dir / "run.json", info)
     shutil.rmtree(ep.run_dir / ".runner", ignore_errors=True)
     return info
@@ -436,16 +447,19 @@ def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None
     workers: list[WorkerProcess] = []
     local = threading.local()
 
+    cancel = threading.Event()
+
     def job(ep: Episode) -> RunInfo:
         if cfg.agent is None:
-            return run_episode(cfg, ep, env)
+            return run_episode(cfg, ep, env, cancel=cancel)
         if getattr(local, "worker", None) is None:
             local.worker = new_worker(env)
             with lock:
                 workers.append(local.worker)
-        return run_episode(cfg, ep, env, local.worker)
+        return run_episode(cfg, ep, env, local.worker, cancel=cancel)
 
-    with ThreadPoolExecutor(max_workers=cfg.jobs) as pool:
+    pool = ThreadPoolExecutor(max_workers=cfg.jobs)
+    try:
         futures = [pool.submit(job, ep) for ep in episodes]
         for fut in as_completed(futures):
             info = fut.result()
@@ -457,10 +471,20 @@ def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None
                     bar.update(1)
             if on_done is not None:
                 on_done(info)
-    for w in workers:
-        w.close()
-    if bar is not None:
-        bar.close()
+    except KeyboardInterrupt:
+        # Stop everything now: episode processes run in sessions of their own, so Ctrl-C
+        # reached none of them. Episodes cut short leave no run directory.
+        cancel.set()
+        pool.shutdown(wait=False, cancel_futures=True)
+        kill_everything()
+        pool.shutdown(wait=True)
+        raise
+    finally:
+        pool.shutdown(wait=True)
+        for w in workers:
+            w.close()
+        if bar is not None:
+            bar.close()
     order = {ep.task_id: i for i, ep in enumerate(episodes)}
     runs.sort(key=lambda r: order.get(r.task_id, 0))
     return BatchResult(runs=runs, skipped=skipped, wall_seconds=time.monotonic() - t0)

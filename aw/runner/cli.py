@@ -94,6 +94,9 @@ def main(argv: list[str] | None = None) -> int:
     except RunnerError as exc:
         print(f"aw-run: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("\naw-run: interrupted; finished episodes are kept, run the same command again to resume", file=sys.stderr)
+        return 130
     ends = result.endings()
     summary = ", ".join(f"{k} {v}" for k, v in sorted(ends.items())) or "nothing to run"
     print(f"{system}: {len(result.runs)} episodes in {result.wall_seconds:.1f} s ({summary})", end="")

@@ -27,6 +27,33 @@ def new_marker() -> str:
     return uuid.uuid4().hex
 
 
+# Every live episode process and its markers, so that an interrupted batch can stop them all.
+_live_lock = threading.Lock()
+_live: dict[int, tuple[str, ...]] = {}
+
+
+def _register(pid: int, *markers: str) -> None:
+    with _live_lock:
+        _live[pid] = markers
+
+
+def _unregister(pid: int) -> None:
+    with _live_lock:
+        _live.pop(pid, None)
+
+
+def kill_everything() -> list[int]:
+    """Kill every registered episode process with its tree and marked processes (Ctrl-C)."""
+    with _live_lock:
+        live = dict(_live)
+    procs: list[psutil.Process] = []
+    for pid, markers in live.items():
+        procs += _tree(pid)
+        for m in markers:
+            procs += marked_processes(m)
+    return kill_all(procs)
+
+
 @dataclass
 class Supervised:
     """How the process ended. ``returncode`` is None when it was killed at the limit."""
@@ -134,6 +161,7 @@ def run_supervised(
             pass
     timed_out = False
     killed: list[int] = []
+    _register(proc.pid, marker)
     try:
         proc.wait(timeout=limit_seconds)
     except subprocess.TimeoutExpired:
@@ -142,6 +170,8 @@ def run_supervised(
         procs = _tree(proc.pid) + marked_processes(marker)
         killed = kill_all(procs, grace=0.0)
         proc.wait()
+    finally:
+        _unregister(proc.pid)
     wall = time.monotonic() - t0
     killed += _reap_marked(marker, 0.0 if timed_out else leftover_grace)
     return Supervised(returncode=None if timed_out else proc.returncode, timed_out=timed_out, wall_seconds=wall, killed=killed)
@@ -187,6 +217,14 @@ class WorkerProcess:
         exit code when it died mid-episode, None when it was killed at the limit."""
         if self.proc is None or self.proc.poll() is not None:
             self._start()
+        _register(self.proc.pid, self.marker, episode_marker)
+        try:
+            return self._run(spec_line, limit_seconds, episode_marker)
+        finally:
+            if self.proc is not None:
+                _register(self.proc.pid, self.marker)
+
+    def _run(self, spec_line: str, limit_seconds: float, episode_marker: str) -> Supervised:
         t0 = time.monotonic()
         try:
             self.proc.stdin.write(spec_line.encode() + b"\n")
@@ -202,6 +240,7 @@ class WorkerProcess:
                 return Supervised(None, True, time.monotonic() - t0, killed)
             if line is None:  # the worker died
                 code = self.proc.wait()
+                _unregister(self.proc.pid)
                 wall = time.monotonic() - t0
                 killed = _reap_marked(episode_marker, grace=5.0)
                 self.proc = None
@@ -217,6 +256,7 @@ class WorkerProcess:
             procs += marked_processes(episode_marker)
         killed = kill_all(procs)
         self.proc.wait()
+        _unregister(self.proc.pid)
         self.proc = None
         return killed
 
@@ -227,6 +267,7 @@ class WorkerProcess:
         try:
             self.proc.stdin.close()
             self.proc.wait(timeout=timeout)
+            _unregister(self.proc.pid)
         except (subprocess.TimeoutExpired, OSError):
             self.kill()
         self.proc = None

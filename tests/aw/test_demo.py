@@ -28,7 +28,7 @@ def test_demo_runs_the_whole_loop(tmp_path):
     report = out / "report" / "report.md"
     assert report.is_file() and str(report) in proc.stdout
     assert list((out / "report").rglob("*.png"))
-    assert "never results" in proc.stdout
+    assert "never results" in proc.stdout and "95% CI" in proc.stdout
     # A second run reuses the suite and every finished episode.
     again = subprocess.run(
         [str(demo), "--out", str(out), "--per-source", "1", "--blocks", "fantastic_breaks", "--jobs", "2"],
@@ -37,8 +37,11 @@ def test_demo_runs_the_whole_loop(tmp_path):
     assert again.returncode == 0 and "reusing the suite" in again.stdout
 
 
-def test_summary_is_the_first_section_with_a_table(tmp_path):
+def test_summary_is_table_1_with_its_intervals(tmp_path):
     md = tmp_path / "r.md"
-    md.write_text("# Report\n\nintro\n\n## Table 1\n\n| system | PA |\n|---|---|\n| idle | 0.0 |\n\n## Other\n\n| a |\n|---|\n")
+    md.write_text("# Report\n\nintro\n\n## Table 1: results\n\n| system | SR |\n|---|---|\n| idle | 0.0 |\n\n"
+                  "## Other\n\n| a |\n|---|\n\n## Table A-3: with bootstrap intervals\n\n| System | SR | 95% CI |\n")
     s = summary_from_report(md)
-    assert s.startswith("## Table 1") and "| idle | 0.0 |" in s and "Other" not in s
+    assert s.startswith("## Table 1: results") and "| idle | 0.0 |" in s and "95% CI" in s and "Other" not in s
+    md.write_text("# Report\n\nintro\n\n## Scores\n\n| a |\n|---|\n")
+    assert summary_from_report(md).startswith("## Scores")

@@ -1,0 +1,126 @@
+"""``aw-prepare compose`` (the paper's benchmark from the datasets a user holds) and
+``aw-prepare official`` (an official package + episode archives -> scoring suite + runs).
+
+Registered in :data:`aw.cli.prepare.REGISTRARS`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+__all__ = ["register_compose", "register_official", "catalogs_from_args"]
+
+
+def register_compose(sub) -> None:
+    p = sub.add_parser(
+        "compose", help="sample the benchmark from the published datasets (Section 3.3, Appendix A.1)",
+        description="Sample --per-source objects from each given dataset with part-count stratification (2-5, 6-10, "
+        "11-20 parts) and category coverage (Fantastic Breaks by category only), seeded, and build their tasks: "
+        "PartNet twice (none and image), IKEA-Manual and AssemblyBench with their manuals, Fantastic Breaks without "
+        "reference. The selection is written to OUT/composition.json.")
+    from aw.cli.prepare import add_suite_options
+
+    add_suite_options(p)
+    p.add_argument("--partnet", metavar="DIR", help="PartNet assembly data (DGL/Manual-PA prepare_data folder)")
+    p.add_argument("--partnet-level", type=int, default=3, help="PartNet hierarchy level of shape_data files (default 3)")
+    p.add_argument("--partnet-split", default="test", help="split lists to read, <Category>.<split>.npy (default test)")
+    p.add_argument("--partnet-categories", default=None, metavar="C1,C2", help="PartNet categories (default: every split list)")
+    p.add_argument("--ikea-manual", metavar="DIR", help="IKEA-Manual dataset folder (main_data.json, parts/, manual pages)")
+    p.add_argument("--assemblybench", metavar="DIR", help="AssemblyBench folder (<category>/<object>/)")
+    p.add_argument("--fantastic-breaks", metavar="DIR", help="Fantastic Breaks folder (<class>/<object>/model_*.ply)")
+    p.add_argument("--breaking-bad", metavar="DIR_OR_H5", help="Breaking Bad folder or HDF5 file (source breaking_bad)")
+    p.add_argument("--rehosted", metavar="PATH", action="append", default=[],
+                   help="official re-hosted download (.parquet/.arrow file or folder); rows join the catalog of their source; repeatable")
+    p.add_argument("--per-source", type=int, default=20, metavar="N", help="objects per source (default 20)")
+    p.add_argument("--dry-run", action="store_true", help="print the selection and stop")
+    p.set_defaults(func=_cmd_compose)
+
+
+def catalogs_from_args(args: argparse.Namespace) -> dict:
+    """Catalogs per source from the dataset options given."""
+    from aw.sources import assemblybench, breaking_bad, fantastic_breaks, ikea_manual, partnet, rehosted
+
+    cats: dict[str, list] = {}
+
+    def add(entries):
+        for e in entries:
+            cats.setdefault(e.source, []).append(e)
+
+    if args.partnet:
+        want = [c.strip().lower() for c in args.partnet_categories.split(",")] if args.partnet_categories else None
+        add(partnet.catalog(args.partnet, args.partnet_level, args.partnet_split, want))
+    if args.ikea_manual:
+        add(ikea_manual.catalog(args.ikea_manual))
+    if args.assemblybench:
+        add(assemblybench.catalog(args.assemblybench))
+    if args.fantastic_breaks:
+        add(fantastic_breaks.catalog(args.fantastic_breaks))
+    if args.breaking_bad:
+        bb = Path(args.breaking_bad)
+        add(breaking_bad.hdf5_catalog(bb) if bb.is_file() else breaking_bad.catalog(bb))
+    for path in args.rehosted:
+        add(rehosted.catalog(path))
+    return cats
+
+
+def _cmd_compose(args: argparse.Namespace) -> int:
+    from aw.cli.prepare import CliError, run_suite
+    from aw.sources.compose import compose, specs_for
+
+    if args.per_source < 1:
+        raise CliError("--per-source must be >= 1")
+    cats = catalogs_from_args(args)
+    if not cats:
+        raise CliError("no dataset given: pass at least one of --partnet, --ikea-manual, --assemblybench, "
+                       "--fantastic-breaks, --breaking-bad, --rehosted")
+    try:
+        comp = compose(cats, args.per_source, args.seed)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    summary = comp.summary()
+    for source, s in summary["sources"].items():
+        print(f"{source}: {len(s['objects'])} of {s['candidates']} candidates; bands {s['bands']}; "
+              f"categories {s['categories']}; conditions {', '.join(s['conditions'])}")
+    if args.dry_run:
+        print(json.dumps(summary, indent=2))
+        return 0
+    specs, sources = specs_for(comp)
+    if not specs:
+        raise CliError("no eligible objects (2 to 20 parts) in the given datasets")
+    code = run_suite(args, specs, sources, name=f"benchmark-{args.per_source}-seed{args.seed}", generator="aw.sources.compose")
+    (Path(args.out) / "composition.json").write_text(json.dumps(summary, indent=2) + "\n")
+    return code
+
+
+def register_official(sub) -> None:
+    p = sub.add_parser(
+        "official", help="convert an official AssemblyWorldBench package and episode archives for aw-score",
+        description="Write a scoring suite (manifest, targets, eval_points/ with the official 1000 points per part) "
+        "and RUNS/<system>/<task>/ trajectories with every recorded state of each final.episode.zip.")
+    p.add_argument("package", metavar="PKG", help="official package folder (manifest.json, eval/)")
+    p.add_argument("--episodes", metavar="DIR", default=None, help="folder searched for *.episode.zip archives")
+    p.add_argument("--out", required=True, metavar="SUITE", help="scoring suite to write")
+    p.add_argument("--runs", metavar="RUNS", default=None, help="runs folder to write (needed with --episodes)")
+    p.add_argument("--system", default=None, help="system label for every archive (default: from each archive)")
+    p.add_argument("--force", action="store_true", help="replace an existing suite / runs")
+    p.set_defaults(func=_cmd_official)
+
+
+def _cmd_official(args: argparse.Namespace) -> int:
+    from aw.cli.prepare import CliError
+    from aw.official import convert, convert_package
+
+    try:
+        if args.episodes is None:
+            manifest = convert_package(args.package, args.out, force=args.force)
+            runs = []
+        else:
+            if not args.runs:
+                raise CliError("--episodes needs --runs")
+            manifest, runs = convert(args.package, args.episodes, args.out, args.runs, system=args.system, force=args.force)
+    except FileExistsError as exc:
+        raise CliError(str(exc)) from None
+    print(f"wrote {len(manifest.tasks)} tasks to {args.out}" + (f" and {len(runs)} runs to {args.runs}" if runs else ""))
+    return 0

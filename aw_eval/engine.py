@@ -1,0 +1,306 @@
+"""Scoring of checkpoints: registration, part matching and metrics (``exact`` and ``fast`` modes).
+
+``exact`` runs every start of the protocol at full resolution with the same arithmetic as
+:mod:`aw_eval.reference` (so results equal the reference's), using KD-trees built once per task
+(target) and once per checkpoint (prediction) and certified warm-started neighbours
+(:mod:`aw_eval.icp`). ``fast`` (:mod:`aw_eval.fast`) prunes starts coarse-to-fine.
+
+Scoring one checkpoint is a pure function of ``(geometry, poses, mode)``: batches only remove
+duplicate rows, so any chunking or worker layout gives identical numbers.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from aw.pose import as_finite, cube_rotations, pca_frame, quat_to_matrix
+from aw_eval.chamfer import chamfer_pairs
+from aw_eval.geometry import TaskGeometry
+from aw_eval.icp import ICPProblem, build_tree
+from aw_eval.results import BatchScores, Registration, ScoreResult, match_within_groups
+
+__all__ = ["task_context", "starts_for", "register_points", "register", "register_checkpoint", "finalize", "score", "score_batch", "part_diagnostics",
+           "PartDiagnostics", "MODES"]
+
+MODES = ("exact", "fast")
+
+
+@dataclass
+class TaskContext:
+    """Per-process derived structures of a task (never pickled)."""
+
+    target_parts: np.ndarray  # (P, n, 3) normalized
+    target: np.ndarray  # (P * n, 3)
+    tree_t: object  # KD-tree of ``target``
+    target_frame: tuple[np.ndarray, np.ndarray]  # pca_frame(target)
+    pairs: np.ndarray  # (G, 2) (i, j) pairs inside groups, row-major per group
+    part_trees: list | None = None  # KD-trees of the target parts (built on first use)
+    target_boxes: tuple | None = None  # per-part axis-aligned boxes of the target parts
+
+
+def task_context(geom: TaskGeometry) -> TaskContext:
+    ctx = geom._derived.get("ctx")
+    if ctx is None:
+        tp = geom.target_parts()
+        target = np.ascontiguousarray(tp.reshape(-1, 3))
+        pairs = [(i, j) for g in geom.groups for i in g for j in g]
+        ctx = TaskContext(tp, target, build_tree(target), pca_frame(target), np.asarray(pairs, dtype=np.int64).reshape(-1, 2))
+        geom._derived["ctx"] = ctx
+    return ctx
+
+
+def starts_for(pred: np.ndarray, target_frame, poses: np.ndarray, target_poses: np.ndarray, divisor: float):
+    """All starts ``(R0 (S, 3, 3), t0 (S, 3))``: 24 PCA starts then one same-ID start per part.
+
+    Same arithmetic, in the same order, as :func:`aw_eval.reference.pca_starts` and
+    :func:`aw_eval.reference.part_starts`.
+    """
+    mu_p, a_p = pca_frame(pred)
+    mu_t, a_t = target_frame
+    rs, ts = [], []
+    for s in cube_rotations():
+        r0 = a_t @ s @ a_p.T
+        rs.append(r0)
+        ts.append(mu_t - r0 @ mu_p)
+    for pose, tgt in zip(poses, target_poses):
+        r0 = quat_to_matrix(tgt[3:]) @ quat_to_matrix(pose[3:]).T
+        rs.append(r0)
+        ts.append((tgt[:3] - r0 @ pose[:3]) / divisor)
+    return np.stack(rs), np.stack(ts)
+
+
+def register_points(prob: ICPProblem, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float) -> Registration:
+    """Every start refined by the protocol's ICP; the lowest objective wins, ties to the earlier."""
+    objs = np.empty(len(r0))
+    best = None
+    for k in range(len(r0)):
+        res = prob.run(r0[k], t0[k], max_iters, tol)
+        objs[k] = res.objective
+        if best is None or res.objective < best[0]:
+            best = (res.objective, res.rotation, res.translation, k)
+    return Registration(float(best[0]), best[1], best[2], int(best[3]), objs)
+
+
+def _part_cd(ctx: TaskContext, moved_parts: np.ndarray, pred_trees: dict, i: int, j: int) -> float:
+    """CD(registered pred part i, target part j): KD-trees, squared distances from coordinates
+    exactly as the reference computes them."""
+    x, y = moved_parts[i], ctx.target_parts[j]
+    _, f = ctx.part_trees[j].query(x, k=1)
+    if i not in pred_trees:
+        pred_trees[i] = build_tree(x)
+    _, b = pred_trees[i].query(y, k=1)
+    return float(np.sum((x - y[f]) ** 2, axis=1).mean() + np.sum((y - x[b]) ** 2, axis=1).mean())
+
+
+def _box_gap_sq(point: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
+    d = np.maximum(0.0, np.maximum(lo - point, point - hi))
+    return float(d @ d)
+
+
+def match_parts(ctx: TaskContext, moved_parts: np.ndarray, groups) -> tuple[np.ndarray, np.ndarray]:
+    """Hungarian assignment within groups on the part CDs: ``(assignment (P,), errors (P,))``.
+
+    Inside a group, pairs start at a proven lower bound (``forward >= dist(mean X, box Y)^2``
+    by Jensen's inequality, likewise backward) and only the pairs an optimal assignment uses
+    are computed exactly, until it uses exact costs alone: that assignment is then optimal for
+    the exact costs too, so far-apart pairs are never computed.
+    """
+    p = moved_parts.shape[0]
+    if ctx.part_trees is None:
+        ctx.part_trees = [build_tree(t) for t in ctx.target_parts]
+        ctx.target_boxes = (ctx.target_parts.min(axis=1), ctx.target_parts.max(axis=1))
+    pred_trees: dict[int, object] = {}
+    assign = np.arange(p)
+    errors = np.empty(p)
+    pm, plo, phi = moved_parts.mean(axis=1), moved_parts.min(axis=1), moved_parts.max(axis=1)
+    tm = ctx.target_parts.mean(axis=1)
+    tlo, thi = ctx.target_boxes
+    for g in groups:
+        g = list(g)
+        if len(g) == 1:
+            i = g[0]
+            errors[i] = _part_cd(ctx, moved_parts, pred_trees, i, i)
+            continue
+        k = len(g)
+        cost = np.array([[_box_gap_sq(pm[i], tlo[j], thi[j]) + _box_gap_sq(tm[j], plo[i], phi[i]) for j in g] for i in g])
+        exact = np.zeros((k, k), dtype=bool)
+        while True:
+            cols = match_within_groups(cost, [list(range(k))])[0]
+            todo = [(a, cols[a]) for a in range(k) if not exact[a, cols[a]]]
+            if not todo:
+                break
+            for a, c in todo:
+                cost[a, c] = _part_cd(ctx, moved_parts, pred_trees, g[a], g[c])
+                exact[a, c] = True
+        for a in range(k):
+            assign[g[a]] = g[cols[a]]
+            errors[g[a]] = cost[a, cols[a]]
+    return assign, errors
+
+
+def finalize(geom: TaskGeometry, ctx: TaskContext, pred_parts: np.ndarray, reg: Registration, mode: str) -> ScoreResult:
+    """Metrics of a registered checkpoint: part CDs, Hungarian within groups, PA/SR/SCD/SR^a."""
+    st = geom.settings
+    moved = pred_parts @ reg.rotation.T + reg.translation
+    assign, errors = match_parts(ctx, moved, geom.groups)
+    ok = errors <= st.threshold
+    return ScoreResult(
+        pa=float(ok.mean()),
+        sr=bool(ok.all()),
+        scd=float(reg.scd),
+        sra=bool(reg.scd < st.sra_threshold),
+        part_errors=errors,
+        assignment=assign,
+        reg_rotation=np.asarray(reg.rotation, dtype=np.float64),
+        reg_translation=np.asarray(reg.translation, dtype=np.float64),
+        start_index=int(reg.start_index),
+        mode=mode,
+    )
+
+
+def _register_exact(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, pred_parts: np.ndarray) -> Registration:
+    pred = np.ascontiguousarray(pred_parts.reshape(-1, 3))
+    r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor)
+    prob = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t)
+    return register_points(prob, r0, t0, geom.settings.max_iters, geom.settings.tol)
+
+
+def register(pred, target, starts=None, settings=None) -> Registration:
+    """Protocol ICP of ``pred (n, 3)`` onto ``target (m, 3)`` from ``starts`` (``(R0 (S, 3, 3),
+    t0 (S, 3))``; default: the 24 PCA starts), best objective over starts (ties to the earlier)."""
+    from aw_eval.settings import ProtocolSettings
+
+    settings = settings or ProtocolSettings()
+    pred = as_finite(pred, (3,), "pred")
+    target = as_finite(target, (3,), "target")
+    if pred.ndim != 2 or target.ndim != 2 or len(pred) < 1 or len(target) < 1:
+        raise ValueError(f"register takes point sets (n, 3) and (m, 3), got {pred.shape} and {target.shape}")
+    if starts is None:
+        r0, t0 = starts_for(pred, pca_frame(target), np.zeros((0, 7)), np.zeros((0, 7)), 1.0)
+    else:
+        r0 = as_finite(starts[0], (3, 3), "start rotations").reshape(-1, 3, 3)
+        t0 = as_finite(starts[1], (3,), "start translations").reshape(-1, 3)
+        if len(r0) != len(t0) or len(r0) < 1:
+            raise ValueError("starts need as many rotations as translations (at least one)")
+    prob = ICPProblem(pred, target)
+    return register_points(prob, r0, t0, settings.max_iters, settings.tol)
+
+
+def register_checkpoint(geom: TaskGeometry, poses, mode: str = "exact") -> Registration:
+    """The protocol's registration of one checkpoint ``poses (P, 7)`` (all starts in ``exact``)."""
+    _check_mode(mode)
+    poses = geom.check_poses(poses)
+    ctx = task_context(geom)
+    pred_parts = geom.pred_parts(poses)
+    if mode == "exact":
+        return _register_exact(geom, ctx, poses, pred_parts)
+    from aw_eval.fast import register_fast
+
+    return register_fast(geom, ctx, poses, pred_parts)
+
+
+def _check_mode(mode: str) -> None:
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+
+
+def score(geom: TaskGeometry, poses, mode: str = "exact") -> ScoreResult:
+    """Score one checkpoint ``poses (P, 7)`` (scored parts, in ``geom.part_ids`` order)."""
+    _check_mode(mode)
+    poses = geom.check_poses(poses)
+    if poses.ndim != 2:
+        raise ValueError(f"score takes one checkpoint (P, 7); use score_batch for {poses.shape}")
+    ctx = task_context(geom)
+    pred_parts = geom.pred_parts(poses)
+    if mode == "exact":
+        reg = _register_exact(geom, ctx, poses, pred_parts)
+        return finalize(geom, ctx, pred_parts, reg, mode)
+    from aw_eval import fast
+
+    reg = fast.register_fast(geom, ctx, poses, pred_parts, fast.FAST)
+    res = finalize(geom, ctx, pred_parts, reg, mode)
+    if fast.FAST.margin > 1 and fast.near_threshold(res, geom.settings, fast.FAST.margin):
+        res = finalize(geom, ctx, pred_parts, fast.escalate(geom, ctx, pred_parts, reg), mode)
+    return res
+
+
+def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None) -> BatchScores:
+    """Score ``poses (N, P, 7)``: identical rows are scored once; each row is scored exactly as
+    :func:`score` would (no state is shared between rows), so chunking never changes results.
+
+    ``progress``: optional callable ``(done, total)`` called after each unique row.
+    """
+    _check_mode(mode)
+    poses = geom.check_poses(poses)
+    if poses.ndim != 3:
+        raise ValueError(f"score_batch takes (N, P, 7) poses, got {poses.shape}")
+    n = poses.shape[0]
+    if n == 0:
+        empty = ScoreResult(0.0, False, 0.0, False, np.zeros(geom.n_parts), np.arange(geom.n_parts), np.eye(3), np.zeros(3), 0)
+        out = BatchScores.stack([empty], mode, 0)
+        return BatchScores(**{k: (v[:0] if isinstance(v, np.ndarray) else v) for k, v in out.__dict__.items()})
+    flat = np.ascontiguousarray(poses.reshape(n, -1))
+    _, first, inverse = np.unique(flat, axis=0, return_index=True, return_inverse=True)
+    t0 = time.perf_counter()
+    results = {}
+    for done, k in enumerate(sorted(first)):
+        results[k] = score(geom, poses[k], mode)
+        if progress is not None:
+            progress(done + 1, len(first))
+    by_unique = [results[k] for k in first]
+    rows = [by_unique[u] for u in np.asarray(inverse).reshape(-1)]
+    return BatchScores.stack(rows, mode, len(first), {"seconds": time.perf_counter() - t0})
+
+
+@dataclass
+class PartDiagnostics:
+    """Per-part diagnostics of Appendix C.2 under the saved registration and matching (``(P,)``):
+
+    - ``offset``: distance between the centroids of registered pred part ``i`` and of its matched
+      target part (normalized units: the largest part's PCA box diagonal is 1);
+    - ``centred_cd``: CD of the two clouds after moving each to zero mean (orientation and shape
+      error without translation);
+    - ``never_moved``: the pose equals the identity initial pose.
+    """
+
+    offset: np.ndarray
+    centred_cd: np.ndarray
+    never_moved: np.ndarray
+    part_errors: np.ndarray
+    assignment: np.ndarray
+
+    @property
+    def moved(self) -> np.ndarray:
+        return ~self.never_moved
+
+
+def _row(result, row: int | None) -> ScoreResult:
+    if isinstance(result, BatchScores):
+        if row is None:
+            if len(result) != 1:
+                raise ValueError("part_diagnostics on a BatchScores needs the row index")
+            row = 0
+        return result.row(int(row))
+    return result
+
+
+def part_diagnostics(geom: TaskGeometry, poses, result, row: int | None = None, atol: float = 1e-9) -> PartDiagnostics:
+    """Diagnostics of one checkpoint ``poses (P, 7)`` scored as ``result`` (a :class:`ScoreResult`,
+    or a :class:`BatchScores` with ``row``)."""
+    res = _row(result, row)
+    poses = geom.check_poses(poses)
+    if poses.ndim != 2:
+        raise ValueError(f"part_diagnostics takes one checkpoint (P, 7), got {poses.shape}")
+    ctx = task_context(geom)
+    moved = geom.pred_parts(poses) @ res.reg_rotation.T + res.reg_translation
+    matched = ctx.target_parts[res.assignment]
+    mc, tc = moved.mean(axis=1), matched.mean(axis=1)
+    offset = np.linalg.norm(mc - tc, axis=1)
+    centred = chamfer_pairs(moved - mc[:, None, :], matched - tc[:, None, :])
+    q = poses[:, 3:] / np.linalg.norm(poses[:, 3:], axis=1, keepdims=True)
+    never = (np.abs(poses[:, :3]).max(axis=1) <= atol) & (np.abs(np.abs(q[:, 0]) - 1.0) <= atol)
+    return PartDiagnostics(offset, centred, never, np.asarray(res.part_errors), np.asarray(res.assignment))
+

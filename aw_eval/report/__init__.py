@@ -1,0 +1,45 @@
+"""Outputs of ``aw-score``: ``scores.json``, ``tasks.csv``, ``checkpoints.csv``, ``report.md``
+and PNG plots, all written into the output directory."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import orjson
+
+from aw_eval.report.csvs import write_checkpoint_csv, write_task_csv
+from aw_eval.report.markdown import render_markdown
+from aw_eval.report.plots import write_plots
+from aw_eval.report.results import SCHEMA, SCHEMA_VERSION, AnalysisSettings, build_results
+from aw_eval.study.table import Study
+
+__all__ = ["SCHEMA", "SCHEMA_VERSION", "AnalysisSettings", "build_results", "render_markdown", "write_plots",
+           "write_outputs", "write_json"]
+
+
+def write_json(path: Path, doc: Any) -> None:
+    data = orjson.dumps(doc, option=orjson.OPT_INDENT_2 | orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS)
+    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
+    tmp.write_bytes(data + b"\n")
+    os.replace(tmp, path)
+
+
+def write_outputs(study: Study, out_dir: str | Path, settings: AnalysisSettings, *, suite_dir: str = "",
+                  runs_dir: str = "", score_stats: dict[str, Any] | None = None, plots: bool = True) -> dict[str, Any]:
+    """Write every output; returns ``{"doc": scores document, "files": {name: path}}``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    doc = build_results(study, settings, suite_dir=suite_dir, runs_dir=runs_dir, score_stats=score_stats)
+    files = {"scores": out / "scores.json", "tasks_csv": out / "tasks.csv", "checkpoints_csv": out / "checkpoints.csv",
+             "report": out / "report.md"}
+    write_task_csv(study, files["tasks_csv"])
+    write_checkpoint_csv(study, files["checkpoints_csv"])
+    made = write_plots(doc, out / "plots") if plots else {}
+    doc["plots"] = {k: f"plots/{v}" for k, v in made.items()}
+    write_json(files["scores"], doc)
+    files["report"].write_text(render_markdown(doc, doc["plots"]))
+    for k, v in made.items():
+        files[f"plot_{k}"] = out / "plots" / v
+    return {"doc": doc, "files": files}

@@ -1,0 +1,382 @@
+"""``report.md``: the paper's tables from a ``scores.json`` document.
+
+Tables follow the layout of Table 1 (``tab:benchmark``) and Appendix tables A-3 to A-12 where the
+study has the data; a section says so when it does not (for example, no paired reference
+conditions, no run.json completion reports, no robustness variants).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from aw_eval.analyses.benchmark import cell_label
+from aw_eval.analyses.failures import CLASSES
+from aw_eval.report.fmt import DASH, bold_best, ci, fixed, md_table, paper, pval, signed
+
+__all__ = ["render_markdown"]
+
+SOURCE_NAMES = {"partnet": "PartNet", "ikea_manual": "IKEA-Manual", "assemblybench": "AssemblyBench",
+                "fantastic_breaks": "Fantastic Breaks"}
+
+
+def _order(doc: dict[str, Any]) -> list[str]:
+    return doc["uncertainty"].get("order") or list(doc["systems"])
+
+
+NO_ORIGINALS = "The suite has no original (non-variant) tasks: no benchmark aggregate."
+
+
+def _table1(doc: dict[str, Any]) -> str:
+    q, res = doc["quality"], doc["resources"]
+    if not q["systems"]:
+        return NO_ORIGINALS
+    systems = _order(doc)
+    cells = q["cells"]
+    header = ["System"] + [c["label"] for c in cells] + ["Overall SR (%)", "Time (min)", "MCP calls", "Tokens (M)", "Cost ($)"]
+    cols: list[list[Any]] = []
+    for ci_ in range(len(cells)):
+        cols.append([q["systems"][s]["cells"][ci_]["sr"] for s in systems])
+    cols.append([q["systems"][s]["overall"]["sr"] for s in systems])
+    res_keys = ("time_min", "mcp_calls", "tokens_m", "cost_usd")
+    for k in res_keys:
+        cols.append([res[s][k]["mean"] for s in systems])
+    text_cols = []
+    for j, col in enumerate(cols):
+        if j <= len(cells):
+            txt = [paper(v) for v in col]
+            text_cols.append(bold_best(txt, col, higher=True))
+        else:
+            k = res_keys[j - len(cells) - 1]
+            digits = {"time_min": 1, "mcp_calls": 0, "tokens_m": 2, "cost_usd": 2}[k]
+            txt = [fixed(v, digits) for v in col]
+            text_cols.append(bold_best(txt, col, higher=False))
+    rows = [[s] + [tc[i] for tc in text_cols] for i, s in enumerate(systems)]
+    note = ("SR (%) per source and condition (NR: no reference, IR: assembled-object image, M: manual); Overall by "
+            "eq. 3 (PartNet conditions averaged first, sources weighted equally). Resource columns are arithmetic "
+            "per-evaluation means over available records (records: "
+            + "; ".join(f"{s}: time {res[s]['time_min']['n']}, calls {res[s]['mcp_calls']['n']}, tokens "
+                        f"{res[s]['tokens_m']['n']}, cost {res[s]['cost_usd']['n']}" for s in systems)
+            + "). Bold marks the highest SR or lowest resource use.")
+    return md_table(header, rows) + "\n\n" + note
+
+
+def _quality_full(doc: dict[str, Any]) -> str:
+    q = doc["quality"]
+    if not q["systems"]:
+        return NO_ORIGINALS
+    out = []
+    for s in _order(doc):
+        row = q["systems"][s]
+        rows = []
+        for c, v in zip(q["cells"], row["cells"]):
+            rows.append([c["label"], str(c["n_tasks"]), str(v["n_scored"]), fixed(v["pa"], 2), fixed(v["sr"], 2),
+                         fixed(v["sra"], 2), fixed(v["scd"], 2)])
+        o = row["overall"]
+        rows.append(["**Overall**", str(row["n_tasks"]), str(row["n_scored"]), fixed(o["pa"], 2), fixed(o["sr"], 2),
+                     fixed(o["sra"], 2), fixed(o["scd"], 2)])
+        out.append(f"**{s}**\n\n" + md_table(["Cell", "Tasks", "Scored", "PA (%)", "SR (%)", "SR^a (%)", "SCD (x1000)"], rows))
+    return "\n\n".join(out) + ("\n\nPA, SR and SR^a average all attempted tasks (an unscored attempt counts 0); SCD "
+                              "averages scored attempts only. Overall SCD applies eq. 3 to the cell means.")
+
+
+def _overview(doc: dict[str, Any]) -> str:
+    u, oc = doc["uncertainty"], doc["outcomes"]
+    if not u["overview"]:
+        return NO_ORIGINALS
+    rows = []
+    for s in _order(doc):
+        o = u["overview"].get(s)
+        if o is None:
+            continue
+        rows.append([s, paper(o["sr"]["value"]), ci(o["sr"]["ci"]), paper(o["pa"]["value"]), ci(o["pa"]["ci"]),
+                     str(oc[s]["errors_timeouts"])])
+    return (md_table(["System", "SR", "95% CI", "PA", "95% CI", "Errors/timeouts"], rows) +
+            f"\n\nSource-weighted quality with pointwise percentile bootstrap intervals ({u['n_draws']:,} draws, seed "
+            f"{u['seed']}; objects resampled within sources, PartNet conditions paired). Errors/timeouts count runs "
+            "that did not finish normally, including missing and unreadable runs.")
+
+
+def _pairs(doc: dict[str, Any]) -> str:
+    u = doc["uncertainty"]
+    if not u["overview"]:
+        return NO_ORIGINALS
+    if not u["pairs"]:
+        return "Only one system: no pairwise comparisons."
+    rows = [[p["a"], p["b"], f"{signed(p['sr']['diff'])} {ci(p['sr']['ci'])}", pval(p["sr"]["p_holm"]),
+             f"{signed(p['pa']['diff'])} {ci(p['pa']['ci'])}", pval(p["pa"]["p_holm"])] for p in u["pairs"]]
+    return (md_table(["A", "B", "ΔSR [95% CI]", "p_Holm", "ΔPA [95% CI]", "p_Holm"], rows, "llrrrr") +
+            f"\n\nA minus B in percentage points. Two-sided randomization tests ({u['n_permutations']:,} relabellings, "
+            f"add-one correction, labels exchanged within objects), Holm correction over all {u.get('family_size', 0)} "
+            "system-pair/metric comparisons; intervals are pointwise.")
+
+
+def _reference(doc: dict[str, Any]) -> str:
+    ref = doc["uncertainty"]["reference"]
+    if not ref:
+        return "No source has paired no-reference and image conditions: no reference effects."
+    rows = []
+    for r in ref:
+        rows.append([r["system"], SOURCE_NAMES.get(r["source"], r["source"]), str(r["n_objects"]), signed(r["pa"]["diff"]),
+                     ci(r["pa"]["ci"]), f"{r['pa']['up']}/{r['pa']['down']}", signed(r["sr"]["diff"]), ci(r["sr"]["ci"]),
+                     f"{r['sr']['up']}/{r['sr']['down']}"])
+    return (md_table(["System", "Source", "Objects", "ΔPA (pp)", "95% CI", "PA up/down", "ΔSR (pp)", "95% CI", "SR up/down"],
+                     rows, "llrrrrrrr") +
+            "\n\nImage-conditioned minus no-reference results on the same objects. Up/down counts exclude ties; SR counts "
+            "are discordant successes. Intervals are pointwise percentile bootstrap intervals over objects.")
+
+
+def _part_scale(doc: dict[str, Any]) -> str:
+    ps = doc["part_scale"]
+    if not ps:
+        return "No task geometry was loaded: no part-size ratios."
+    rows = [[SOURCE_NAMES.get(s, s), str(v["n"]), fixed(v["median"], 2), f"{fixed(v['q1'], 2)}–{fixed(v['q3'], 2)}",
+             fixed(v["p90"], 2), fixed(v["above_10"], 1)] for s, v in ps.items()]
+    return (md_table(["Dataset", "N", "Median", "Interquartile range", "90th percentile", "Ratio > 10 (%)"], rows) +
+            "\n\nLargest over smallest part PCA bounding-box diagonal (unique vertices), one value per object.")
+
+
+def _part_count(doc: dict[str, Any]) -> str:
+    pc = doc["part_count"]
+    bands = [b for b in pc["bands"]]
+    out = []
+    for s in _order(doc):
+        rows_src = pc["systems"].get(s, [])
+        used = [b for b in bands if any(b in r["bands"] for r in rows_src)]
+        rows = []
+        for r in rows_src:
+            cells = []
+            for b in used:
+                v = r["bands"].get(b)
+                cells.append(DASH if v is None else f"{v['n']}: {fixed(v['pa'], 2)}/{fixed(v['sr'], 2)}")
+            rows.append([r["label"]] + cells)
+        out.append(f"**{s}**\n\n" + md_table(["Condition"] + [f"{b} parts" for b in used], rows))
+    return "\n\n".join(out) + "\n\nEach cell: number of tasks and mean PA/SR in percent."
+
+
+def _scd_tail(doc: dict[str, Any]) -> str:
+    out = []
+    for s in _order(doc):
+        rows = [[r["label"], str(r["n"]), fixed(r["mean"], 2), fixed(r["median"], 2), str(r["k"]), fixed(r["contribution"], 2),
+                 fixed(r["remaining_mean"], 2), str(r["tail_never_moved"])] for r in doc["scd_tail"]["systems"].get(s, [])]
+        if rows:
+            out.append(f"**{s}**\n\n" + md_table(["Setting", "N", "Mean", "Median", "k", "Contribution (%)", "Remaining mean",
+                                                 "Tail never moved"], rows))
+    if not out:
+        return "No scored attempts."
+    return "\n\n".join(out) + ("\n\nSCD x1000 over scored attempts; the largest k = ceil(0.05 N) values form the tail. "
+                              "'Tail never moved' counts tail runs in which no part ever moved.")
+
+
+def _categories(doc: dict[str, Any]) -> str:
+    out = []
+    for s in _order(doc):
+        rows = [[r["label"], r["category"], str(r["n"]), fixed(r["scd"], 2), fixed(r["pa"], 2), fixed(r["sr"], 2)]
+                for r in doc["categories"]["systems"].get(s, [])]
+        out.append(f"**{s}**\n\n" + md_table(["Cell", "Category", "N", "SCD (x1000)", "PA (%)", "SR (%)"], rows, "llrrrr"))
+    return "\n\n".join(out)
+
+
+def _thresholds(doc: dict[str, Any]) -> str:
+    th = doc["thresholds"]
+    ts = th["thresholds"]
+    show = [i for i, t in enumerate(ts) if any(abs(t - x) < 1e-12 for x in (1e-4, 1e-3, 0.00316228, 0.01, 0.0316228, 0.1))]
+    header = ["System"] + [f"PA@{ts[i]:g}" for i in show] + [f"SR@{ts[i]:g}" for i in show]
+    rows = []
+    for s in _order(doc):
+        v = th["systems"].get(s)
+        if v is None:
+            continue
+        rows.append([s] + [fixed(v["pa"][i]) for i in show] + [fixed(v["sr"][i]) for i in show])
+    return md_table(header, rows) + ("\n\nPA/SR (%, eq. 3) at correctness thresholds, with the saved registration and "
+                                    "Hungarian correspondence fixed; the full sweep is in scores.json and thresholds.png.")
+
+
+def _stages(doc: dict[str, Any]) -> str:
+    rows = []
+    for s in _order(doc):
+        st = doc["dynamics"]["systems"].get(s, {}).get("stages")
+        if not st:
+            continue
+        rows.append([s, fixed(st["translation_early"], 3), fixed(st["translation_late"], 3), fixed(st["rotation_early"], 1),
+                     fixed(st["rotation_late"], 1), fixed(st["revisit"], 1)])
+    return (md_table(["System", "Trans. early", "Late", "Rot. early", "Late", "Revisit (%)"], rows) +
+            "\n\nSource-weighted medians of per-evaluation medians in the first and last third of the interaction "
+            "interval. Translation is normalized by the largest-part diagonal; rotation is in degrees; operations "
+            "below 0.5 degrees count as translations. Revisit: weighted median fraction of edits touching a part "
+            "edited before.")
+
+
+def _activity(doc: dict[str, Any]) -> str:
+    dy = doc["dynamics"]
+    out = []
+    for s in _order(doc):
+        v = dy["systems"].get(s)
+        if v is None:
+            continue
+        rows = []
+        for b in range(dy["n_bins"]):
+            sh = v["shares"][b]
+            mg = v["magnitudes"]
+            rows.append([f"{b * 10}–{(b + 1) * 10}%", str(v["active"][b])] +
+                        [DASH if x is None else fixed(100 * x, 1) for x in sh] +
+                        [fixed(mg["translation"][b], 3), fixed(mg["rotation_deg"][b], 1)])
+        out.append(f"**{s}**\n\n" + md_table(["Bin", "Active", "Inspect (%)", "Observe (%)", "Manipulate (%)", "Other (%)",
+                                             "Translation", "Rotation (deg)"], rows))
+    return "\n\n".join(out) + ("\n\nMean call shares within active evaluation-bins (ten equal-width bins from the first to "
+                              "the last call), averaged with benchmark weights; magnitudes are weighted medians of "
+                              "per-evaluation medians.")
+
+
+def _curves(doc: dict[str, Any]) -> str:
+    cv = doc["curves"]
+    pts = cv["points"]
+    rows = []
+    for s in _order(doc):
+        v = cv["systems"].get(s)
+        if v is None:
+            continue
+        rows.append([s] + [f"{fixed(a)}/{fixed(b)}" for a, b in zip(v["pa"]["normalized"], v["sr"]["normalized"])])
+    t1 = md_table(["System"] + [f"{p:g}" for p in pts], rows)
+    rows = []
+    for s in _order(doc):
+        v = cv["systems"].get(s)
+        if v is None:
+            continue
+        rows.append([s] + [f"{fixed(a)}/{fixed(b)}" for a, b in zip(v["pa"]["budget"], v["sr"]["budget"])] +
+                    [f"{fixed(v['pa']['final'])}/{fixed(v['sr']['final'])}", str(v["edits_after_last_budget"])])
+    t2 = md_table(["System"] + [f"{m:g} min" for m in cv["budget_minutes"]] + ["Final", "Edits after last budget"], rows)
+    dec = doc["pa_decreases"]
+    t3 = md_table(["System", "PA decreases", "with an assignment change", "persist, alignment fixed",
+                   "persist, alignment and matching fixed"],
+                  [[s, str(dec[s]["decreases"]), str(dec[s]["with_assignment_change"]),
+                    str(dec[s]["persist_alignment_fixed"]), str(dec[s]["persist_both_fixed"])]
+                   for s in _order(doc) if s in dec])
+    return ("PA/SR (%) at normalized interaction time (first to last call; 1 = final state):\n\n" + t1 +
+            "\n\nPA/SR (%) at absolute time budgets (state after the last completed operation; no interpolation; "
+            "an episode that ended earlier keeps its final state). These are retrospective truncations, not new "
+            "budget-conditioned runs:\n\n" + t2 +
+            "\n\nPA decreases between consecutive checkpoints: how many change at least one matched assignment, and "
+            "how many persist when the later state is rescored with the earlier checkpoint's registration "
+            "(re-matched), and with its registration and matching:\n\n" + t3)
+
+
+def _completion(doc: dict[str, Any]) -> str:
+    c = doc["completion"]
+    rows = [[s, str(v["declared"]), str(v["declared_successful"]), str(v["not_declared"]), str(v["no_report"]),
+             fixed(v["median_incorrect_fraction_of_failed_claims"])] for s, v in c.items()]
+    if all(v["declared"] + v["not_declared"] == 0 for v in c.values()):
+        return "No run.json records declared completion: nothing to compare."
+    return md_table(["System", "Declared complete", "of which successful", "Not declared", "No report",
+                     "Median incorrect parts of failed claims (%)"], rows)
+
+
+def _failures(doc: dict[str, Any]) -> str:
+    f = doc["failures"]
+    rows = []
+    for s in _order(doc):
+        v = f["systems"].get(s)
+        if v is None:
+            continue
+        rng = v["grid_range"]
+        rows.append([s, str(v["failed_tasks"]), str(v["wrong_parts"]), fixed(v["translation_part_pooled"]),
+                     fixed(v["translation_task_pooled"]), DASH if rng is None else f"{fixed(rng[0])}–{fixed(rng[1])}"])
+    t1 = md_table(["System", "Failed tasks", "Wrong parts", "Part pooled (%)", "Task pooled (%)", "Sensitivity range (%)"], rows)
+    rows = []
+    for s in _order(doc):
+        v = f["systems"].get(s)
+        if v is None:
+            continue
+        rows.append([s] + [str(v["class_counts"][c]) for c in CLASSES])
+    t2 = md_table(["System"] + [c.replace("_", " ") for c in CLASSES], rows)
+    return (t1 + "\n\nTranslation-dominated fractions of incorrect parts (part pooling weights incorrect parts equally; "
+            "task pooling averages within failed tasks first). The sensitivity range spans offset cutoffs "
+            f"{', '.join(map(str, f['offset_grid']))} x centred-CD cutoffs {', '.join(map(str, f['centred_grid']))}.\n\n"
+            "Parts per class (ordered classifier; correct parts included):\n\n" + t2)
+
+
+def _robustness(doc: dict[str, Any]) -> str:
+    rb = doc["robustness"]
+    if not rb["systems"]:
+        return "The suite has no robustness variants."
+    out = []
+
+    def one(x):
+        return f"{fixed(x['pa'], 2)}/{int(x['sr'])}" if x["status"] == "scored" else f"({x['status']})"
+
+    def cell(v):
+        return " ".join(one(x) for x in v) if v else DASH
+
+    for s in _order(doc):
+        v = rb["systems"].get(s)
+        if v is None:
+            continue
+        rows = [[r["label"], r["object_id"], one(r["original"]),
+                 cell(r["layout"]), cell(r["distractor"]), cell(r["missing"])] for r in v["rows"]]
+        out.append(f"**{s}**\n\n" + md_table(["Source", "Object", "Original", "Layouts", "Distractor", "Missing"], rows, "llrrrr"))
+    return "\n\n".join(out) + ("\n\nEach cell: PA (%) / SR (0 or 1); the missing-part column reports retained-part PA / "
+                              "retained-part completeness. A dash marks an untested condition; a status in parentheses a run "
+                              "that was not scored (counted 0 in the aggregates).")
+
+
+def _runs(doc: dict[str, Any]) -> str:
+    lines = []
+    for status, items in sorted(doc["unscored_runs"].items()):
+        lines.append(f"- **{status}** ({len(items)}), scored PA = SR = 0:")
+        for it in items[:200]:
+            lines.append(f"  - {it['system']} / {it['task_id']}: {'; '.join(it['problems']) or status}")
+        if len(items) > 200:
+            lines.append(f"  - ... and {len(items) - 200} more (see scores.json)")
+    if doc["unknown_runs"]:
+        lines.append(f"- **runs for tasks not in the suite** ({len(doc['unknown_runs'])}), ignored:")
+        lines += [f"  - {u['system']} / {u['task_id']}" for u in doc["unknown_runs"]]
+    notes = [r for r in doc["runs"] if r["status"] == "scored" and (r["problems"] or r["final_from"] != "final.json")]
+    if notes:
+        lines.append(f"- **scored with notes** ({len(notes)}):")
+        for r in notes:
+            msg = "; ".join(r["problems"]) if r["problems"] else ""
+            lines.append(f"  - {r['system']} / {r['task_id']}: final state from {r['final_from']}" + (f"; {msg}" if msg else ""))
+    return "\n".join(lines) if lines else "Every run was found and scored from its final.json."
+
+
+def render_markdown(doc: dict[str, Any], plots: dict[str, str] | None = None) -> str:
+    st = doc["settings"]
+    plots = plots or {}
+    parts = [
+        f"# AssemblyWorld scores: {doc['suite']['name']}",
+        f"Suite `{doc['suite']['dir']}` ({doc['suite']['n_original']} original tasks, {doc['suite']['n_tasks']} in all); "
+        f"runs `{doc['runs_dir']}`; systems: {', '.join(doc['systems'])}. Final states scored in `{st.get('final_mode')}` "
+        f"mode, checkpoints in `{st.get('checkpoint_mode')}` mode" + (" (final states only)" if st.get("final_only") else "") +
+        f"; seed {st['seed']}. Generated {doc['generated_at']} (schema {doc['format']} v{doc['format_version']})." +
+        (f" **Protocol overrides (not the paper's protocol): {st['protocol_overrides']}.**"
+         if st.get("protocol_overrides") else ""),
+        "## Runs", _runs(doc),
+        "## Table 1: benchmark results", _table1(doc),
+        "## Quality per cell (PA, SR, SR^a, SCD)", _quality_full(doc),
+        "## Table A-3: benchmark quality with bootstrap intervals", _overview(doc),
+        "## Table A-4: paired system differences", _pairs(doc),
+        "## Table A-5: paired reference effects", _reference(doc),
+    ]
+    if "reference" in plots:
+        parts.append(f"![reference effects]({plots['reference']})")
+    parts += [
+        "## Table A-6: within-object part-size ratios", _part_scale(doc),
+        "## Table A-7: part-count bands", _part_count(doc),
+        "## Table A-8: SCD concentration", _scd_tail(doc),
+        "## Table A-9: results per category", _categories(doc),
+        "## Correctness-threshold sensitivity", _thresholds(doc),
+    ]
+    if "thresholds" in plots:
+        parts.append(f"![threshold sensitivity]({plots['thresholds']})")
+    parts += ["## Table A-10: early-to-late interaction changes", _stages(doc),
+              "## Interaction dynamics per bin", _activity(doc)]
+    for k in ("activity", "magnitudes"):
+        if k in plots:
+            parts.append(f"![{k}]({plots[k]})")
+    parts += ["## Quality over time", _curves(doc)]
+    for k in ("quality_normalized", "quality_budget"):
+        if k in plots:
+            parts.append(f"![{k.replace('_', ' ')}]({plots[k]})")
+    parts += ["## Completion reports", _completion(doc),
+              "## Table A-11: geometric failure classes", _failures(doc),
+              "## Table A-12: robustness variants", _robustness(doc)]
+    return "\n\n".join(parts) + "\n"

@@ -1,0 +1,108 @@
+"""The study's only contact with the evaluator core (``aw_eval``'s public API).
+
+Keeping every call here makes the batch front end independent of the evaluator's internals:
+``load_geometry`` (cached per task), ``score_states`` (a batch of checkpoints in one call) and
+``final_diagnostics`` (centred CDs and centroid offsets under the saved registration and
+matching, for the failure classes).
+"""
+
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["prepare_thread", "protocol_settings", "load_geometry", "score_states", "final_diagnostics", "evaluator_version", "MODES"]
+
+MODES = ("exact", "fast")
+
+
+@functools.lru_cache(maxsize=1)
+def evaluator_version() -> str:
+    """Version of the scoring code; part of every cache key: the evaluator's ``__version__`` and
+    a hash of the source of every module that computes cached numbers (the evaluator core, this
+    package's scoring modules, the trajectory reader), so that any change to them rescores."""
+    import hashlib
+
+    import aw.formats.trajectory
+    import aw_eval
+
+    core = Path(aw_eval.__file__).parent
+    files = sorted(p for p in core.glob("*.py") if p.name not in ("cli.py", "__init__.py"))
+    files += [core / "study" / f for f in ("episode.py", "job.py", "decreases.py", "evaluator.py", "model.py")]
+    files.append(Path(aw.formats.trajectory.__file__))
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f.name.encode() + b"\0" + f.read_bytes())
+    return f"{getattr(aw_eval, '__version__', '0')}+src{h.hexdigest()[:12]}"
+
+
+def prepare_thread() -> None:
+    """Per-thread setup before scoring in this thread.
+
+    OpenMP's thread count is a per-thread setting: the evaluator limits pykdtree's OpenMP team to
+    one thread when it is imported, which holds for the importing thread only. A Dask worker
+    thread (or any other thread) would otherwise run every small KD-tree query with a team of
+    all cores, several times slower on a busy machine, so the limit is set again here.
+    """
+    try:
+        from aw_eval.icp import limit_kdtree_threads
+    except ImportError:  # pragma: no cover - an evaluator without KD-trees
+        return
+    limit_kdtree_threads()
+
+
+def protocol_settings(overrides=()):
+    """``ProtocolSettings`` with ``overrides`` ((name, value) pairs) applied; None without any.
+    Unknown names or invalid values raise ``ValueError``."""
+    if not overrides:
+        return None
+    from aw_eval.settings import ProtocolSettings
+
+    fields = ProtocolSettings.__dataclass_fields__
+    kw = {}
+    for name, value in overrides:
+        if name not in fields:
+            raise ValueError(f"unknown protocol setting {name!r}; known: {', '.join(fields)}")
+        kw[name] = int(value) if fields[name].type in (int, "int") else float(value)
+    return ProtocolSettings(**kw)
+
+
+def load_geometry(task_dir: Path, targets_path: Path, cache_dir: Path | None, overrides=()):
+    import aw_eval
+
+    settings = protocol_settings(overrides)
+    if settings is None:
+        return aw_eval.load_task_geometry(task_dir, targets_path, cache_dir=cache_dir)
+    return aw_eval.load_task_geometry(task_dir, targets_path, cache_dir=cache_dir, settings=settings)
+
+
+def score_states(geom, poses: np.ndarray, mode: str) -> dict[str, np.ndarray]:
+    """Scores of ``poses: (N, P, 7)``: ``part_errors (N, P)``, ``assignment (N, P)``, ``pa``,
+    ``sr``, ``sra``, ``scd`` ``(N,)`` and the raw batch result under ``"batch"``."""
+    import aw_eval
+
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    b = aw_eval.score_batch(geom, np.asarray(poses, dtype=np.float64), mode=mode)
+    return {
+        "part_errors": np.asarray(b.part_errors, dtype=np.float64),
+        "assignment": np.asarray(b.assignment, dtype=np.int64),
+        "pa": np.asarray(b.pa, dtype=np.float64),
+        "sr": np.asarray(b.sr, dtype=np.float64),
+        "sra": np.asarray(b.sra, dtype=np.float64),
+        "scd": np.asarray(b.scd, dtype=np.float64),
+        "reg_rotation": np.asarray(b.reg_rotation, dtype=np.float64),
+        "reg_translation": np.asarray(b.reg_translation, dtype=np.float64),
+        "batch": b,
+    }
+
+
+def final_diagnostics(geom, poses: np.ndarray, scores: dict[str, Any], row: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(centred_cd (P,), offset (P,))`` of row ``row`` of a scored batch."""
+    import aw_eval
+
+    d = aw_eval.part_diagnostics(geom, poses[row], scores["batch"], row)
+    return np.asarray(d.centred_cd, dtype=np.float64), np.asarray(d.offset, dtype=np.float64)

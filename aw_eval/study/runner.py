@@ -1,0 +1,230 @@
+"""Scoring a whole study: find the runs, reuse what the cache holds, score the rest task by task
+(in-process, in a local process pool, or on a Dask cluster), and assemble the :class:`Study`.
+
+Runs are ``RUNS_DIR/<system>/<task_id>/`` (``trajectory.jsonl``, ``final.json``, optional
+``run.json``). Every system is scored on every suite task: a task without a run directory, or
+whose directory holds neither a trajectory nor final.json, is ``missing`` (PA = SR = 0). Run
+directories for tasks outside the suite are listed in ``Study.unknown_runs`` and ignored.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import sys
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from aw.formats import FormatError, read_manifest, read_run_info
+from aw.formats.suite import suite_paths
+from aw_eval.study import evaluator
+from aw_eval.study.cache import Cache, geometry_key, run_key
+from aw_eval.study.job import STATUS_ERROR, RunRequest, ScoreSettings, TaskJob, TaskOutput, score_task
+from aw_eval.study.model import STATUS_MISSING, RunScore
+from aw_eval.study.table import RunRecord, Study
+
+__all__ = ["StudyError", "discover_runs", "score_study", "ScoreStats", "default_jobs"]
+
+
+class StudyError(Exception):
+    """A problem with the inputs as a whole (no suite, no runs directory): one line for the user."""
+
+
+@dataclass
+class ScoreStats:
+    """What a scoring pass did: runs found in the cache, runs scored now, tasks dispatched."""
+
+    cached: int = 0
+    scored: int = 0
+    tasks_dispatched: int = 0
+    missing: int = 0
+    errors: int = 0
+    executor: str = "none"
+    seconds_geometry: float = 0.0  # summed over the tasks dispatched now (worker wall time)
+    seconds_checkpoints: float = 0.0
+    seconds_final: float = 0.0
+
+
+def default_jobs() -> int:
+    return max(1, os.cpu_count() or 1)
+
+
+def _is_run_dir(p: Path) -> bool:
+    return (p / "trajectory.jsonl").exists() or (p / "final.json").exists()
+
+
+def discover_runs(runs_dir: Path, task_ids: set[str]) -> tuple[list[str], dict[tuple[str, str], Path], list[dict[str, Any]]]:
+    """``(systems, {(system, task_id): run_dir}, unknown)`` where ``unknown`` lists run
+    directories of tasks not in the suite. Hidden directories are skipped."""
+    if not runs_dir.is_dir():
+        raise StudyError(f"{runs_dir}: runs directory not found")
+    systems = sorted(p.name for p in runs_dir.iterdir() if p.is_dir() and not p.name.startswith("."))
+    found: dict[tuple[str, str], Path] = {}
+    unknown: list[dict[str, Any]] = []
+    for s in systems:
+        for p in sorted((runs_dir / s).iterdir()):
+            if not p.is_dir() or p.name.startswith("."):
+                continue
+            if p.name in task_ids:
+                found[(s, p.name)] = p
+            elif _is_run_dir(p):
+                unknown.append({"system": s, "task_id": p.name, "path": str(p)})
+    return systems, found, unknown
+
+
+def _progress(total: int, enabled: bool, desc: str):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="task", disable=not enabled, file=sys.stderr, dynamic_ncols=True)
+
+
+def _worker_init() -> None:
+    # One XLA thread per worker process: the pool already spreads work over the cores.
+    os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
+
+
+def _failed(job: TaskJob, exc: BaseException) -> TaskOutput:
+    """The output of a job whose worker failed: every run gets status ``error`` (not cached)."""
+    msg = f"worker failed: {type(exc).__name__}: {exc}".strip()
+    return TaskOutput(job.task_id, None, [RunScore.unscored(r.system, job.task_id, STATUS_ERROR, [msg]) for r in job.runs],
+                      error=msg)
+
+
+def _run_jobs(jobs: list[TaskJob], *, scheduler: str | None, n_jobs: int) -> tuple[Iterator[TaskOutput], str, Callable[[], None]]:
+    """Yield outputs as they complete; returns (iterator, executor name, closer)."""
+    if not jobs:
+        return iter(()), "none", lambda: None
+    if scheduler:
+        try:
+            from distributed import Client
+            from distributed import as_completed as dask_completed
+        except ImportError as exc:  # pragma: no cover - distributed is a dependency
+            raise StudyError(f"--scheduler needs the 'distributed' package ({exc})") from None
+        try:
+            client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise StudyError(f"cannot connect to the Dask scheduler at {scheduler}: {exc}") from None
+        futures = client.map(score_task, jobs, pure=False)
+        job_of = {f.key: j for f, j in zip(futures, jobs)}
+
+        def gen_dask() -> Iterator[TaskOutput]:
+            for fut in dask_completed(futures):
+                try:
+                    yield fut.result()
+                except Exception as exc:  # a worker died or could not run the job
+                    yield _failed(job_of[fut.key], exc)
+
+        return gen_dask(), f"dask:{scheduler}", client.close
+    if n_jobs <= 1 or len(jobs) == 1:
+        return (score_task(j) for j in jobs), "in-process", lambda: None
+    pool = ProcessPoolExecutor(max_workers=min(n_jobs, len(jobs)), mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_worker_init)
+    futs = {pool.submit(score_task, j): j for j in jobs}
+
+    def gen_pool() -> Iterator[TaskOutput]:
+        for f in as_completed(futs):
+            try:
+                yield f.result()
+            except Exception as exc:  # e.g. BrokenProcessPool: a worker was killed
+                yield _failed(futs[f], exc)
+
+    return gen_pool(), f"processes:{min(n_jobs, len(jobs))}", lambda: pool.shutdown(cancel_futures=True)
+
+
+def _read_info(run_dir: Path | None) -> tuple[Any, str | None]:
+    if run_dir is None or not (run_dir / "run.json").is_file():
+        return None, None
+    try:
+        return read_run_info(run_dir / "run.json"), None
+    except FormatError as exc:
+        return None, f"run.json unreadable: {exc.problem}"
+
+
+def score_study(suite_dir: str | Path, runs_dir: str | Path, out_dir: str | Path, settings: ScoreSettings, *,
+                scheduler: str | None = None, n_jobs: int | None = None, progress: bool = True,
+                log: Callable[[str], None] | None = None,
+                geometry_cache: str | Path | None = None) -> tuple[Study, ScoreStats]:
+    """Score every run of every system on every suite task (resuming from ``out_dir/cache``).
+
+    ``geometry_cache``: the evaluator's per-task geometry cache (default ``out_dir/cache/geometry``).
+    """
+    suite_dir, runs_dir, out_dir = Path(suite_dir), Path(runs_dir), Path(out_dir)
+    try:
+        manifest = read_manifest(suite_dir)
+    except FormatError as exc:
+        raise StudyError(str(exc)) from None
+    entries = list(manifest.tasks)
+    ids = {e.task_id for e in entries}
+    systems, found, unknown = discover_runs(runs_dir, ids)
+    if not systems:
+        raise StudyError(f"{runs_dir}: no system directories (expected RUNS_DIR/<system>/<task_id>/)")
+    cache = Cache(out_dir / "cache")
+    ev_version = evaluator.evaluator_version()
+    stats = ScoreStats()
+    scores: dict[tuple[str, str], RunScore] = {}
+    keys: dict[tuple[str, str], str] = {}
+    facts = {}
+    jobs: list[TaskJob] = []
+    gkeys: dict[str, str] = {}
+    for e in entries:
+        task_dir, targets = suite_paths(suite_dir, e.task_id)
+        gkey = gkeys[e.task_id] = geometry_key(task_dir, targets)
+        f = cache.get_facts(e.task_id, gkey)
+        if f is not None:
+            facts[e.task_id] = f
+        todo = []
+        for s in systems:
+            run_dir = found.get((s, e.task_id))
+            if run_dir is None or not _is_run_dir(run_dir):
+                where = f"{runs_dir / s / e.task_id}"
+                scores[(s, e.task_id)] = RunScore.unscored(s, e.task_id, STATUS_MISSING, [f"no run at {where}"])
+                stats.missing += 1
+                continue
+            key = run_key(gkey, run_dir, settings.key(), ev_version)
+            keys[(s, e.task_id)] = key
+            hit = cache.get_run(s, e.task_id, key)
+            if hit is not None:
+                scores[(s, e.task_id)] = hit
+                stats.cached += 1
+            else:
+                todo.append(RunRequest(s, str(run_dir)))
+        if todo or f is None:
+            jobs.append(TaskJob(e.task_id, str(task_dir), str(targets), tuple(todo), settings,
+                                str(geometry_cache or cache.geometry_dir)))
+    stats.tasks_dispatched = len(jobs)
+    outputs, stats.executor, close = _run_jobs(jobs, scheduler=scheduler, n_jobs=n_jobs or default_jobs())
+    if log and jobs:
+        log(f"scoring {sum(len(j.runs) for j in jobs)} runs of {len(jobs)} tasks ({stats.executor}); "
+            f"{stats.cached} runs from the cache")
+    try:
+        with _progress(len(jobs), progress and len(jobs) > 0, "scoring") as bar:
+            for out in outputs:
+                if out.facts is not None:
+                    facts[out.task_id] = out.facts
+                    stats.seconds_geometry += out.facts.seconds_geometry
+                    cache.put_facts(out.facts, gkeys[out.task_id])
+                for r in out.results:
+                    scores[(r.system, r.task_id)] = r
+                    stats.scored += 1
+                    stats.seconds_checkpoints += r.seconds_checkpoints
+                    stats.seconds_final += r.seconds_final
+                    if r.status == STATUS_ERROR or out.error:
+                        stats.errors += 1
+                    else:
+                        cache.put_run(r, keys[(r.system, r.task_id)])
+                bar.update(1)
+    finally:
+        close()
+    runs: dict[tuple[str, str], RunRecord] = {}
+    for (s, t), sc in scores.items():
+        run_dir = found.get((s, t))
+        info, problem = _read_info(run_dir)
+        runs[(s, t)] = RunRecord(sc, info, problem, run_dir)
+    study = Study(manifest.name, entries, systems, runs, facts, unknown,
+                  settings={"checkpoint_mode": settings.checkpoint_mode, "final_mode": settings.final_mode,
+                            "final_only": settings.final_only, "evaluator_version": ev_version,
+                            "protocol_overrides": {k: v for k, v in settings.protocol}})
+    return study, stats

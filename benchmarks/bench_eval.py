@@ -1,0 +1,182 @@
+"""Evaluator benchmark: checkpoints per second of the reference, ``exact`` and ``fast`` on the same
+checkpoints, compile time apart, peak memory, and the agreement of ``fast`` with ``exact``.
+
+Prints a table and writes JSON (default ``benchmarks/results/bench_eval.json``). Geometry is
+synthetic (:mod:`aw_eval.fixtures`): tables of 2-20 parts with identical legs and symmetric
+parts; checkpoints come from agent-like synthetic trajectories. Examples::
+
+    # issue 3/8 throughput table (reference on few checkpoints: it takes minutes each)
+    .venv/bin/python benchmarks/bench_eval.py --parts 2 5 10 --ref 2 --fast-batches 1 100
+    # agreement of fast against exact on many checkpoints at reduced resolution
+    .venv/bin/python benchmarks/bench_eval.py --parts 2 5 10 --ref 0 --exact 0 --agreement 1000 --agree-fps 64
+
+Every figure is measured in one process on this machine; ratios compare runs on identical
+checkpoints. ``--workers`` is not offered on purpose: throughput per process is reported, and a
+pool of ``k`` processes (``aw-score`` does that) multiplies it by about ``k`` on ``k`` free cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+os.environ.setdefault("JAX_PLATFORMS", "cpu")
+os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".jax_cache"))
+
+import aw_eval  # noqa: E402
+from aw_eval import reference as ref  # noqa: E402
+from aw_eval.fixtures import make_points_geometry, synthetic_trajectory  # noqa: E402
+
+
+def peak_mib() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def trajectory_checkpoints(obj, n: int, seed: int) -> np.ndarray:
+    """``n`` checkpoints from consecutive synthetic trajectories (about 3 edits per part each)."""
+    p = len(obj.meshes)
+    out, k = [], 0
+    while sum(len(t) for t in out) < n:
+        out.append(synthetic_trajectory(obj, 3 * p, seed=seed + k))
+        k += 1
+    return np.concatenate(out)[:n]
+
+
+def time_calls(fn, items):
+    t0 = time.perf_counter()
+    res = [fn(x) for x in items]
+    return time.perf_counter() - t0, res
+
+
+def bench_parts(p: int, args, rows: list, agree: list) -> None:
+    t0 = time.perf_counter()
+    geom, obj = make_points_geometry(p, args.n_fps, seed=p, settings=aw_eval.ProtocolSettings(n_fps=args.n_fps, n_surface=max(4096, 4 * args.n_fps)))
+    t_geom = time.perf_counter() - t0
+    n_need = max(args.ref, args.exact, max(args.fast_batches or [0]), 1)
+    cks = trajectory_checkpoints(obj, n_need + 1, seed=1000 + p)
+    # compile (JAX) apart: the first fast call on this shape
+    t0 = time.perf_counter()
+    aw_eval.score(geom, cks[-1], mode="fast")
+    first_fast = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    aw_eval.score(geom, cks[-1], mode="fast")
+    warm_fast = time.perf_counter() - t0
+    row = {"parts": p, "points_per_part": args.n_fps, "geometry_s": t_geom, "fast_first_call_s": first_fast,
+           "fast_warm_call_s": warm_fast, "compile_s": max(0.0, first_fast - warm_fast)}
+    same = cks[: max(args.ref, args.exact)]
+    if args.ref:
+        t, rres = time_calls(lambda c: ref.score(geom.clouds, geom.target_poses, geom.divisor, geom.groups, c, geom.settings), same[: args.ref])
+        row["reference_s_per_ck"] = t / args.ref
+        row["peak_mib_after_reference"] = peak_mib()
+    if args.exact:
+        t, eres = time_calls(lambda c: aw_eval.score(geom, c, mode="exact"), same[: args.exact])
+        row["exact_s_per_ck"] = t / args.exact
+        row["peak_mib_after_exact"] = peak_mib()
+        if args.ref:
+            k = min(args.ref, args.exact)
+            row["exact_vs_reference_identical_pa_sr"] = sum((e.pa, e.sr) == (r.pa, r.sr) for e, r in zip(eres[:k], rres[:k]))
+            row["exact_vs_reference_max_rel_scd"] = max(abs(e.scd - r.scd) / max(r.scd, 1e-300) for e, r in zip(eres[:k], rres[:k]))
+            row["exact_vs_reference_compared"] = k
+    t, fres = time_calls(lambda c: aw_eval.score(geom, c, mode="fast"), same if len(same) else cks[:1])
+    row["fast_s_per_ck_same"] = t / max(1, len(same) or 1)
+    for b in args.fast_batches:
+        batch = cks[:b]
+        t0 = time.perf_counter()
+        out = aw_eval.score_batch(geom, batch, mode="fast")
+        dt = time.perf_counter() - t0
+        row[f"fast_batch{b}_ck_per_s"] = b / dt
+        row[f"fast_batch{b}_unique"] = out.n_unique
+    row["peak_mib"] = peak_mib()
+    if "reference_s_per_ck" in row:
+        row["exact_speedup"] = row["reference_s_per_ck"] / row["exact_s_per_ck"] if "exact_s_per_ck" in row else None
+        row["fast_speedup"] = row["reference_s_per_ck"] / row["fast_s_per_ck_same"]
+    rows.append(row)
+    print(json.dumps(row), flush=True)
+
+
+def bench_agreement(parts: list[int], n: int, fps: int, seed: int = 0) -> dict:
+    """Fast vs exact (exact == reference by the tests) on ``n`` trajectory checkpoints."""
+    st = aw_eval.ProtocolSettings(n_fps=fps, n_surface=4 * fps)
+    per = {p: n // len(parts) + (1 if i < n % len(parts) else 0) for i, p in enumerate(parts)}
+    same_pa = same_sr = total = 0
+    rel = []
+    t_exact = t_fast = 0.0
+    flips = []
+    for p, k in per.items():
+        geom, obj = make_points_geometry(p, fps, seed=p, settings=st)
+        cks = trajectory_checkpoints(obj, k, seed=seed + 7 * p)
+        t0 = time.perf_counter()
+        e = aw_eval.score_batch(geom, cks, mode="exact")
+        t_exact += time.perf_counter() - t0
+        t0 = time.perf_counter()
+        f = aw_eval.score_batch(geom, cks, mode="fast")
+        t_fast += time.perf_counter() - t0
+        same_pa += int(np.sum(e.pa == f.pa))
+        same_sr += int(np.sum(e.sr == f.sr))
+        total += len(cks)
+        rel += list(np.abs(f.scd - e.scd) / np.maximum(e.scd, 1e-12))
+        for i in np.flatnonzero((e.pa != f.pa) | (e.sr != f.sr)):
+            flips.append({"parts": p, "pa_exact": float(e.pa[i]), "pa_fast": float(f.pa[i]), "scd_exact": float(e.scd[i]), "scd_fast": float(f.scd[i])})
+        print(f"agreement parts={p}: {k} checkpoints, exact {t_exact:.1f}s fast {t_fast:.1f}s so far", flush=True)
+    rel = np.asarray(rel)
+    return {"checkpoints": total, "points_per_part": fps, "parts": parts, "identical_pa": same_pa / total,
+            "identical_sr": same_sr / total, "identical_pa_and_sr_count": total - len(flips),
+            "scd_rel_err_median": float(np.median(rel)), "scd_rel_err_p99": float(np.quantile(rel, 0.99)),
+            "scd_rel_err_max": float(rel.max()), "exact_s": t_exact, "fast_s": t_fast, "disagreements": flips[:50]}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--parts", type=int, nargs="*", default=[2, 5, 10, 20])
+    ap.add_argument("--n-fps", type=int, default=1000, help="points per part (paper: 1000)")
+    ap.add_argument("--ref", type=int, default=1, help="checkpoints scored by the reference per part count")
+    ap.add_argument("--exact", type=int, default=1, help="checkpoints scored by exact (the first --ref of them are shared)")
+    ap.add_argument("--fast-batches", type=int, nargs="*", default=[1, 100])
+    ap.add_argument("--agreement", type=int, default=0, help="checkpoints for the fast-vs-exact agreement")
+    ap.add_argument("--agree-fps", type=int, default=64)
+    ap.add_argument("--agree-parts", type=int, nargs="+", default=[2, 5, 10])
+    ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "bench_eval.json"))
+    args = ap.parse_args(argv)
+    rows: list = []
+    result = {"command": " ".join(["benchmarks/bench_eval.py"] + (argv if argv is not None else sys.argv[1:])),
+              "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
+                          "load_avg_start": os.getloadavg()}, "rows": rows}
+    for p in args.parts:
+        bench_parts(p, args, rows, [])
+    if args.agreement:
+        result["agreement"] = bench_agreement(args.agree_parts, args.agreement, args.agree_fps)
+        print(json.dumps({k: v for k, v in result["agreement"].items() if k != "disagreements"}), flush=True)
+    result["machine"]["load_avg_end"] = os.getloadavg()
+    result["peak_mib"] = peak_mib()
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(json.dumps(result, indent=1))
+    print("\n| parts | reference s/ck | exact s/ck | fast s/ck | exact x | fast x | compile s | peak MiB |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for r in rows:
+        def f(k, fmt="{:.3g}"):
+            v = r.get(k)
+            return fmt.format(v) if isinstance(v, (int, float)) else "-"
+        print(f"| {r['parts']} | {f('reference_s_per_ck')} | {f('exact_s_per_ck')} | {f('fast_s_per_ck_same')} | "
+              f"{f('exact_speedup', '{:.1f}')} | {f('fast_speedup', '{:.0f}')} | {f('compile_s', '{:.2f}')} | {f('peak_mib', '{:.0f}')} |")
+    for r in rows:
+        for b in args.fast_batches:
+            print(f"parts={r['parts']} fast batch {b}: {r[f'fast_batch{b}_ck_per_s']:.2f} ck/s ({r[f'fast_batch{b}_unique']} unique)")
+    if "agreement" in result:
+        a = result["agreement"]
+        print(f"agreement fast vs exact: {a['checkpoints']} checkpoints at {a['points_per_part']} pts/part: "
+              f"PA identical {a['identical_pa']:.4f}, SR identical {a['identical_sr']:.4f}, SCD rel err p99 {a['scd_rel_err_p99']:.2e}")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,83 @@
+"""Table 1 aggregation, resources and outcomes on synthetic per-task outcomes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from aw.formats import RunInfo, TokenUsage
+from aw_eval.analyses import outcomes, quality, resources
+from aw_eval.report import AnalysisSettings, build_results, render_markdown
+from tests.aw_eval.score_helpers import make_study, paper_entries, run_from_errors, table1_study
+
+
+def test_table1_overall_from_per_task_outcomes():
+    study = table1_study()
+    q = quality(study)
+    assert [c["label"] for c in q["cells"]] == ["PartNet NR", "PartNet IR", "IKEA M", "AB M", "FB NR"]
+    astra, qwen = q["systems"]["Astra"], q["systems"]["Qwen"]
+    assert [c["sr"] for c in astra["cells"]] == pytest.approx([15, 40, 65, 55, 90])
+    assert [c["sr"] for c in qwen["cells"]] == pytest.approx([5, 0, 0, 10, 35])
+    assert astra["overall"]["sr"] == pytest.approx(59.375)
+    assert qwen["overall"]["sr"] == pytest.approx(11.875)
+    # PA: a winning task has 4/4 parts, a losing one 2/4
+    assert astra["overall"]["pa"] == pytest.approx(50 + 59.375 / 2)
+    assert astra["sources"]["partnet"]["sr"] == pytest.approx(27.5)
+
+
+def test_table1_is_printed_like_the_paper():
+    study = table1_study()
+    doc = build_results(study, AnalysisSettings(n_draws=200, n_permutations=500))
+    md = render_markdown(doc)
+    table = md.split("## Table 1")[1].split("##")[0]
+    astra = next(line for line in table.splitlines() if line.startswith("| Astra"))
+    qwen = next(line for line in table.splitlines() if line.startswith("| Qwen"))
+    cells = [c.strip().strip("*") for c in astra.split("|")[1:-1]]
+    assert cells[:7] == ["Astra", "15.00", "40.00", "65.00", "55.00", "90.00", "59.40"]
+    cells = [c.strip().strip("*") for c in qwen.split("|")[1:-1]]
+    assert cells[:7] == ["Qwen", "5.000", "0.000", "0.000", "10.00", "35.00", "11.90"]
+    assert cells[7:9] == ["6.0", "90"]  # time (min) and MCP calls from run.json
+
+
+def test_missing_runs_count_zero_and_scd_uses_scored_attempts_only():
+    entries = paper_entries(n_objects=2)
+    runs = {("A", e.task_id): run_from_errors("A", e.task_id, [0.0, 0.0], scd=0.004) for e in entries}
+    runs[("A", entries[0].task_id)] = run_from_errors("A", entries[0].task_id, [], status="missing")
+    study = make_study(entries, runs)
+    q = quality(study)["systems"]["A"]
+    pn_none = q["cells"][0]
+    assert pn_none["sr"] == pytest.approx(50.0) and pn_none["pa"] == pytest.approx(50.0)
+    assert pn_none["scd"] == pytest.approx(4.0)  # x1000, over the one scored attempt
+    assert pn_none["n_scored"] == 1
+    assert q["overall"]["sr"] == pytest.approx(100 - 0.25 * 0.5 * 50)
+
+
+def test_resources_are_arithmetic_means_over_available_records():
+    entries = paper_entries(n_objects=1)
+    runs = {("A", e.task_id): run_from_errors("A", e.task_id, [0.0], end_t=600.0, call_t=np.arange(5.0))
+            for e in entries}
+    infos = {("A", entries[0].task_id): RunInfo(system="A", task_id=entries[0].task_id, wall_seconds=120.0, mcp_calls=10,
+                                                tokens=TokenUsage(input=1_000_000, output=500_000), cost_usd=3.0),
+             ("A", entries[1].task_id): RunInfo(system="A", task_id=entries[1].task_id, ended="timeout",
+                                                tokens=TokenUsage(total=2_500_000), cost_usd=1.0)}
+    study = make_study(entries, runs, infos)
+    r = resources(study)["A"]
+    # time: 2 min from run.json, the other 4 tasks from the trajectory (10 min)
+    assert r["time_min"]["mean"] == pytest.approx((2 + 4 * 10) / 5) and r["time_min"]["from_trajectory"] == 4
+    assert r["mcp_calls"]["mean"] == pytest.approx((10 + 4 * 5) / 5)
+    assert r["tokens_m"] == {"mean": pytest.approx(2.0), "n": 2}
+    assert r["cost_usd"] == {"mean": pytest.approx(2.0), "n": 2}
+    o = outcomes(study)["A"]
+    assert o["timeout"] == 1 and o["finished"] == 4 and o["errors_timeouts"] == 1
+
+
+def test_a_suite_of_variants_only_still_reports():
+    from aw.formats import SuiteEntry
+
+    e = [SuiteEntry(task_id="v", source="partnet", condition="none", object_id="o", n_parts=2, variant="layout",
+                    base_task_id="absent")]
+    study = make_study(e, {("A", "v"): run_from_errors("A", "v", [0.0, 0.0])})
+    doc = build_results(study, AnalysisSettings(n_draws=10, n_permutations=10))
+    md = render_markdown(doc)
+    assert "no original (non-variant) tasks" in md
+    assert doc["quality"]["systems"] == {}

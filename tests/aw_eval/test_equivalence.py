@@ -1,0 +1,54 @@
+"""Equivalence groups: fast path against the reference, symmetric and identical parts."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aw.pose import quat_to_matrix
+from aw_eval import reference as ref
+from aw_eval.equivalence import equivalence_groups
+from aw_eval.fixtures import random_rotation_quat
+from aw_eval.settings import ProtocolSettings
+from eval_helpers import small_task
+
+
+def test_groups_equal_reference_and_join_identical_legs():
+    geom, obj = small_task(6, n_points=16, seed=2, max_iters=25)
+    want = ref.equivalence_groups(geom.clouds, geom.divisor, geom.settings)
+    assert [list(g) for g in geom.groups] == want
+    assert list(obj.identical[0]) in want
+
+
+def test_rotated_copies_join_scaled_copies_do_not():
+    rng = np.random.default_rng(3)
+    base = rng.normal(size=(40, 3)) * [0.5, 0.2, 0.1]
+    rot = quat_to_matrix(random_rotation_quat(rng))
+    clouds = np.stack([base, base @ rot.T + [2.0, 0, 0], base * 1.5, base[::-1] @ rot + [0, 3.0, 0]])
+    st = ProtocolSettings(n_surface=40, n_fps=40, max_iters=40)
+    got = equivalence_groups(clouds, 1.0, st)
+    assert got == [[0, 1, 3], [2]]
+    assert got == ref.equivalence_groups(clouds, 1.0, st)
+
+
+def _pair_cd(x, y, st):
+    from aw.pose import cube_rotations, pca_frame
+
+    qs = []
+    for c in (x, y):
+        mu, ax = pca_frame(c)
+        qs.append((c - mu) @ ax)
+    return ref.register(qs[0], qs[1], [(s, np.zeros(3)) for s in cube_rotations()], st).scd
+
+
+def test_groups_are_transitive_closures():
+    # b moves one point of a by eps, c moves one more: a~b and b~c within 1e-4, a and c not
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(30, 3)) * [1.0, 0.5, 0.25]
+    b = a.copy()
+    b[0, 0] += 0.034
+    c = b.copy()
+    c[1, 0] += 0.034
+    st = ProtocolSettings(n_surface=30, n_fps=30, max_iters=30, equiv_cd=1e-4)
+    assert _pair_cd(a, b, st) <= 1e-4 and _pair_cd(b, c, st) <= 1e-4 and _pair_cd(a, c, st) > 1e-4
+    groups = equivalence_groups(np.stack([a, b, c]), 1.0, st)
+    assert groups == [[0, 1, 2]] == ref.equivalence_groups(np.stack([a, b, c]), 1.0, st)

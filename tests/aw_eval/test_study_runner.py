@@ -1,0 +1,44 @@
+"""Study discovery and the local process pool (results identical to in-process scoring)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aw_eval.study import ScoreSettings, discover_runs, score_study
+from aw_eval.study.fixtures import box_suite, write_scripted_run
+
+SMALL = (("n_fps", 48), ("n_surface", 192))
+
+
+def test_discover_runs(tmp_path):
+    (tmp_path / "A" / "t1").mkdir(parents=True)
+    (tmp_path / "A" / "zzz").mkdir()
+    (tmp_path / "A" / "zzz" / "final.json").write_text("{}")
+    (tmp_path / "A" / "empty-unknown").mkdir()
+    (tmp_path / ".hidden" / "t1").mkdir(parents=True)
+    (tmp_path / "B").mkdir()
+    systems, found, unknown = discover_runs(tmp_path, {"t1", "t2"})
+    assert systems == ["A", "B"]
+    assert list(found) == [("A", "t1")]
+    assert [u["task_id"] for u in unknown] == ["zzz"]  # directories without run files are not runs
+
+
+def test_process_pool_matches_in_process(tmp_path):
+    blocks = (("fantastic_breaks", ("none",)),)
+    suite = box_suite(tmp_path / "suite", objects_per_source=2, n_parts=2, blocks=blocks)
+    for i, t in enumerate(["fantastic_breaks-box000-none", "fantastic_breaks-box001-none"]):
+        write_scripted_run(tmp_path / "runs" / "S" / t, suite, t, system="S", correct=["p01"] if i else None,
+                           inspect_moves=False)
+    settings = ScoreSettings(final_only=True, protocol=SMALL)
+    geo = tmp_path / "geometry"
+    a, sa = score_study(suite, tmp_path / "runs", tmp_path / "o1", settings, n_jobs=1, progress=False, geometry_cache=geo)
+    b, sb = score_study(suite, tmp_path / "runs", tmp_path / "o2", settings, n_jobs=2, progress=False, geometry_cache=geo)
+    assert sa.executor == "in-process" and sb.executor == "processes:2"
+    assert sa.scored == sb.scored == 2
+    for key, rec in a.runs.items():
+        x, y = rec.score, b.runs[key].score
+        assert x.status == y.status == "scored"
+        assert (x.pa, x.sr, x.sra) == (y.pa, y.sr, y.sra)
+        assert x.scd == y.scd
+        assert np.array_equal(x.part_errors, y.part_errors) and np.array_equal(x.assignment, y.assignment)
+    assert a.runs[("S", "fantastic_breaks-box000-none")].score.sr == 1.0
