@@ -52,10 +52,6 @@ class FastSettings:
 FAST = FastSettings()
 
 
-def _bucket(n: int, minimum: int = 1) -> int:
-    return max(minimum, 1 << max(0, (n - 1).bit_length()))
-
-
 @lru_cache(maxsize=None)
 def _coarse_fn(max_iters: int):
     jax, jnp = jax_modules()
