@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from typing import Any
 
-from aw_eval.analyses.benchmark import cell_label
 from aw_eval.analyses.failures import CLASSES
 from aw_eval.report.fmt import DASH, bold_best, ci, fixed, md_table, paper, pval, signed
 

@@ -1,4 +1,5 @@
-"""Designs shaped like the paper's benchmark, for statistics tests."""
+"""Helpers for the aw-score tests: designs shaped like the paper's benchmark and synthetic studies
+built directly from per-part error arrays (no evaluator)."""
 
 from __future__ import annotations
 
@@ -34,7 +35,7 @@ def first_k(design: Design, counts: dict[tuple[str, str], int]) -> np.ndarray:
 # ---- synthetic studies (no evaluator): RunScores from per-part error arrays -----------------
 
 from aw.formats import RunInfo, SuiteEntry  # noqa: E402
-from aw_eval.study import RunRecord, RunScore, Study, TaskFacts  # noqa: E402
+from aw_eval.study import RunRecord, RunScore, Study  # noqa: E402
 
 
 def paper_entries(n_objects: int = 20, n_parts: int = 4) -> list[SuiteEntry]:
