@@ -32,9 +32,14 @@ def file_digest(path: Path) -> str:
 
 
 def geometry_key(task_dir: Path, targets_path: Path) -> str:
-    """Hash of task.json, every file under ``parts/`` and the targets file."""
+    """Hash of task.json, every file under ``parts/`` and the targets file; for an official
+    (converted) task without a task directory, its evaluation points and the targets file."""
     h = hashlib.sha256()
-    files = [task_dir / "task.json", *sorted((task_dir / "parts").glob("*")), targets_path]
+    official = targets_path.parent.parent / "eval_points" / f"{targets_path.stem}.npz"
+    if official.is_file():
+        files = [official, targets_path]
+    else:
+        files = [task_dir / "task.json", *sorted((task_dir / "parts").glob("*")), targets_path]
     for f in files:
         h.update(f.name.encode())
         h.update(file_digest(f).encode())

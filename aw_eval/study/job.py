@@ -17,6 +17,7 @@ import numpy as np
 
 from aw.formats import FormatError, read_targets, read_task
 from aw.meshes import load_task_meshes
+from aw.official import suite_eval_inputs
 from aw.prepare.geometry import part_size_ratio
 from aw_eval.study import evaluator
 from aw_eval.study.decreases import pa_decreases
@@ -125,27 +126,43 @@ def _score_run(req: RunRequest, task_id: str, geom, all_ids: list[str], centroid
     return r
 
 
+def _load_native(job: TaskJob, t0: float):
+    """Geometry, all part ids, centroids and facts of a task read from its task directory."""
+    task = read_task(job.task_dir)
+    read_targets(job.targets_path)  # fail early with a clear message
+    geom = evaluator.load_geometry(Path(job.task_dir), Path(job.targets_path),
+                                   Path(job.geometry_cache) if job.geometry_cache else None, job.settings.protocol)
+    meshes = load_task_meshes(task)
+    all_ids = task.part_ids
+    scored = set(geom.part_ids)
+    ratio = part_size_ratio([m for pid, m in zip(all_ids, meshes) if pid in scored])
+    facts = TaskFacts(job.task_id, int(geom.n_parts), float(ratio), float(geom.divisor), list(geom.part_ids),
+                      time.perf_counter() - t0)
+    return geom, all_ids, surface_centroids(meshes), facts
+
+
+def _load_official(job: TaskJob, inputs, t0: float):
+    """The same for a task converted from an official package (``aw.official``): its geometry is
+    the package's own evaluation points; there is no task directory."""
+    read_targets(job.targets_path)
+    geom = inputs.task_geometry()
+    facts = TaskFacts(job.task_id, int(geom.n_parts), float(inputs.size_ratio()), float(geom.divisor),
+                      list(geom.part_ids), time.perf_counter() - t0)
+    return geom, list(inputs.part_ids), inputs.centroids(), facts
+
+
 def score_task(job: TaskJob) -> TaskOutput:
     """Score every run of ``job``; never raises for a bad run or task (errors are in the output)."""
     evaluator.prepare_thread()
     t0 = time.perf_counter()
     try:
-        task = read_task(job.task_dir)
-        targets = read_targets(job.targets_path)
-        geom = evaluator.load_geometry(Path(job.task_dir), Path(job.targets_path),
-                                       Path(job.geometry_cache) if job.geometry_cache else None, job.settings.protocol)
-        meshes = load_task_meshes(task)
-        all_ids = task.part_ids
-        centroids = surface_centroids(meshes)
-        scored = set(geom.part_ids)
-        ratio = part_size_ratio([m for pid, m in zip(all_ids, meshes) if pid in scored])
-        facts = TaskFacts(job.task_id, int(geom.n_parts), float(ratio), float(geom.divisor), list(geom.part_ids),
-                          time.perf_counter() - t0)
-        del targets  # read only to fail early with a clear message
+        official = suite_eval_inputs(Path(job.targets_path).parent.parent, job.task_id)
+        loaded = _load_official(job, official, t0) if official is not None else _load_native(job, t0)
     except (FormatError, ValueError, OSError) as exc:
         msg = f"task geometry could not be loaded: {exc}"
         return TaskOutput(job.task_id, None, [RunScore.unscored(r.system, job.task_id, STATUS_TASK_ERROR, [msg])
                                               for r in job.runs], error=msg)
+    geom, all_ids, centroids, facts = loaded
     out = TaskOutput(job.task_id, facts)
     for req in job.runs:
         try:

@@ -103,3 +103,21 @@ def test_official_path_matches_native_path(tmp_path):
         assert np.array_equal(rn.part_errors, ro.part_errors)
     final = score(official, np.array([otraj.final_poses()[p] for p in ids]), mode="fast")
     assert final.pa == 1.0 and final.sr == 1.0
+
+    # aw-score reads the converted suite (no task dirs: the official points) and scores every state
+    import json
+
+    from aw_eval.cli import main
+
+    out = tmp_path / "out"
+    rc = main([str(tmp_path / "osuite"), str(tmp_path / "oruns"), "--out", str(out), "--jobs", "1", "--mode", "fast",
+               "--final", "fast", "--bootstrap", "200", "--permutations", "500", "--no-progress", "--no-plots"])
+    assert rc == 0
+    doc = json.loads((out / "scores.json").read_text())
+    (r,) = [r for r in doc["runs"] if r["task_id"] == entry.task_id]
+    assert r["status"] == "scored", r
+    direct = score(native, np.array([ntraj.final_poses()[p] for p in ids]), mode="fast")
+    assert r["sr"] == float(direct.sr) == 1.0
+    assert r["pa"] == 100 * float(direct.pa)
+    assert r["scd"] == float(direct.scd)
+    assert doc["tasks"][0]["n_parts"] == len(ids)
