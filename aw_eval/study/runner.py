@@ -21,7 +21,7 @@ from typing import Any
 from aw.formats import FormatError, read_manifest, read_run_info
 from aw.formats.suite import suite_paths
 from aw_eval.study import evaluator
-from aw_eval.study.cache import Cache, geometry_key, run_key
+from aw_eval.study.cache import Cache, file_digest, geometry_key, run_key
 from aw_eval.study.job import STATUS_ERROR, RunRequest, ScoreSettings, TaskJob, TaskOutput, score_task
 from aw_eval.study.model import STATUS_MISSING, RunScore
 from aw_eval.study.table import RunRecord, Study
@@ -50,6 +50,25 @@ class ScoreStats:
 
 def default_jobs() -> int:
     return max(1, os.cpu_count() or 1)
+
+
+def shape_family(task_dir: Path) -> str:
+    """Digest of a task's part meshes: tasks with equal digests share their evaluation geometry
+    (paired PartNet conditions), which the evaluator's geometry cache computes once."""
+    return "|".join(file_digest(f) for f in sorted((Path(task_dir) / "parts").glob("*")))
+
+
+def schedule_jobs(jobs: list[TaskJob], n_parts: dict[str, int]) -> list[TaskJob]:
+    """Dispatch order: largest tasks first (their geometry dominates, and starting them first
+    shortens the tail on a pool), and a task whose meshes repeat an earlier task's after every
+    first occurrence, so its geometry is a cache hit instead of being computed twice at once."""
+    seen: set[str] = set()
+    first, repeats = [], []
+    for job in sorted(jobs, key=lambda j: (-n_parts.get(j.task_id, 0), j.task_id)):
+        fam = shape_family(Path(job.task_dir))
+        (repeats if fam in seen and fam else first).append(job)
+        seen.add(fam)
+    return first + repeats
 
 
 def _is_run_dir(p: Path) -> bool:
@@ -194,6 +213,7 @@ def score_study(suite_dir: str | Path, runs_dir: str | Path, out_dir: str | Path
         if todo or f is None:
             jobs.append(TaskJob(e.task_id, str(task_dir), str(targets), tuple(todo), settings,
                                 str(geometry_cache or cache.geometry_dir)))
+    jobs = schedule_jobs(jobs, {e.task_id: e.n_parts for e in entries})
     stats.tasks_dispatched = len(jobs)
     outputs, stats.executor, close = _run_jobs(jobs, scheduler=scheduler, n_jobs=n_jobs or default_jobs())
     if log and jobs:

@@ -52,3 +52,53 @@ def test_groups_are_transitive_closures():
     assert _pair_cd(a, b, st) <= 1e-4 and _pair_cd(b, c, st) <= 1e-4 and _pair_cd(a, c, st) > 1e-4
     groups = equivalence_groups(np.stack([a, b, c]), 1.0, st)
     assert groups == [[0, 1, 2]] == ref.equivalence_groups(np.stack([a, b, c]), 1.0, st)
+
+
+def _box_cloud(extents, n, seed):
+    import trimesh
+
+    pts, _ = trimesh.sample.sample_surface(trimesh.creation.box(extents=extents), n, seed=seed)
+    return np.asarray(pts, dtype=np.float64)
+
+
+def _in_frame(c):
+    from aw.pose import pca_frame
+
+    mu, ax = pca_frame(c)
+    return (c - mu) @ ax
+
+
+def test_cd_lower_bound_holds_for_every_rigid_motion_and_the_registration():
+    from aw_eval.chamfer import chamfer as cd
+    from aw_eval.equivalence import cd_lower_bound, shape_bounds
+
+    rng = np.random.default_rng(11)
+    st = ProtocolSettings(n_surface=200, n_fps=200, max_iters=30)
+    shapes = [(0.6, 0.1, 0.05), (0.6, 0.1, 0.08), (0.5, 0.12, 0.05), (0.3, 0.3, 0.02), (0.2, 0.2, 0.2), (0.62, 0.1, 0.05)]
+    clouds = [_in_frame(_box_cloud(e, 200, k)) for k, e in enumerate(shapes)]
+    bounds = [shape_bounds(q) for q in clouds]
+    excluded = 0
+    for i in range(len(clouds)):
+        for j in range(len(clouds)):
+            if i == j:
+                continue
+            lb = cd_lower_bound(bounds[i], bounds[j])
+            best = _pair_cd(clouds[i], clouds[j], st)
+            assert lb <= best * (1 + 1e-12) + 1e-15, (i, j, lb, best)
+            for _ in range(20):
+                r = quat_to_matrix(random_rotation_quat(rng))
+                t = rng.normal(scale=0.05, size=3)
+                assert lb <= float(cd(clouds[i] @ r.T + t, clouds[j])) + 1e-15
+            excluded += lb > 1e-4
+    # the bound does real work: a plate against a stick or a cube is excluded without registration
+    assert cd_lower_bound(bounds[3], bounds[0]) > 1e-4 and cd_lower_bound(bounds[4], bounds[0]) > 1e-4
+    assert excluded >= 10
+
+
+def test_bounded_groups_equal_reference_on_near_identical_boxes():
+    # boxes close in size: the bound must not cut a true edge (0 ~ 5), and the groups equal the reference
+    clouds = np.stack([_box_cloud(e, 64, 0) for e in [(0.6, 0.1, 0.05), (0.6, 0.1, 0.08), (0.3, 0.3, 0.02), (0.2, 0.2, 0.2), (0.6, 0.1, 0.05)]])
+    st = ProtocolSettings(n_surface=64, n_fps=64, max_iters=30)
+    got = equivalence_groups(clouds, 1.0, st)
+    assert got == ref.equivalence_groups(clouds, 1.0, st)
+    assert [0, 4] in got

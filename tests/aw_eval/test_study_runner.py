@@ -42,3 +42,19 @@ def test_process_pool_matches_in_process(tmp_path):
         assert x.scd == y.scd
         assert np.array_equal(x.part_errors, y.part_errors) and np.array_equal(x.assignment, y.assignment)
     assert a.runs[("S", "fantastic_breaks-box000-none")].score.sr == 1.0
+
+
+def test_schedule_jobs_largest_first_and_repeated_meshes_last(tmp_path):
+    from aw_eval.study.job import ScoreSettings, TaskJob
+    from aw_eval.study.runner import schedule_jobs
+
+    def task(name, meshes):
+        d = tmp_path / name / "parts"
+        d.mkdir(parents=True)
+        for k, text in enumerate(meshes):
+            (d / f"p{k:02d}.obj").write_text(text)
+        return TaskJob(name, str(d.parent), str(tmp_path / f"{name}.json"), (), ScoreSettings())
+
+    jobs = [task("a-none", ["x", "y"]), task("a-image", ["x", "y"]), task("b", ["u", "v", "w"]), task("c", ["z"])]
+    order = [j.task_id for j in schedule_jobs(jobs, {"a-none": 2, "a-image": 2, "b": 3, "c": 1})]
+    assert order == ["b", "a-image", "c", "a-none"]
