@@ -102,3 +102,29 @@ def server_env(env: dict[str, str], marker: str) -> dict[str, str]:
     out = {k: env[k] for k in keep if env.get(k)}
     out[MARKER_VAR] = marker
     return out
+
+
+def read_json_events(transcript: Path) -> tuple[list[dict], int]:
+    """The JSON-object lines of a harness transcript (JSONL) and the count of unparsable lines.
+
+    A missing or unreadable transcript gives no events; blank lines and non-object values are skipped.
+    """
+    import json
+
+    try:
+        lines = transcript.read_text(errors="replace").splitlines()
+    except OSError:
+        return [], 0
+    events, n_bad = [], 0
+    for line in lines:
+        line = line.strip()
+        if not line:
+            continue
+        try:
+            ev = json.loads(line)
+        except ValueError:
+            n_bad += 1
+            continue
+        if isinstance(ev, dict):
+            events.append(ev)
+    return events, n_bad

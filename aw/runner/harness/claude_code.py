@@ -24,6 +24,7 @@ from pathlib import Path
 
 from aw.formats import TokenUsage
 from aw.runner.harness.base import (
+    read_json_events,
     SERVER_NAME,
     HarnessOptions,
     HarnessUsage,
@@ -87,22 +88,8 @@ class ClaudeCode:
         result = None
         tool_uses: Counter[str] = Counter()
         by_message: dict[str, dict] = {}
-        n_bad = 0
-        try:
-            lines = transcript.read_text(errors="replace").splitlines()
-        except OSError:
-            lines = []
-        for line in lines:
-            line = line.strip()
-            if not line:
-                continue
-            try:
-                ev = json.loads(line)
-            except ValueError:
-                n_bad += 1
-                continue
-            if not isinstance(ev, dict):
-                continue
+        events, n_bad = read_json_events(transcript)
+        for ev in events:
             kind = ev.get("type")
             if kind == "system" and ev.get("subtype") == "init":
                 usage.model = ev.get("model") or usage.model

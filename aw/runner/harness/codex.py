@@ -25,6 +25,7 @@ from pathlib import Path
 
 from aw.formats import TokenUsage
 from aw.runner.harness.base import (
+    read_json_events,
     SERVER_NAME,
     HarnessOptions,
     HarnessUsage,
@@ -95,22 +96,8 @@ class Codex:
         tool_calls: Counter[str] = Counter()
         messages: list[str] = []
         errors: list[str] = []
-        n_bad = 0
-        try:
-            lines = transcript.read_text(errors="replace").splitlines()
-        except OSError:
-            lines = []
-        for line in lines:
-            line = line.strip()
-            if not line:
-                continue
-            try:
-                ev = json.loads(line)
-            except ValueError:
-                n_bad += 1
-                continue
-            if not isinstance(ev, dict):
-                continue
+        events, n_bad = read_json_events(transcript)
+        for ev in events:
             kind = ev.get("type")
             if kind == "thread.started":
                 usage.extra["thread_id"] = ev.get("thread_id")
