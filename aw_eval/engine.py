@@ -19,7 +19,8 @@ import numpy as np
 from aw.pose import as_finite, cube_rotations, pca_frame, quat_to_matrix
 from aw_eval.chamfer import chamfer_pairs
 from aw_eval.geometry import TaskGeometry
-from aw_eval.icp import ICPProblem, build_tree
+from aw_eval.icp import ICPProblem
+from aw_eval.kdtree import build_tree, chamfer_tree
 from aw_eval.results import BatchScores, Registration, ScoreResult, match_within_groups
 
 __all__ = ["task_context", "starts_for", "register_points", "register", "register_checkpoint", "finalize", "score", "score_batch", "part_diagnostics",
@@ -52,6 +53,9 @@ def task_context(geom: TaskGeometry) -> TaskContext:
     return ctx
 
 
+_CUBE = cube_rotations()  # exact 0/+-1 entries: computing them once changes no number
+
+
 def starts_for(pred: np.ndarray, target_frame, poses: np.ndarray, target_poses: np.ndarray, divisor: float):
     """All starts ``(R0 (S, 3, 3), t0 (S, 3))``: 24 PCA starts then one same-ID start per part.
 
@@ -61,7 +65,7 @@ def starts_for(pred: np.ndarray, target_frame, poses: np.ndarray, target_poses: 
     mu_p, a_p = pca_frame(pred)
     mu_t, a_t = target_frame
     rs, ts = [], []
-    for s in cube_rotations():
+    for s in _CUBE:
         r0 = a_t @ s @ a_p.T
         rs.append(r0)
         ts.append(mu_t - r0 @ mu_p)
@@ -85,14 +89,11 @@ def register_points(prob: ICPProblem, r0: np.ndarray, t0: np.ndarray, max_iters:
 
 
 def _part_cd(ctx: TaskContext, moved_parts: np.ndarray, pred_trees: dict, i: int, j: int) -> float:
-    """CD(registered pred part i, target part j): KD-trees, squared distances from coordinates
-    exactly as the reference computes them."""
-    x, y = moved_parts[i], ctx.target_parts[j]
-    _, f = ctx.part_trees[j].query(x, k=1)
+    """CD(registered pred part i, target part j) with compiled KD-trees, squared distances from
+    coordinates as the reference computes them."""
     if i not in pred_trees:
-        pred_trees[i] = build_tree(x)
-    _, b = pred_trees[i].query(y, k=1)
-    return float(np.sum((x - y[f]) ** 2, axis=1).mean() + np.sum((y - x[b]) ** 2, axis=1).mean())
+        pred_trees[i] = build_tree(moved_parts[i])
+    return float(chamfer_tree(moved_parts[i], tuple(pred_trees[i]), ctx.target_parts[j], tuple(ctx.part_trees[j])))
 
 
 def _box_gap_sq(point: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:

@@ -140,12 +140,14 @@ def coarse_icp(pred_parts: np.ndarray, target_parts: np.ndarray, r0: np.ndarray,
 
 
 def _dedupe_starts(r0: np.ndarray, t0: np.ndarray, tol: float) -> np.ndarray:
-    """Indices of the first of every group of starts equal within ``tol`` (entrywise)."""
-    keep: list[int] = []
+    """Indices of the first of every group of starts equal within ``tol`` (entrywise): a start is
+    kept unless an earlier kept start is within ``tol`` of it."""
+    flat = np.concatenate([r0.reshape(len(r0), -1), t0.reshape(len(t0), -1)], axis=1)
+    close = np.abs(flat[:, None, :] - flat[None, :, :]).max(axis=2) <= tol  # (S, S)
+    kept = np.zeros(len(r0), dtype=bool)
     for k in range(len(r0)):
-        if not any(np.abs(r0[k] - r0[j]).max() <= tol and np.abs(t0[k] - t0[j]).max() <= tol for j in keep):
-            keep.append(k)
-    return np.asarray(keep, dtype=np.int64)
+        kept[k] = not np.any(close[k, :k] & kept[:k])
+    return np.flatnonzero(kept).astype(np.int64)
 
 
 def _distinct(order, r, t, keep: int, deg: float, dt: float) -> list[int]:

@@ -1,7 +1,7 @@
-"""Full-resolution symmetric ICP with KD-trees built once and certified warm-started neighbours.
+"""Full-resolution symmetric ICP, compiled (numba), with certified warm-started neighbours.
 
-The iteration is the protocol's (see :func:`aw_eval.reference.icp`) and gives the same numbers;
-only the nearest-neighbour search differs:
+The iteration is the protocol's (see :func:`aw_eval.reference.icp`) and gives the same numbers
+up to floating-point summation order; only the nearest-neighbour search differs:
 
 - the target tree is built once per task, the prediction tree once per checkpoint: the
   backward query maps the target points into the prediction's frame (``R^T (T - t)``) instead
@@ -10,115 +10,178 @@ only the nearest-neighbour search differs:
   search: if a query point was last searched exactly at ``x_ref``, where its nearest neighbour
   was ``j`` and its second-nearest distance ``d2``, then at a new position ``x`` every other
   reference point is at least ``d2 - |x - x_ref|`` away, so ``j`` is still the nearest whenever
-  ``|x - y_j| < d2 - |x - x_ref|``. Only the points that fail this test are searched again
-  (with ``k = 2``, which renews ``x_ref`` and ``d2``). The result is the exact nearest
-  neighbour (up to exact distance ties), not an approximation.
+  ``|x - y_j| < d2 - |x - x_ref|``. Only the points that fail this test are searched again,
+  warm-started from ``j`` (:func:`aw_eval.kdtree.nearest2`). The result is the exact nearest
+  neighbour (up to exact distance ties), not an approximation;
+- one compiled pass per direction and iteration does the transform, the certificate or search,
+  the objective and the pairs of the next Kabsch fit (no NumPy temporaries).
 
 Arrays: ``p (n, 3)`` prediction, ``t_pts (m, 3)`` target, rotations ``(3, 3)``.
 """
 
 from __future__ import annotations
 
-import ctypes
-import glob
-import os
 from dataclasses import dataclass
 
 import numpy as np
-import pykdtree
-from pykdtree.kdtree import KDTree
+from numba import njit
 
-from aw_eval.reference import kabsch
+from aw_eval.kdtree import STACK, KDTree, build_tree, nearest2
 
-__all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "build_tree", "limit_kdtree_threads"]
+__all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "build_tree", "compile_kernels"]
 
 # Safety margin of the certificate in normalized units (coordinates are O(1); rounding is ~1e-16).
 _MARGIN = 1e-10
 
 
-# Below this many query points a plain search per iteration is cheaper than certifying.
-_CERTIFY_MIN = 3000
-
-
-def limit_kdtree_threads(n: int | None = None) -> bool:
-    """Set the OpenMP thread count of pykdtree's bundled libgomp (default ``$AW_KDTREE_THREADS``
-    or 1). Queries here are small and many: thread start-up costs more than it saves, and
-    throughput comes from one process per core instead. Returns False if the library is absent."""
-    n = int(os.environ.get("AW_KDTREE_THREADS", "1")) if n is None else int(n)
-    libs = glob.glob(os.path.join(os.path.dirname(pykdtree.__file__) + ".libs", "libgomp*"))
-    try:
-        lib = ctypes.CDLL(libs[0]) if libs else ctypes.CDLL("libgomp.so.1")
-        lib.omp_set_num_threads(max(1, n))
-        return True
-    except (OSError, AttributeError):
-        return False
-
-
-limit_kdtree_threads()
-
-
-def build_tree(points: np.ndarray) -> KDTree:
-    """A KD-tree (pykdtree) of ``points (n, 3)`` float64 (C-contiguous copy kept by the tree)."""
-    return KDTree(np.ascontiguousarray(points, dtype=np.float64), leafsize=16)
+@njit(cache=True)
+def _certified_pass(tree, x: np.ndarray, cand: np.ndarray, xref: np.ndarray, d2: np.ndarray, fresh: bool,
+                    stack: np.ndarray, bounds: np.ndarray) -> int:
+    """Update ``cand (k,)`` (tree positions) to the exact nearest neighbours of ``x (k, 3)``;
+    returns the number of points searched. ``xref (k, 3)``, ``d2 (k,)``: certificate state."""
+    pts = tree[0]
+    searched = 0
+    for i in range(x.shape[0]):
+        x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
+        if not fresh:
+            j = cand[i]
+            a, b, c = x0 - pts[j, 0], x1 - pts[j, 1], x2 - pts[j, 2]
+            e, f, g = x0 - xref[i, 0], x1 - xref[i, 1], x2 - xref[i, 2]
+            if np.sqrt(a * a + b * b + c * c) + np.sqrt(e * e + f * f + g * g) + _MARGIN < np.sqrt(d2[i]):
+                continue
+            j, _, dd2 = nearest2(tree, x0, x1, x2, j, stack, bounds)
+        else:
+            j, _, dd2 = nearest2(tree, x0, x1, x2, -1, stack, bounds)
+        cand[i] = j
+        d2[i] = dd2
+        xref[i, 0], xref[i, 1], xref[i, 2] = x0, x1, x2
+        searched += 1
+    return searched
 
 
 class CertifiedNN:
-    """Nearest neighbours of a moving query set ``(k, 3)`` in a fixed reference set ``(m, 3)``.
+    """Exact nearest neighbours of a moving query set ``(k, 3)`` in a fixed reference set ``(m, 3)``
+    (the certificate of the module docstring; compiled)."""
 
-    Each searched point keeps its ``K`` nearest candidates at the search position ``x_ref`` and
-    the ``K``-th distance ``dK``. At a new position ``x``, every non-candidate is at least
-    ``dK - |x - x_ref|`` away, so the best candidate is the nearest neighbour whenever its
-    distance is below that bound; only the points failing the test are searched again.
-    """
-
-    __slots__ = ("ref", "tree", "k", "cand", "xref", "dk", "n_searched")
-
-    def __init__(self, ref: np.ndarray, tree: KDTree, k: int = 2, certify: bool = True):
-        self.ref = ref
-        self.tree = tree
-        self.k = int(min(k, len(ref))) if certify else 1
+    def __init__(self, ref: np.ndarray, tree: KDTree | None = None):
+        self.tree = build_tree(ref) if tree is None else tree
         self.cand = None
         self.xref = None
-        self.dk = None
+        self.d2 = None
         self.n_searched = 0
-
-    def _search(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        d, i = self.tree.query(q, k=self.k)
-        i = i.reshape(len(q), self.k).astype(np.int64)
-        d = d.reshape(len(q), self.k)
-        # With every reference point a candidate nothing lies outside: the bound is infinite.
-        dk = d[:, -1] if self.k < len(self.ref) else np.full(len(q), np.inf)
-        return i, dk
+        self._stack = np.empty(STACK, np.int64)
+        self._bounds = np.empty(STACK)
 
     def query(self, x: np.ndarray) -> np.ndarray:
-        """Exact nearest-neighbour indices ``(k,)`` of the rows of ``x (k, 3)``."""
-        if self.k == 1:  # no certificate: a plain search
-            self.n_searched += len(x)
-            _, i = self.tree.query(x, k=1)
-            return i.reshape(-1).astype(np.int64)
-        if self.cand is None:
-            self.cand, self.dk = self._search(x)
-            self.xref = x.copy()
-            self.n_searched += len(x)
-            return self.cand[:, 0].copy()
-        diff = x - self.xref
-        move = np.sqrt(np.einsum("ij,ij->i", diff, diff))
-        cur = x[:, None, :] - self.ref[self.cand]  # (k, K, 3)
-        dist = np.einsum("ijk,ijk->ij", cur, cur)
-        arg = np.argmin(dist, axis=1)
-        rows = np.arange(len(x))
-        dmin = np.sqrt(dist[rows, arg])
-        idx = self.cand[rows, arg]
-        bad = np.flatnonzero(dmin + move + _MARGIN >= self.dk)
-        if bad.size:
-            xb = x[bad]
-            i, dk = self._search(xb)
-            self.cand[bad] = i
-            self.dk[bad] = dk
-            self.xref[bad] = xb
-            idx[bad] = i[:, 0]
-            self.n_searched += bad.size
-        return idx
+        """Exact nearest-neighbour rows (in the reference set's order) ``(k,)`` of ``x (k, 3)``."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        fresh = self.cand is None
+        if fresh:
+            self.cand = np.zeros(len(x), np.int64)
+            self.xref = np.zeros((len(x), 3))
+            self.d2 = np.zeros(len(x))
+        self.n_searched += _certified_pass(tuple(self.tree), x, self.cand, self.xref, self.d2, fresh, self._stack, self._bounds)
+        return self.tree.index[self.cand]
+
+
+@njit(cache=True)
+def _evaluate(p, t, tree_t, tree_p, r, tr, fc, fx, fd, bc, bx, bd, fresh, xs, ys, stack, bounds):
+    """Objective at ``(r, tr)`` and neighbours of both directions (tree positions into ``fc``,
+    ``bc``); returns ``(objective, searched)``. ``p (n, 3)``, ``t (m, 3)`` in tree order."""
+    n, m = p.shape[0], t.shape[0]
+    for i in range(n):
+        for k in range(3):
+            xs[i, k] = r[k, 0] * p[i, 0] + r[k, 1] * p[i, 1] + r[k, 2] * p[i, 2] + tr[k]
+    for i in range(m):
+        a, b, c = t[i, 0] - tr[0], t[i, 1] - tr[1], t[i, 2] - tr[2]
+        for k in range(3):  # R^T (T - t)
+            ys[i, k] = r[0, k] * a + r[1, k] * b + r[2, k] * c
+    searched = _certified_pass(tree_t, xs, fc, fx, fd, fresh, stack, bounds)
+    searched += _certified_pass(tree_p, ys, bc, bx, bd, fresh, stack, bounds)
+    sf = 0.0
+    for i in range(n):
+        j = fc[i]
+        a, b, c = xs[i, 0] - t[j, 0], xs[i, 1] - t[j, 1], xs[i, 2] - t[j, 2]
+        sf += a * a + b * b + c * c
+    sb = 0.0
+    for i in range(m):
+        j = bc[i]
+        a, b, c = t[i, 0] - xs[j, 0], t[i, 1] - xs[j, 1], t[i, 2] - xs[j, 2]
+        sb += a * a + b * b + c * c
+    return sf / n + sb / m, searched
+
+
+@njit(cache=True)
+def _kabsch_pairs(p, t, fc, bc):
+    """Proper Kabsch fit of ``p`` onto ``t`` on the forward pairs ``(p_i, t_fc[i])`` and the backward
+    pairs ``(p_bc[k], t_k)``, two-pass like :func:`aw_eval.reference.kabsch`."""
+    n, m = p.shape[0], t.shape[0]
+    cs = np.zeros(3)
+    cd = np.zeros(3)
+    for i in range(n):
+        for k in range(3):
+            cs[k] += p[i, k]
+            cd[k] += t[fc[i], k]
+    for i in range(m):
+        for k in range(3):
+            cs[k] += p[bc[i], k]
+            cd[k] += t[i, k]
+    cs /= n + m
+    cd /= n + m
+    h = np.zeros((3, 3))
+    for i in range(n):
+        j = fc[i]
+        for a in range(3):
+            s = p[i, a] - cs[a]
+            for b in range(3):
+                h[a, b] += s * (t[j, b] - cd[b])
+    for i in range(m):
+        j = bc[i]
+        for a in range(3):
+            s = p[j, a] - cs[a]
+            for b in range(3):
+                h[a, b] += s * (t[i, b] - cd[b])
+    u, _, vt = np.linalg.svd(h)
+    v = vt.T
+    d = 1.0 if np.linalg.det(v @ u.T) >= 0 else -1.0
+    for k in range(3):
+        v[k, 2] *= d
+    r = v @ u.T
+    return r, cd - r @ cs
+
+
+@njit(cache=True)
+def _icp(p, t, tree_t, tree_p, r0, t0, max_iters, tol, stop_at):
+    n, m = p.shape[0], t.shape[0]
+    fc = np.zeros(n, np.int64)
+    bc = np.zeros(m, np.int64)
+    fx = np.zeros((n, 3))
+    bx = np.zeros((m, 3))
+    fd = np.zeros(n)
+    bd = np.zeros(m)
+    xs = np.empty((n, 3))
+    ys = np.empty((m, 3))
+    stack = np.empty(STACK, np.int64)
+    bounds = np.empty(STACK)
+    obj, searched = _evaluate(p, t, tree_t, tree_p, r0, t0, fc, fx, fd, bc, bx, bd, True, xs, ys, stack, bounds)
+    best, best_r, best_t = obj, r0.copy(), t0.copy()
+    prev = obj
+    it = 0
+    if obj <= stop_at:
+        return best, best_r, best_t, 0, searched
+    while it < max_iters:
+        it += 1
+        r, tr = _kabsch_pairs(p, t, fc, bc)
+        new, s = _evaluate(p, t, tree_t, tree_p, r, tr, fc, fx, fd, bc, bx, bd, False, xs, ys, stack, bounds)
+        searched += s
+        if new < best:
+            best, best_r, best_t = new, r, tr
+        if new <= stop_at:
+            break
+        if prev - new < tol:
+            break
+        prev = new
+    return best, best_r, best_t, it, searched
 
 
 @dataclass
@@ -134,27 +197,17 @@ class ICPProblem:
     """Registration of one prediction ``p (n, 3)`` onto one target ``t_pts (m, 3)``.
 
     ``tree_t`` (target) may be shared across checkpoints of a task; ``tree_p`` is built here
-    unless given. ``certify``: use certified warm starts (default: when a side has at least
-    3000 points; below that a plain search per iteration is cheaper). Results are the same.
+    unless given (both from :func:`aw_eval.kdtree.build_tree`). ``certify`` is accepted for
+    compatibility; the compiled search always certifies (it never changes a result).
     """
 
     def __init__(self, p: np.ndarray, t_pts: np.ndarray, tree_t: KDTree | None = None, tree_p: KDTree | None = None,
                  certify: bool | None = None):
-        self.certify = certify
-        self.p = np.ascontiguousarray(p, dtype=np.float64)
-        self.t = np.ascontiguousarray(t_pts, dtype=np.float64)
-        self.tree_t = build_tree(self.t) if tree_t is None else tree_t
-        self.tree_p = build_tree(self.p) if tree_p is None else tree_p
-
-    def _evaluate(self, fwd: CertifiedNN, bwd: CertifiedNN, r: np.ndarray, t: np.ndarray):
-        # Same arithmetic as the reference objective: x = p R^T + t, squared differences.
-        x = self.p @ r.T + t
-        f = fwd.query(x)
-        b = bwd.query((self.t - t) @ r)  # R^T (T - t), row form
-        df = x - self.t[f]
-        db = self.t - x[b]
-        obj = float(np.sum(df**2, axis=1).mean() + np.sum(db**2, axis=1).mean())
-        return obj, f, b
+        self.tree_t = build_tree(t_pts) if tree_t is None else tree_t
+        self.tree_p = build_tree(p) if tree_p is None else tree_p
+        # the kernels work in tree order; sums over all points do not depend on the order
+        self._p = self.tree_p.points
+        self._t = self.tree_t.points
 
     def run(self, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float, stop_at: float | None = None) -> ICPResult:
         """The protocol's ICP from ``(r0, t0)``; returns the best state visited.
@@ -162,25 +215,23 @@ class ICPProblem:
         ``stop_at``: return as soon as the objective is ``<= stop_at`` (for yes/no questions such
         as "is the best CD <= 1e-4?", whose answer cannot change afterwards).
         """
-        auto = self.certify is None
-        fwd = CertifiedNN(self.t, self.tree_t, certify=len(self.p) >= _CERTIFY_MIN if auto else self.certify)
-        bwd = CertifiedNN(self.p, self.tree_p, certify=len(self.t) >= _CERTIFY_MIN if auto else self.certify)
-        obj, f, b = self._evaluate(fwd, bwd, r0, t0)
-        best = (obj, r0, t0)
-        prev = obj
-        it = 0
-        if stop_at is not None and obj <= stop_at:
-            return ICPResult(obj, r0, t0, 0, fwd.n_searched + bwd.n_searched)
-        for it in range(1, max_iters + 1):
-            src = np.concatenate([self.p, self.p[b]])
-            dst = np.concatenate([self.t[f], self.t])
-            r, t = kabsch(src, dst)
-            new, f, b = self._evaluate(fwd, bwd, r, t)
-            if new < best[0]:
-                best = (new, r, t)
-            if stop_at is not None and new <= stop_at:
-                break
-            if prev - new < tol:
-                break
-            prev = new
-        return ICPResult(best[0], best[1], best[2], it, fwd.n_searched + bwd.n_searched)
+        r0 = np.ascontiguousarray(r0, dtype=np.float64)
+        t0 = np.ascontiguousarray(t0, dtype=np.float64)
+        stop = -np.inf if stop_at is None else float(stop_at)
+        obj, r, t, it, searched = _icp(self._p, self._t, tuple(self.tree_t), tuple(self.tree_p), r0, t0,
+                                       int(max_iters), float(tol), stop)
+        return ICPResult(float(obj), r, t, int(it), int(searched))
+
+
+def compile_kernels() -> None:
+    """Compile (or load from numba's on-disk cache) every kernel of the evaluator on tiny inputs,
+    so that scoring processes start warm. The install step runs it once."""
+    from aw_eval.kdtree import chamfer_tree
+
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(40, 3)), rng.normal(size=(30, 3))
+    ta, tb = build_tree(a), build_tree(b)
+    ta.query(b)
+    chamfer_tree(a, tuple(ta), b, tuple(tb))
+    CertifiedNN(a, ta).query(b)
+    ICPProblem(a, b, tree_t=tb, tree_p=ta).run(np.eye(3), np.zeros(3), 3, 1e-9, stop_at=1e-4)

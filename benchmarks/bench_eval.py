@@ -103,35 +103,73 @@ def bench_parts(p: int, args, rows: list, agree: list) -> None:
     print(json.dumps(row), flush=True)
 
 
-def bench_agreement(parts: list[int], n: int, fps: int, seed: int = 0) -> dict:
-    """Fast vs exact (exact == reference by the tests) on ``n`` trajectory checkpoints."""
-    st = aw_eval.ProtocolSettings(n_fps=fps, n_surface=4 * fps)
+_GEOMS: dict = {}
+
+
+def _agreement_chunk(job):
+    """Exact and fast on checkpoints ``lo:hi`` of the ``p``-part trajectory set (one worker)."""
+    p, fps, seed, k, lo, hi = job
+    if (p, fps) not in _GEOMS:
+        st = aw_eval.ProtocolSettings(n_fps=fps, n_surface=max(4096, 4 * fps))
+        geom, obj = make_points_geometry(p, fps, seed=p, settings=st)
+        _GEOMS[(p, fps)] = (geom, trajectory_checkpoints(obj, k, seed=seed + 7 * p))
+    geom, cks = _GEOMS[(p, fps)]
+    cks = cks[lo:hi]
+    t0 = time.perf_counter()
+    e = aw_eval.score_batch(geom, cks, mode="exact")
+    t_exact = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    f = aw_eval.score_batch(geom, cks, mode="fast")
+    t_fast = time.perf_counter() - t0
+    return p, e.pa, e.sr, e.scd, f.pa, f.sr, f.scd, e.n_unique, t_exact, t_fast
+
+
+def bench_agreement(parts: list[int], n: int, fps: int, seed: int = 0, workers: int = 1, chunk: int = 6) -> dict:
+    """Fast vs exact (exact == reference by the tests) on ``n`` trajectory checkpoints, split
+    evenly over ``parts``; ``workers`` processes share the chunks (largest tasks first). Agreement
+    does not depend on the worker count; the seconds are summed over workers."""
     per = {p: n // len(parts) + (1 if i < n % len(parts) else 0) for i, p in enumerate(parts)}
-    same_pa = same_sr = total = 0
+    jobs = [(p, fps, seed, k, lo, min(k, lo + chunk)) for p, k in sorted(per.items(), reverse=True)
+            for lo in range(0, k, chunk)]
+    if workers > 1:
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        from aw_eval.icp import compile_kernels
+
+        compile_kernels()  # fill numba's on-disk cache once, before the workers load it
+
+        with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
+            outs = list(pool.map(_agreement_chunk, jobs))
+    else:
+        outs = [_agreement_chunk(j) for j in jobs]
+    same_pa = same_sr = total = unique = 0
     rel = []
     t_exact = t_fast = 0.0
     flips = []
-    for p, k in per.items():
-        geom, obj = make_points_geometry(p, fps, seed=p, settings=st)
-        cks = trajectory_checkpoints(obj, k, seed=seed + 7 * p)
-        t0 = time.perf_counter()
-        e = aw_eval.score_batch(geom, cks, mode="exact")
-        t_exact += time.perf_counter() - t0
-        t0 = time.perf_counter()
-        f = aw_eval.score_batch(geom, cks, mode="fast")
-        t_fast += time.perf_counter() - t0
-        same_pa += int(np.sum(e.pa == f.pa))
-        same_sr += int(np.sum(e.sr == f.sr))
-        total += len(cks)
-        rel += list(np.abs(f.scd - e.scd) / np.maximum(e.scd, 1e-12))
-        for i in np.flatnonzero((e.pa != f.pa) | (e.sr != f.sr)):
-            flips.append({"parts": p, "pa_exact": float(e.pa[i]), "pa_fast": float(f.pa[i]), "scd_exact": float(e.scd[i]), "scd_fast": float(f.scd[i])})
-        print(f"agreement parts={p}: {k} checkpoints, exact {t_exact:.1f}s fast {t_fast:.1f}s so far", flush=True)
+    by_parts: dict = {}
+    for p, epa, esr, escd, fpa, fsr, fscd, n_unique, te, tf in outs:
+        same_pa += int(np.sum(epa == fpa))
+        same_sr += int(np.sum(esr == fsr))
+        total += len(epa)
+        unique += n_unique
+        t_exact += te
+        t_fast += tf
+        rel += list(np.abs(fscd - escd) / np.maximum(escd, 1e-12))
+        row = by_parts.setdefault(p, {"checkpoints": 0, "identical_pa_and_sr": 0})
+        row["checkpoints"] += len(epa)
+        row["identical_pa_and_sr"] += int(np.sum((epa == fpa) & (esr == fsr)))
+        for i in np.flatnonzero((epa != fpa) | (esr != fsr)):
+            flips.append({"parts": p, "pa_exact": float(epa[i]), "pa_fast": float(fpa[i]), "scd_exact": float(escd[i]),
+                          "scd_fast": float(fscd[i])})
+    print(f"agreement: {total} checkpoints ({unique} unique), exact {t_exact:.1f}s fast {t_fast:.1f}s (worker seconds)", flush=True)
     rel = np.asarray(rel)
-    return {"checkpoints": total, "points_per_part": fps, "parts": parts, "identical_pa": same_pa / total,
+    return {"checkpoints": total, "unique_checkpoints": unique, "points_per_part": fps, "parts": parts,
+            "workers": workers, "by_parts": by_parts, "identical_pa": same_pa / total,
             "identical_sr": same_sr / total, "identical_pa_and_sr_count": total - len(flips),
             "scd_rel_err_median": float(np.median(rel)), "scd_rel_err_p99": float(np.quantile(rel, 0.99)),
-            "scd_rel_err_max": float(rel.max()), "exact_s": t_exact, "fast_s": t_fast, "disagreements": flips[:50]}
+            "scd_rel_err_max": float(rel.max()), "exact_worker_s": t_exact, "fast_worker_s": t_fast,
+            "exact_over_fast_time": t_exact / max(t_fast, 1e-9), "disagreements": flips[:50]}
 
 
 def main(argv=None) -> int:
@@ -144,6 +182,8 @@ def main(argv=None) -> int:
     ap.add_argument("--agreement", type=int, default=0, help="checkpoints for the fast-vs-exact agreement")
     ap.add_argument("--agree-fps", type=int, default=64)
     ap.add_argument("--agree-parts", type=int, nargs="+", default=[2, 5, 10])
+    ap.add_argument("--agree-workers", type=int, default=1,
+                    help="processes for the agreement run (agreement does not depend on it; timings are worker seconds)")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "bench_eval.json"))
     args = ap.parse_args(argv)
     rows: list = []
@@ -153,7 +193,7 @@ def main(argv=None) -> int:
     for p in args.parts:
         bench_parts(p, args, rows, [])
     if args.agreement:
-        result["agreement"] = bench_agreement(args.agree_parts, args.agreement, args.agree_fps)
+        result["agreement"] = bench_agreement(args.agree_parts, args.agreement, args.agree_fps, workers=args.agree_workers)
         print(json.dumps({k: v for k, v in result["agreement"].items() if k != "disagreements"}), flush=True)
     result["machine"]["load_avg_end"] = os.getloadavg()
     result["peak_mib"] = peak_mib()

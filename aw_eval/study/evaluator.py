@@ -40,18 +40,11 @@ def evaluator_version() -> str:
 
 
 def prepare_thread() -> None:
-    """Per-thread setup before scoring in this thread.
+    """Per-thread setup before scoring in this thread: loads the compiled kernels (numba's
+    on-disk cache) up front, so the first checkpoint's timing is not a compile."""
+    from aw_eval.icp import compile_kernels
 
-    OpenMP's thread count is a per-thread setting: the evaluator limits pykdtree's OpenMP team to
-    one thread when it is imported, which holds for the importing thread only. A Dask worker
-    thread (or any other thread) would otherwise run every small KD-tree query with a team of
-    all cores, several times slower on a busy machine, so the limit is set again here.
-    """
-    try:
-        from aw_eval.icp import limit_kdtree_threads
-    except ImportError:  # pragma: no cover - an evaluator without KD-trees
-        return
-    limit_kdtree_threads()
+    compile_kernels()
 
 
 def protocol_settings(overrides=()):

@@ -20,7 +20,7 @@ def test_certified_nn_equals_brute_force_along_a_path():
     ref[:200] *= 0.05  # a dense cluster next to a sparse cloud
     x = rng.normal(size=(400, 3)) * 1.5
     x[:50] += 8.0  # far queries: almost tied neighbours
-    nn = CertifiedNN(ref, build_tree(ref), k=2)
+    nn = CertifiedNN(ref, build_tree(ref))
     step = rng.normal(size=(400, 3))
     searched = []
     for it in range(25):

@@ -1,0 +1,61 @@
+"""The compiled KD-tree: exact neighbours, warm starts, second-nearest distances, Chamfer."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from aw_eval.kdtree import STACK, build_tree, chamfer_tree, nearest2
+from aw_eval.reference import chamfer
+
+
+def _brute(x, ref):
+    d = ((x[:, None, :] - ref[None, :, :]) ** 2).sum(-1)
+    return d
+
+
+@pytest.mark.parametrize("n", [1, 2, 7, 9, 500])
+def test_query_equals_brute_force(n):
+    rng = np.random.default_rng(n)
+    ref = rng.normal(size=(n, 3)) * [1.0, 0.3, 0.05]
+    x = rng.normal(size=(300, 3)) * 2.0
+    x[:20] += 50.0  # far queries
+    d, rows = build_tree(ref).query(x)
+    want = _brute(x, ref)
+    assert np.array_equal(rows, want.argmin(1))
+    assert np.allclose(d, want.min(1), rtol=1e-15, atol=0)
+
+
+def test_nearest2_from_any_warm_start_and_second_distance():
+    rng = np.random.default_rng(3)
+    ref = rng.normal(size=(400, 3))
+    tree = build_tree(ref)
+    stack = np.empty(STACK, np.int64)
+    bounds = np.empty(STACK)
+    for q in rng.normal(size=(50, 3)) * 3:
+        d = np.sort(_brute(q[None], ref)[0])
+        want = int(_brute(q[None], ref)[0].argmin())
+        for warm in (-1, 0, 17, 399):
+            j, d1, d2 = nearest2(tuple(tree), q[0], q[1], q[2], warm, stack, bounds)
+            assert tree.index[j] == want
+            assert np.isclose(d1, d[0], rtol=1e-14) and np.isclose(d2, d[1], rtol=1e-14)
+
+
+def test_duplicate_points_and_flat_clouds():
+    ref = np.zeros((40, 3))
+    ref[20:, 0] = 1.0  # two stacks of identical points, all on a line
+    d, rows = build_tree(ref).query(np.array([[0.2, 0.0, 0.0], [0.9, 0.0, 0.0]]))
+    assert rows[0] < 20 <= rows[1]
+    assert np.allclose(d, [0.04, 0.01])
+
+
+def test_empty_cloud_is_rejected():
+    with pytest.raises(ValueError, match="at least one point"):
+        build_tree(np.zeros((0, 3)))
+
+
+def test_chamfer_tree_equals_reference_chamfer():
+    rng = np.random.default_rng(5)
+    x, y = rng.normal(size=(300, 3)), rng.normal(size=(250, 3)) + 0.5
+    got = chamfer_tree(x, tuple(build_tree(x)), y, tuple(build_tree(y)))
+    assert abs(got - chamfer(x, y)) <= 1e-12 * chamfer(x, y)
