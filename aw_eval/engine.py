@@ -225,6 +225,10 @@ def score(geom: TaskGeometry, poses, mode: str = "exact") -> ScoreResult:
     res = finalize(geom, ctx, pred_parts, reg, mode)
     if fast.FAST.margin > 1 and fast.near_threshold(res, geom.settings, fast.FAST.margin):
         res = finalize(geom, ctx, pred_parts, fast.escalate(geom, ctx, pred_parts, reg), mode)
+    if fast.FAST.exact_margin > 1 and fast.near_threshold(res, geom.settings, fast.FAST.exact_margin):
+        # a knife-edge decision: the last digits of the registration decide it, so only the
+        # protocol's own registration (every start at full resolution) gives the protocol's answer
+        res = finalize(geom, ctx, pred_parts, _register_exact(geom, ctx, poses, pred_parts), mode)
     return res
 
 

@@ -18,7 +18,17 @@ Near-identical starts (same-ID starts of parts already placed consistently) are 
    ``margin`` of ``threshold``, or SCD within ``margin`` of ``sra_threshold``), the result is
    refined further at full resolution with the protocol's full iteration budget (certified
    exact neighbours) from the fast transform, and the better objective is kept. Far from the
-   thresholds the small registration differences cannot flip a decision.
+   thresholds the small registration differences cannot flip a decision;
+5. **exact fallback** (opt-in, ``exact_margin > 1``; off by default): when a decision is still
+   within a factor ``exact_margin`` of its threshold, the checkpoint is registered as ``exact``
+   does (every start at full resolution): such knife-edge decisions turn on the last digits of
+   the registration. Measured (see ``docs/performance.md``): two of the four disagreements among
+   1,008 paper-resolution checkpoints were knife edges, part errors 0.00999 (exact) vs 0.01008
+   (fast) and 0.00991 vs 0.01012 under registrations whose SCD differed by 1e-4 and 2e-3
+   relative; ``exact_margin=1.02`` resolves both, but on converging trajectories 2-7% of
+   checkpoints fall in that band and each costs a full ``exact`` registration, which made
+   ``fast`` 3-9x slower on the benchmark's trajectories. Final states are scored in ``exact``
+   by default anyway (``aw-score --final exact``).
 """
 
 from __future__ import annotations
@@ -44,6 +54,7 @@ class FastSettings:
     keep: int = 2
     full_iters: int = 2
     margin: float = 1.5
+    exact_margin: float = 1.0  # off by default: see step 5 of the module docstring
     distinct_deg: float = 2.0
     distinct_t: float = 0.02
     same_start_tol: float = 1e-9

@@ -17,7 +17,8 @@ import trimesh
 
 from aw.pose import IDENTITY_POSE, apply_pose, compose_poses, invert_pose, quat_from_axis_angle, quat_to_matrix
 
-__all__ = ["SyntheticObject", "make_object", "random_rotation_quat", "perturb", "random_checkpoints", "PERTURBATION_KINDS"]
+__all__ = ["SyntheticObject", "make_object", "random_rotation_quat", "perturb", "random_checkpoints", "trajectory_checkpoints",
+           "PERTURBATION_KINDS"]
 
 
 @dataclass
@@ -219,3 +220,15 @@ def synthetic_trajectory(obj: SyntheticObject, n_steps: int, seed: int = 0) -> n
         poses[i] = compose_poses(g, perturb(obj.target_poses[i], str(kind), rng, centres[i]))
         out.append(poses.copy())
     return np.stack(out)
+
+
+def trajectory_checkpoints(obj: SyntheticObject, n: int, seed: int) -> np.ndarray:
+    """``n`` checkpoints ``(n, P, 7)`` from consecutive synthetic trajectories (about 3 edits per
+    part each, seeds ``seed, seed + 1, ...``). Prefix-stable: the first ``k`` rows do not depend
+    on ``n >= k``."""
+    p = len(obj.meshes)
+    out, k = [], 0
+    while sum(len(t) for t in out) < n:
+        out.append(synthetic_trajectory(obj, 3 * p, seed=seed + k))
+        k += 1
+    return np.concatenate(out)[:n]

@@ -34,21 +34,11 @@ os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(Path(__file__).resolve().
 
 import aw_eval  # noqa: E402
 from aw_eval import reference as ref  # noqa: E402
-from aw_eval.fixtures import make_points_geometry, synthetic_trajectory  # noqa: E402
+from aw_eval.fixtures import make_points_geometry, trajectory_checkpoints  # noqa: E402
 
 
 def peak_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
-def trajectory_checkpoints(obj, n: int, seed: int) -> np.ndarray:
-    """``n`` checkpoints from consecutive synthetic trajectories (about 3 edits per part each)."""
-    p = len(obj.meshes)
-    out, k = [], 0
-    while sum(len(t) for t in out) < n:
-        out.append(synthetic_trajectory(obj, 3 * p, seed=seed + k))
-        k += 1
-    return np.concatenate(out)[:n]
 
 
 def time_calls(fn, items):
@@ -124,7 +114,20 @@ def _agreement_chunk(job):
     return p, e.pa, e.sr, e.scd, f.pa, f.sr, f.scd, e.n_unique, t_exact, t_fast
 
 
-def bench_agreement(parts: list[int], n: int, fps: int, seed: int = 0, workers: int = 1, chunk: int = 6) -> dict:
+def _log_chunk(log: Path | None, out) -> None:
+    """Append one chunk's results to ``log`` (JSON lines), so a run stopped early keeps them."""
+    if log is None:
+        return
+    p, epa, esr, escd, fpa, fsr, fscd, n_unique, te, tf = out
+    row = {"parts": p, "pa_exact": epa.tolist(), "sr_exact": esr.tolist(), "scd_exact": escd.tolist(),
+           "pa_fast": fpa.tolist(), "sr_fast": fsr.tolist(), "scd_fast": fscd.tolist(), "unique": n_unique,
+           "exact_s": te, "fast_s": tf}
+    with open(log, "a") as fh:
+        fh.write(json.dumps(row) + "\n")
+
+
+def bench_agreement(parts: list[int], n: int, fps: int, seed: int = 0, workers: int = 1, chunk: int = 6,
+                    log: Path | None = None) -> dict:
     """Fast vs exact (exact == reference by the tests) on ``n`` trajectory checkpoints, split
     evenly over ``parts``; ``workers`` processes share the chunks (largest tasks first). Agreement
     does not depend on the worker count; the seconds are summed over workers."""
@@ -140,9 +143,15 @@ def bench_agreement(parts: list[int], n: int, fps: int, seed: int = 0, workers: 
         compile_kernels()  # fill numba's on-disk cache once, before the workers load it
 
         with ProcessPoolExecutor(workers, mp_context=mp.get_context("spawn")) as pool:
-            outs = list(pool.map(_agreement_chunk, jobs))
+            outs = []
+            for out in pool.map(_agreement_chunk, jobs):
+                outs.append(out)
+                _log_chunk(log, out)
     else:
-        outs = [_agreement_chunk(j) for j in jobs]
+        outs = []
+        for j in jobs:
+            outs.append(_agreement_chunk(j))
+            _log_chunk(log, outs[-1])
     same_pa = same_sr = total = unique = 0
     rel = []
     t_exact = t_fast = 0.0
@@ -172,6 +181,46 @@ def bench_agreement(parts: list[int], n: int, fps: int, seed: int = 0, workers: 
             "exact_over_fast_time": t_exact / max(t_fast, 1e-9), "disagreements": flips[:50]}
 
 
+def agreement_from_logs(logs: list[Path], fps: int, seed: int = 0) -> dict:
+    """``fast`` (this process, current code) against the ``exact`` results recorded in ``logs``
+    (``--agree-log`` files of earlier agreement runs, for example from a larger machine): the
+    checkpoints are regenerated deterministically (their order is prefix-stable), so ``exact``,
+    the expensive side, is not run again."""
+    exact: dict[int, dict[str, list]] = {}
+    for log in logs:
+        for line in Path(log).read_text().splitlines():
+            r = json.loads(line)
+            d = exact.setdefault(int(r["parts"]), {"pa": [], "sr": [], "scd": []})
+            for k in ("pa", "sr", "scd"):
+                d[k] += r[f"{k}_exact"]
+    total = same = 0
+    flips, rel, t_fast, by_parts = [], [], 0.0, {}
+    for p, d in sorted(exact.items()):
+        n = len(d["pa"])
+        st = aw_eval.ProtocolSettings(n_fps=fps, n_surface=max(4096, 4 * fps))
+        geom, obj = make_points_geometry(p, fps, seed=p, settings=st)
+        cks = trajectory_checkpoints(obj, n, seed=seed + 7 * p)
+        t0 = time.perf_counter()
+        f = aw_eval.score_batch(geom, cks, mode="fast")
+        t_fast += time.perf_counter() - t0
+        epa, esr, escd = np.asarray(d["pa"]), np.asarray(d["sr"]), np.asarray(d["scd"])
+        ok = (epa == f.pa) & (esr == f.sr)
+        by_parts[p] = {"checkpoints": n, "identical_pa_and_sr": int(ok.sum())}
+        total += n
+        same += int(ok.sum())
+        rel += list(np.abs(f.scd - escd) / np.maximum(escd, 1e-12))
+        for i in np.flatnonzero(~ok):
+            flips.append({"parts": p, "index": int(i), "pa_exact": float(epa[i]), "pa_fast": float(f.pa[i]),
+                          "scd_exact": float(escd[i]), "scd_fast": float(f.scd[i]),
+                          "part_errors_fast": [float(x) for x in f.part_errors[i]]})
+        print(f"agreement vs logged exact, parts={p}: {int(ok.sum())}/{n} identical, fast {t_fast:.1f}s so far", flush=True)
+    rel = np.asarray(rel)
+    return {"checkpoints": total, "identical_pa_and_sr_count": same, "identical_rate": same / total, "by_parts": by_parts,
+            "points_per_part": fps, "exact_logs": [str(x) for x in logs], "scd_rel_err_median": float(np.median(rel)),
+            "scd_rel_err_p99": float(np.quantile(rel, 0.99)), "scd_rel_err_max": float(rel.max()), "fast_s": t_fast,
+            "disagreements": flips}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--parts", type=int, nargs="*", default=[2, 5, 10, 20])
@@ -182,6 +231,9 @@ def main(argv=None) -> int:
     ap.add_argument("--agreement", type=int, default=0, help="checkpoints for the fast-vs-exact agreement")
     ap.add_argument("--agree-fps", type=int, default=64)
     ap.add_argument("--agree-parts", type=int, nargs="+", default=[2, 5, 10])
+    ap.add_argument("--agree-exact-log", type=Path, nargs="*", default=[],
+                    help="score fast against the exact results of these --agree-log files (exact is not re-run)")
+    ap.add_argument("--agree-log", type=Path, default=None, help="JSON lines of every chunk's results, as they finish")
     ap.add_argument("--agree-workers", type=int, default=1,
                     help="processes for the agreement run (agreement does not depend on it; timings are worker seconds)")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "bench_eval.json"))
@@ -193,8 +245,14 @@ def main(argv=None) -> int:
     for p in args.parts:
         bench_parts(p, args, rows, [])
     if args.agreement:
-        result["agreement"] = bench_agreement(args.agree_parts, args.agreement, args.agree_fps, workers=args.agree_workers)
+        result["agreement"] = bench_agreement(args.agree_parts, args.agreement, args.agree_fps, workers=args.agree_workers, log=args.agree_log)
         print(json.dumps({k: v for k, v in result["agreement"].items() if k != "disagreements"}), flush=True)
+    if args.agree_exact_log:
+        result["agreement_vs_logged_exact"] = agreement_from_logs(args.agree_exact_log, args.agree_fps)
+        a = result["agreement_vs_logged_exact"]
+        print(json.dumps({k: v for k, v in a.items() if k != "disagreements"}), flush=True)
+        for d in a["disagreements"]:
+            print(json.dumps(d), flush=True)
     result["machine"]["load_avg_end"] = os.getloadavg()
     result["peak_mib"] = peak_mib()
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
