@@ -5,8 +5,9 @@ The evaluator's neighbour searches all have the same shape: a reference cloud th
 little between calls (ICP iterations). This tree is built once per cloud and answers
 
 - ``nearest2``: the nearest and second-nearest squared distances of one query, with a *warm*
-  start: the previous neighbour's distance bounds the search from the first node on, so a query
-  that barely moved visits a handful of nodes;
+  start: the search begins at the leaf of the previous neighbour and climbs only until the
+  second-nearest ball lies inside the current node's cell, so a query that barely moved visits
+  a leaf or two;
 - the *certificate* used by :mod:`aw_eval.icp`: a query last searched at ``x_ref`` with second
   nearest distance ``d2`` keeps its neighbour ``j`` at a new position ``x`` without any search
   while ``|x - y_j| + |x - x_ref| < d2`` (every other point is at least ``d2 - |x - x_ref|``
@@ -14,7 +15,8 @@ little between calls (ICP iterations). This tree is built once per cloud and ans
 
 Layout (all arrays C-contiguous): ``points (n, 3)`` float64 permuted into tree order; ``index
 (n,)`` maps tree order to the caller's order; per node ``lo, hi (N, 3)`` bounding boxes,
-``left, right (N,)`` children (``-1`` for a leaf) and ``start, end (N,)`` its point range.
+``left, right (N,)`` children (``-1`` for a leaf), ``start, end (N,)`` its point range, the split
+``dim, split``, ``parent`` and the cell ``cell_lo, cell_hi``; ``leaf_of (n,)`` per point.
 Searches work in tree order; callers convert with ``index`` once.
 """
 
