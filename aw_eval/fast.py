@@ -205,8 +205,7 @@ def register_fast(geom, ctx, poses: np.ndarray, pred_parts: np.ndarray, fast: Fa
     else:
         best_k = 0
         r_s, t_s = c_r[chosen[0]], c_t[chosen[0]]
-    # A few full-resolution iterations: a plain search beats certification at this count.
-    full = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, certify=False).run(r_s, t_s, min(fast.full_iters, st.max_iters), st.tol)
+    full = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t).run(r_s, t_s, min(fast.full_iters, st.max_iters), st.tol)
     return Registration(full.objective, full.rotation, full.translation, int(uniq[chosen[best_k]]), None)
 
 

@@ -116,31 +116,23 @@ def _kabsch_pairs(p, t, fc, bc):
     """Proper Kabsch fit of ``p`` onto ``t`` on the forward pairs ``(p_i, t_fc[i])`` and the backward
     pairs ``(p_bc[k], t_k)``, two-pass like :func:`aw_eval.reference.kabsch`."""
     n, m = p.shape[0], t.shape[0]
+    src = np.concatenate((np.arange(n), bc))  # pair k: p[src[k]] -> t[dst[k]]
+    dst = np.concatenate((fc, np.arange(m)))
     cs = np.zeros(3)
     cd = np.zeros(3)
-    for i in range(n):
-        for k in range(3):
-            cs[k] += p[i, k]
-            cd[k] += t[fc[i], k]
-    for i in range(m):
-        for k in range(3):
-            cs[k] += p[bc[i], k]
-            cd[k] += t[i, k]
+    for k in range(n + m):
+        for a in range(3):
+            cs[a] += p[src[k], a]
+            cd[a] += t[dst[k], a]
     cs /= n + m
     cd /= n + m
     h = np.zeros((3, 3))
-    for i in range(n):
-        j = fc[i]
+    for k in range(n + m):
+        i, j = src[k], dst[k]
         for a in range(3):
             s = p[i, a] - cs[a]
             for b in range(3):
                 h[a, b] += s * (t[j, b] - cd[b])
-    for i in range(m):
-        j = bc[i]
-        for a in range(3):
-            s = p[j, a] - cs[a]
-            for b in range(3):
-                h[a, b] += s * (t[i, b] - cd[b])
     u, _, vt = np.linalg.svd(h)
     v = vt.T
     d = 1.0 if np.linalg.det(v @ u.T) >= 0 else -1.0
@@ -197,12 +189,11 @@ class ICPProblem:
     """Registration of one prediction ``p (n, 3)`` onto one target ``t_pts (m, 3)``.
 
     ``tree_t`` (target) may be shared across checkpoints of a task; ``tree_p`` is built here
-    unless given (both from :func:`aw_eval.kdtree.build_tree`). ``certify`` is accepted for
-    compatibility; the compiled search always certifies (it never changes a result).
+    unless given (both from :func:`aw_eval.kdtree.build_tree`). The search always certifies
+    (it never changes a result).
     """
 
-    def __init__(self, p: np.ndarray, t_pts: np.ndarray, tree_t: KDTree | None = None, tree_p: KDTree | None = None,
-                 certify: bool | None = None):
+    def __init__(self, p: np.ndarray, t_pts: np.ndarray, tree_t: KDTree | None = None, tree_p: KDTree | None = None):
         self.tree_t = build_tree(t_pts) if tree_t is None else tree_t
         self.tree_p = build_tree(p) if tree_p is None else tree_p
         # the kernels work in tree order; sums over all points do not depend on the order
@@ -223,9 +214,16 @@ class ICPProblem:
         return ICPResult(float(obj), r, t, int(it), int(searched))
 
 
+_COMPILED = False
+
+
 def compile_kernels() -> None:
     """Compile (or load from numba's on-disk cache) every kernel of the evaluator on tiny inputs,
-    so that scoring processes start warm. The install step runs it once."""
+    so that scoring processes start warm. The install step runs it once; later calls in the same
+    process return at once."""
+    global _COMPILED
+    if _COMPILED:
+        return
     from aw_eval.kdtree import chamfer_tree
 
     rng = np.random.default_rng(0)
@@ -235,3 +233,4 @@ def compile_kernels() -> None:
     chamfer_tree(a, tuple(ta), b, tuple(tb))
     CertifiedNN(a, ta).query(b)
     ICPProblem(a, b, tree_t=tb, tree_p=ta).run(np.eye(3), np.zeros(3), 3, 1e-9, stop_at=1e-4)
+    _COMPILED = True

@@ -146,28 +146,11 @@ def build_tree(points: np.ndarray) -> KDTree:
 
 @njit(cache=True, inline="always")
 def _box_d2(x0, x1, x2, lo, hi, node):
+    """Squared distance from the point to the bounding box of ``node`` (0 inside)."""
     d = 0.0
-    v = lo[node, 0] - x0
-    if v > 0:
-        d += v * v
-    else:
-        v = x0 - hi[node, 0]
-        if v > 0:
-            d += v * v
-    v = lo[node, 1] - x1
-    if v > 0:
-        d += v * v
-    else:
-        v = x1 - hi[node, 1]
-        if v > 0:
-            d += v * v
-    v = lo[node, 2] - x2
-    if v > 0:
-        d += v * v
-    else:
-        v = x2 - hi[node, 2]
-        if v > 0:
-            d += v * v
+    for k, v in enumerate((x0, x1, x2)):
+        g = max(lo[node, k] - v, v - hi[node, k], 0.0)
+        d += g * g
     return d
 
 
