@@ -19,8 +19,8 @@ import numpy as np
 from aw.pose import as_finite, cube_rotations, pca_frame, quat_to_matrix
 from aw_eval.chamfer import chamfer_pairs
 from aw_eval.geometry import TaskGeometry
-from aw_eval.icp import ICPProblem
-from aw_eval.kdtree import build_tree, chamfer_tree
+from aw_eval.icp import ICPProblem, graph_for, nearest_positions
+from aw_eval.kdtree import build_tree
 from aw_eval.results import BatchScores, Registration, ScoreResult, match_within_groups
 
 __all__ = ["task_context", "starts_for", "register_points", "register", "register_checkpoint", "finalize", "score", "score_batch", "part_diagnostics",
@@ -39,7 +39,17 @@ class TaskContext:
     target_frame: tuple[np.ndarray, np.ndarray]  # pca_frame(target)
     pairs: np.ndarray  # (G, 2) (i, j) pairs inside groups, row-major per group
     part_trees: list | None = None  # KD-trees of the target parts (built on first use)
+    part_graphs: list | None = None  # their Delaunay graphs (None entries: Qhull could not)
+    baked: list | None = None  # (KD-tree, graph) of every part's cloud in its baked frame (unnormalized)
     target_boxes: tuple | None = None  # per-part axis-aligned boxes of the target parts
+    _graph_t: object = False  # Delaunay graph of ``tree_t``'s points (None: Qhull could not)
+
+    @property
+    def graph_t(self):
+        """Delaunay graph of the target in tree order, built on first use (``None`` if Qhull cannot)."""
+        if self._graph_t is False:
+            self._graph_t = graph_for(self.tree_t)
+        return self._graph_t
 
 
 def task_context(geom: TaskGeometry) -> TaskContext:
@@ -88,12 +98,31 @@ def register_points(prob: ICPProblem, r0: np.ndarray, t0: np.ndarray, max_iters:
     return Registration(float(best[0]), best[1], best[2], int(best[3]), objs)
 
 
-def _part_cd(ctx: TaskContext, moved_parts: np.ndarray, pred_trees: dict, i: int, j: int) -> float:
-    """CD(registered pred part i, target part j) with compiled KD-trees, squared distances from
-    coordinates as the reference computes them."""
-    if i not in pred_trees:
-        pred_trees[i] = build_tree(moved_parts[i])
-    return float(chamfer_tree(moved_parts[i], tuple(pred_trees[i]), ctx.target_parts[j], tuple(ctx.part_trees[j])))
+def _part_structures(geom: TaskGeometry, ctx: TaskContext) -> None:
+    """Per-task search structures of the parts (built once): the normalized target parts and
+    every part's cloud in its baked frame, which a checkpoint's prediction only moves rigidly."""
+    if ctx.part_trees is None:
+        ctx.part_trees = [build_tree(t) for t in ctx.target_parts]
+        ctx.part_graphs = [graph_for(t) for t in ctx.part_trees]
+        ctx.target_boxes = (ctx.target_parts.min(axis=1), ctx.target_parts.max(axis=1))
+        ctx.baked = [(tree, graph_for(tree)) for tree in (build_tree(c) for c in geom.clouds)]
+
+
+def _part_cd(ctx: TaskContext, moved_parts: np.ndarray, to_baked: tuple, i: int, j: int) -> float:
+    """CD(registered pred part i, target part j) with squared distances from normalized
+    coordinates, as the reference computes them. Forward: the target part's tree and graph (per
+    task); backward: the target points mapped into part i's baked frame by ``to_baked = (A (P, 3,
+    3), b (P, 3))`` (``c = A y + b``), searched in the baked cloud's tree and graph (per task)."""
+    tree_t, tree_b, graph_b = ctx.part_trees[j], *ctx.baked[i]
+    # queries in their own trees' order: consecutive queries are neighbours in space, so each
+    # walk starts next to its answer (FPS order would jump across the part)
+    x, y = moved_parts[i][tree_b.index], tree_t.points
+    fwd = nearest_positions(tree_t, ctx.part_graphs[j], x)
+    df = x - tree_t.points[fwd]
+    a, b = to_baked
+    bwd = nearest_positions(tree_b, graph_b, y @ a[i].T + b[i])  # tree positions of part i = rows of x
+    db = y - x[bwd]
+    return float(np.mean(np.sum(df * df, axis=1)) + np.mean(np.sum(db * db, axis=1)))
 
 
 def _box_gap_sq(point: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
@@ -101,8 +130,10 @@ def _box_gap_sq(point: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
     return float(d @ d)
 
 
-def match_parts(ctx: TaskContext, moved_parts: np.ndarray, groups) -> tuple[np.ndarray, np.ndarray]:
+def match_parts(ctx: TaskContext, moved_parts: np.ndarray, groups, to_baked: tuple) -> tuple[np.ndarray, np.ndarray]:
     """Hungarian assignment within groups on the part CDs: ``(assignment (P,), errors (P,))``.
+    ``to_baked``: the maps of normalized registered coordinates into each part's baked frame
+    (see :func:`_part_cd`); :func:`_part_structures` must have run.
 
     Inside a group, pairs start at a proven lower bound (``forward >= dist(mean X, box Y)^2``
     by Jensen's inequality, likewise backward) and only the pairs an optimal assignment uses
@@ -110,10 +141,6 @@ def match_parts(ctx: TaskContext, moved_parts: np.ndarray, groups) -> tuple[np.n
     the exact costs too, so far-apart pairs are never computed.
     """
     p = moved_parts.shape[0]
-    if ctx.part_trees is None:
-        ctx.part_trees = [build_tree(t) for t in ctx.target_parts]
-        ctx.target_boxes = (ctx.target_parts.min(axis=1), ctx.target_parts.max(axis=1))
-    pred_trees: dict[int, object] = {}
     assign = np.arange(p)
     errors = np.empty(p)
     pm, plo, phi = moved_parts.mean(axis=1), moved_parts.min(axis=1), moved_parts.max(axis=1)
@@ -123,7 +150,7 @@ def match_parts(ctx: TaskContext, moved_parts: np.ndarray, groups) -> tuple[np.n
         g = list(g)
         if len(g) == 1:
             i = g[0]
-            errors[i] = _part_cd(ctx, moved_parts, pred_trees, i, i)
+            errors[i] = _part_cd(ctx, moved_parts, to_baked, i, i)
             continue
         k = len(g)
         cost = np.array([[_box_gap_sq(pm[i], tlo[j], thi[j]) + _box_gap_sq(tm[j], plo[i], phi[i]) for j in g] for i in g])
@@ -134,7 +161,7 @@ def match_parts(ctx: TaskContext, moved_parts: np.ndarray, groups) -> tuple[np.n
             if not todo:
                 break
             for a, c in todo:
-                cost[a, c] = _part_cd(ctx, moved_parts, pred_trees, g[a], g[c])
+                cost[a, c] = _part_cd(ctx, moved_parts, to_baked, g[a], g[c])
                 exact[a, c] = True
         for a in range(k):
             assign[g[a]] = g[cols[a]]
@@ -142,11 +169,18 @@ def match_parts(ctx: TaskContext, moved_parts: np.ndarray, groups) -> tuple[np.n
     return assign, errors
 
 
-def finalize(geom: TaskGeometry, ctx: TaskContext, pred_parts: np.ndarray, reg: Registration, mode: str) -> ScoreResult:
-    """Metrics of a registered checkpoint: part CDs, Hungarian within groups, PA/SR/SCD/SR^a."""
+def finalize(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, pred_parts: np.ndarray, reg: Registration,
+             mode: str) -> ScoreResult:
+    """Metrics of a registered checkpoint ``poses (P, 7)``: part CDs, Hungarian within groups,
+    PA/SR/SCD/SR^a."""
     st = geom.settings
     moved = pred_parts @ reg.rotation.T + reg.translation
-    assign, errors = match_parts(ctx, moved, geom.groups)
+    _part_structures(geom, ctx)
+    # registered normalized y = R_reg (R_i c + t_i) / div + t_reg  <=>  c = A_i y + b_i
+    rot_i = quat_to_matrix(poses[:, 3:])
+    a = geom.divisor * np.einsum("pji,kj->pik", rot_i, reg.rotation)  # div R_i^T R_reg^T
+    b = -np.einsum("pji,pj->pi", rot_i, geom.divisor * (reg.rotation.T @ reg.translation) + poses[:, :3])
+    assign, errors = match_parts(ctx, moved, geom.groups, (a, b))
     ok = errors <= st.threshold
     return ScoreResult(
         pa=float(ok.mean()),
@@ -165,7 +199,9 @@ def finalize(geom: TaskGeometry, ctx: TaskContext, pred_parts: np.ndarray, reg: 
 def _register_exact(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, pred_parts: np.ndarray) -> Registration:
     pred = np.ascontiguousarray(pred_parts.reshape(-1, 3))
     r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor)
-    prob = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t)
+    tree_p = build_tree(pred)
+    # every start walks both Delaunay graphs: the prediction's (once per checkpoint) pays for itself
+    prob = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p, graph_t=ctx.graph_t, graph_p=graph_for(tree_p))
     return register_points(prob, r0, t0, geom.settings.max_iters, geom.settings.tol)
 
 
@@ -186,7 +222,8 @@ def register(pred, target, starts=None, settings=None) -> Registration:
         t0 = as_finite(starts[1], (3,), "start translations").reshape(-1, 3)
         if len(r0) != len(t0) or len(r0) < 1:
             raise ValueError("starts need as many rotations as translations (at least one)")
-    prob = ICPProblem(pred, target)
+    tree_p, tree_t = build_tree(pred), build_tree(target)
+    prob = ICPProblem(pred, target, tree_t=tree_t, tree_p=tree_p, graph_t=graph_for(tree_t), graph_p=graph_for(tree_p))
     return register_points(prob, r0, t0, settings.max_iters, settings.tol)
 
 
@@ -218,17 +255,17 @@ def score(geom: TaskGeometry, poses, mode: str = "exact") -> ScoreResult:
     pred_parts = geom.pred_parts(poses)
     if mode == "exact":
         reg = _register_exact(geom, ctx, poses, pred_parts)
-        return finalize(geom, ctx, pred_parts, reg, mode)
+        return finalize(geom, ctx, poses, pred_parts, reg, mode)
     from aw_eval import fast
 
     reg = fast.register_fast(geom, ctx, poses, pred_parts, fast.FAST)
-    res = finalize(geom, ctx, pred_parts, reg, mode)
+    res = finalize(geom, ctx, poses, pred_parts, reg, mode)
     if fast.FAST.margin > 1 and fast.near_threshold(res, geom.settings, fast.FAST.margin):
-        res = finalize(geom, ctx, pred_parts, fast.escalate(geom, ctx, pred_parts, reg), mode)
+        res = finalize(geom, ctx, poses, pred_parts, fast.escalate(geom, ctx, pred_parts, reg), mode)
     if fast.FAST.exact_margin > 1 and fast.near_threshold(res, geom.settings, fast.FAST.exact_margin):
         # a knife-edge decision: the last digits of the registration decide it, so only the
         # protocol's own registration (every start at full resolution) gives the protocol's answer
-        res = finalize(geom, ctx, pred_parts, _register_exact(geom, ctx, poses, pred_parts), mode)
+        res = finalize(geom, ctx, poses, pred_parts, _register_exact(geom, ctx, poses, pred_parts), mode)
     return res
 
 

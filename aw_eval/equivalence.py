@@ -2,8 +2,8 @@
 
 Same protocol as the reference: part clouds in their own PCA frames, ``q_i -> q_j`` registered
 with the 24 starts ``(S, 0)``, an edge where the best CD <= ``equiv_cd``, groups = connected
-components. Two exact savings: each part's KD-tree is built once (not once per ICP
-iteration), and a pair whose parts are already connected through other edges is skipped, since
+components. Two exact savings: each part's KD-tree and Delaunay graph are built once (not a
+tree once per ICP iteration), and a pair whose parts are already connected through other edges is skipped, since
 its edge could not change the components. A third saving is a proven size bound: for any
 rigid motion, the CD has the lower bound of :func:`cd_lower_bound` (Minkowski's inequality on
 projections onto the thin principal subspaces, with Ky Fan's bound on projected variance),
@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from aw.pose import cube_rotations, pca_frame
-from aw_eval.icp import ICPProblem, build_tree
+from aw_eval.icp import ICPProblem, build_tree, graph_for
 from aw_eval.settings import ProtocolSettings
 
 __all__ = ["equivalence_groups", "pair_cd", "cd_lower_bound", "shape_bounds"]
@@ -31,13 +31,15 @@ def _frames(clouds: np.ndarray, divisor: float) -> list[np.ndarray]:
 
 
 def pair_cd(q_i: np.ndarray, q_j: np.ndarray, settings: ProtocolSettings, tree_i=None, tree_j=None,
-            decide: bool = False) -> float:
+            decide: bool = False, graph_i=None, graph_j=None) -> float:
     """Best CD of ``q_i -> q_j`` (both in their PCA frames) over the 24 starts ``(S, 0)``.
 
     ``decide=True`` answers only "is it <= equiv_cd?": it returns the first objective at or
     below ``equiv_cd`` as soon as any start reaches one (the answer cannot change afterwards).
+    ``graph_i, graph_j``: Delaunay graphs of the trees' points (:func:`aw_eval.icp.graph_for`),
+    which speed the neighbour search up without changing it.
     """
-    prob = ICPProblem(q_i, q_j, tree_t=tree_j, tree_p=tree_i)
+    prob = ICPProblem(q_i, q_j, tree_t=tree_j, tree_p=tree_i, graph_t=graph_j, graph_p=graph_i)
     zero = np.zeros(3)
     best = np.inf
     stop = settings.equiv_cd if decide else None
@@ -89,6 +91,7 @@ def equivalence_groups(clouds: np.ndarray, divisor: float, settings: ProtocolSet
     settings = settings or ProtocolSettings()
     qs = _frames(np.asarray(clouds, dtype=np.float64), float(divisor))
     trees = [build_tree(q) for q in qs]
+    graphs = [graph_for(t) for t in trees]
     n = len(qs)
     bounds = [shape_bounds(q) for q in qs]
     parent = list(range(n))
@@ -106,7 +109,8 @@ def equivalence_groups(clouds: np.ndarray, divisor: float, settings: ProtocolSet
             # the margin keeps rounding in the bound from ever excluding a true edge
             if cd_lower_bound(bounds[i], bounds[j]) > settings.equiv_cd * (1 + 1e-9) + 1e-12:
                 continue
-            if pair_cd(qs[i], qs[j], settings, trees[i], trees[j], decide=True) <= settings.equiv_cd:
+            if pair_cd(qs[i], qs[j], settings, trees[i], trees[j], decide=True, graph_i=graphs[i],
+                       graph_j=graphs[j]) <= settings.equiv_cd:
                 parent[max(ri, rj)] = min(ri, rj)
     comps: dict[int, list[int]] = {}
     for i in range(n):

@@ -38,7 +38,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from aw_eval.icp import ICPProblem, build_tree
+from aw_eval.icp import ICPProblem, build_tree, graph_for
 from aw_eval.jaxcfg import jax_modules
 from aw_eval.results import Registration
 
@@ -197,7 +197,7 @@ def register_fast(geom, ctx, poses: np.ndarray, pred_parts: np.ndarray, fast: Fa
     if mm < n:
         mp = np.ascontiguousarray(pred_parts[:, :mm].reshape(-1, 3))
         mt = _medium_target(geom, ctx, mm)
-        prob = ICPProblem(mp, mt[0], tree_t=mt[1])
+        prob = ICPProblem(mp, mt[0], tree_t=mt[1], graph_t=mt[2])
         med = [prob.run(c_r[k], c_t[k], min(fast.medium_iters, st.max_iters), st.tol) for k in chosen]
         objs = np.array([m.objective for m in med])
         best_k = min(range(len(chosen)), key=lambda i: (objs[i], uniq[chosen[i]]))
@@ -205,7 +205,7 @@ def register_fast(geom, ctx, poses: np.ndarray, pred_parts: np.ndarray, fast: Fa
     else:
         best_k = 0
         r_s, t_s = c_r[chosen[0]], c_t[chosen[0]]
-    full = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t).run(r_s, t_s, min(fast.full_iters, st.max_iters), st.tol)
+    full = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, graph_t=ctx.graph_t).run(r_s, t_s, min(fast.full_iters, st.max_iters), st.tol)
     return Registration(full.objective, full.rotation, full.translation, int(uniq[chosen[best_k]]), None)
 
 
@@ -213,7 +213,8 @@ def _medium_target(geom, ctx, mm: int):
     key = ("medium_target", mm)
     if key not in geom._derived:
         pts = np.ascontiguousarray(ctx.target_parts[:, :mm].reshape(-1, 3))
-        geom._derived[key] = (pts, build_tree(pts))
+        tree = build_tree(pts)
+        geom._derived[key] = (pts, tree, graph_for(tree))
     return geom._derived[key]
 
 
@@ -230,7 +231,7 @@ def escalate(geom, ctx, pred_parts: np.ndarray, reg: Registration) -> Registrati
     """Refine ``reg`` at full resolution with the protocol's iteration budget; keep the better."""
     st = geom.settings
     pred = np.ascontiguousarray(pred_parts.reshape(-1, 3))
-    res = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t).run(reg.rotation, reg.translation, st.max_iters, st.tol)
+    res = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, graph_t=ctx.graph_t).run(reg.rotation, reg.translation, st.max_iters, st.tol)
     if res.objective < reg.scd:
         return Registration(res.objective, res.rotation, res.translation, reg.start_index, None)
     return reg

@@ -26,34 +26,54 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from aw_eval.delaunay import DelaunayGraph, build_graph, no_graph, walk
 from aw_eval.kdtree import STACK, KDTree, build_tree, nearest2
 
-__all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "build_tree", "compile_kernels"]
+__all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "build_tree", "graph_for", "nearest_positions", "compile_kernels"]
 
 # Safety margin of the certificate in normalized units (coordinates are O(1); rounding is ~1e-16).
 _MARGIN = 1e-10
 
 
 @njit(cache=True)
-def _certified_pass(tree, x: np.ndarray, cand: np.ndarray, xref: np.ndarray, d2: np.ndarray, fresh: bool,
+def _certified_pass(tree, graph, x: np.ndarray, cand: np.ndarray, xref: np.ndarray, slack: np.ndarray, fresh: bool,
                     stack: np.ndarray, bounds: np.ndarray) -> int:
     """Update ``cand (k,)`` (tree positions) to the exact nearest neighbours of ``x (k, 3)``;
-    returns the number of points searched. ``xref (k, 3)``, ``d2 (k,)``: certificate state."""
+    returns the number of points searched. Certificate state: ``xref (k, 3)`` where each point
+    was last searched, ``slack (k, 2)`` the second-nearest squared distance there (the ball
+    certificate) and its Voronoi margin (graph searches only; see :mod:`aw_eval.delaunay`).
+    ``graph``: Delaunay graph of the tree's points in tree order (empty: KD-tree searches)."""
     pts = tree[0]
+    use_graph = graph[0].shape[0] > 0
     searched = 0
+    prev = -1
     for i in range(x.shape[0]):
         x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
+        j = prev  # queries come in tree order: the previous answer is close by
         if not fresh:
             j = cand[i]
-            a, b, c = x0 - pts[j, 0], x1 - pts[j, 1], x2 - pts[j, 2]
             e, f, g = x0 - xref[i, 0], x1 - xref[i, 1], x2 - xref[i, 2]
-            if np.sqrt(a * a + b * b + c * c) + np.sqrt(e * e + f * f + g * g) + _MARGIN < np.sqrt(d2[i]):
+            moved = np.sqrt(e * e + f * f + g * g)
+            if use_graph and moved + _MARGIN < slack[i, 1]:
                 continue
-            j, _, dd2 = nearest2(tree, x0, x1, x2, j, stack, bounds)
+            a, b, c = x0 - pts[j, 0], x1 - pts[j, 1], x2 - pts[j, 2]
+            if np.sqrt(a * a + b * b + c * c) + moved + _MARGIN < np.sqrt(slack[i, 0]):
+                continue
+        if use_graph:
+            if j < 0:  # the first query of a cold pass: its walk then only computes the margin
+                j = nearest2(tree, x0, x1, x2, -1, stack, bounds)[0]
+            elif prev >= 0 and prev != j:
+                # the previous query (a spatial neighbour in tree order) has already walked this
+                # iteration's motion: start from its answer when it is nearer
+                a, b, c = x0 - pts[j, 0], x1 - pts[j, 1], x2 - pts[j, 2]
+                e, f, g = x0 - pts[prev, 0], x1 - pts[prev, 1], x2 - pts[prev, 2]
+                if e * e + f * f + g * g < a * a + b * b + c * c:
+                    j = prev
+            j, _, slack[i, 0], slack[i, 1] = walk(pts, graph, x0, x1, x2, j)
         else:
-            j, _, dd2 = nearest2(tree, x0, x1, x2, -1, stack, bounds)
+            j, _, slack[i, 0] = nearest2(tree, x0, x1, x2, j, stack, bounds)
+        prev = j
         cand[i] = j
-        d2[i] = dd2
         xref[i, 0], xref[i, 1], xref[i, 2] = x0, x1, x2
         searched += 1
     return searched
@@ -79,13 +99,13 @@ class CertifiedNN:
         if fresh:
             self.cand = np.zeros(len(x), np.int64)
             self.xref = np.zeros((len(x), 3))
-            self.d2 = np.zeros(len(x))
-        self.n_searched += _certified_pass(tuple(self.tree), x, self.cand, self.xref, self.d2, fresh, self._stack, self._bounds)
+            self.d2 = np.zeros((len(x), 2))
+        self.n_searched += _certified_pass(tuple(self.tree), tuple(no_graph()), x, self.cand, self.xref, self.d2, fresh, self._stack, self._bounds)
         return self.tree.index[self.cand]
 
 
 @njit(cache=True)
-def _evaluate(p, t, tree_t, tree_p, r, tr, fc, fx, fd, bc, bx, bd, fresh, xs, ys, stack, bounds):
+def _evaluate(p, t, tree_t, tree_p, gt, gp, r, tr, fc, fx, fd, bc, bx, bd, fresh, xs, ys, stack, bounds):
     """Objective at ``(r, tr)`` and neighbours of both directions (tree positions into ``fc``,
     ``bc``); returns ``(objective, searched)``. ``p (n, 3)``, ``t (m, 3)`` in tree order."""
     n, m = p.shape[0], t.shape[0]
@@ -96,8 +116,8 @@ def _evaluate(p, t, tree_t, tree_p, r, tr, fc, fx, fd, bc, bx, bd, fresh, xs, ys
         a, b, c = t[i, 0] - tr[0], t[i, 1] - tr[1], t[i, 2] - tr[2]
         for k in range(3):  # R^T (T - t)
             ys[i, k] = r[0, k] * a + r[1, k] * b + r[2, k] * c
-    searched = _certified_pass(tree_t, xs, fc, fx, fd, fresh, stack, bounds)
-    searched += _certified_pass(tree_p, ys, bc, bx, bd, fresh, stack, bounds)
+    searched = _certified_pass(tree_t, gt, xs, fc, fx, fd, fresh, stack, bounds)
+    searched += _certified_pass(tree_p, gp, ys, bc, bx, bd, fresh, stack, bounds)
     sf = 0.0
     for i in range(n):
         j = fc[i]
@@ -143,19 +163,19 @@ def _kabsch_pairs(p, t, fc, bc):
 
 
 @njit(cache=True)
-def _icp(p, t, tree_t, tree_p, r0, t0, max_iters, tol, stop_at):
+def _icp(p, t, tree_t, tree_p, gt, gp, r0, t0, max_iters, tol, stop_at):
     n, m = p.shape[0], t.shape[0]
     fc = np.zeros(n, np.int64)
     bc = np.zeros(m, np.int64)
     fx = np.zeros((n, 3))
     bx = np.zeros((m, 3))
-    fd = np.zeros(n)
-    bd = np.zeros(m)
+    fd = np.zeros((n, 2))
+    bd = np.zeros((m, 2))
     xs = np.empty((n, 3))
     ys = np.empty((m, 3))
     stack = np.empty(STACK, np.int64)
     bounds = np.empty(STACK)
-    obj, searched = _evaluate(p, t, tree_t, tree_p, r0, t0, fc, fx, fd, bc, bx, bd, True, xs, ys, stack, bounds)
+    obj, searched = _evaluate(p, t, tree_t, tree_p, gt, gp, r0, t0, fc, fx, fd, bc, bx, bd, True, xs, ys, stack, bounds)
     best, best_r, best_t = obj, r0.copy(), t0.copy()
     prev = obj
     it = 0
@@ -164,7 +184,7 @@ def _icp(p, t, tree_t, tree_p, r0, t0, max_iters, tol, stop_at):
     while it < max_iters:
         it += 1
         r, tr = _kabsch_pairs(p, t, fc, bc)
-        new, s = _evaluate(p, t, tree_t, tree_p, r, tr, fc, fx, fd, bc, bx, bd, False, xs, ys, stack, bounds)
+        new, s = _evaluate(p, t, tree_t, tree_p, gt, gp, r, tr, fc, fx, fd, bc, bx, bd, False, xs, ys, stack, bounds)
         searched += s
         if new < best:
             best, best_r, best_t = new, r, tr
@@ -174,6 +194,23 @@ def _icp(p, t, tree_t, tree_p, r0, t0, max_iters, tol, stop_at):
             break
         prev = new
     return best, best_r, best_t, it, searched
+
+
+@njit(cache=True)
+def _nearest_positions(tree, graph, x):
+    k = x.shape[0]
+    cand = np.empty(k, np.int64)
+    _certified_pass(tree, graph, x, cand, np.empty((k, 3)), np.empty((k, 2)), True, np.empty(STACK, np.int64),
+                    np.empty(STACK))
+    return cand
+
+
+def nearest_positions(tree: KDTree, graph: DelaunayGraph | None, x: np.ndarray) -> np.ndarray:
+    """Exact nearest neighbours (tree positions ``(k,)``) of ``x (k, 3)``: Delaunay walks, each from
+    the previous query's answer (neighbours in space when ``x`` is in a spatially coherent order),
+    or KD-tree searches where there is no graph."""
+    x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, 3)
+    return _nearest_positions(tuple(tree), tuple(graph or no_graph()), x)
 
 
 @dataclass
@@ -193,12 +230,15 @@ class ICPProblem:
     (it never changes a result).
     """
 
-    def __init__(self, p: np.ndarray, t_pts: np.ndarray, tree_t: KDTree | None = None, tree_p: KDTree | None = None):
+    def __init__(self, p: np.ndarray, t_pts: np.ndarray, tree_t: KDTree | None = None, tree_p: KDTree | None = None,
+                 graph_t: DelaunayGraph | None = None, graph_p: DelaunayGraph | None = None):
         self.tree_t = build_tree(t_pts) if tree_t is None else tree_t
         self.tree_p = build_tree(p) if tree_p is None else tree_p
         # the kernels work in tree order; sums over all points do not depend on the order
         self._p = self.tree_p.points
         self._t = self.tree_t.points
+        self._gt = tuple(graph_t or no_graph())
+        self._gp = tuple(graph_p or no_graph())
 
     def run(self, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float, stop_at: float | None = None) -> ICPResult:
         """The protocol's ICP from ``(r0, t0)``; returns the best state visited.
@@ -209,9 +249,14 @@ class ICPProblem:
         r0 = np.ascontiguousarray(r0, dtype=np.float64)
         t0 = np.ascontiguousarray(t0, dtype=np.float64)
         stop = -np.inf if stop_at is None else float(stop_at)
-        obj, r, t, it, searched = _icp(self._p, self._t, tuple(self.tree_t), tuple(self.tree_p), r0, t0,
+        obj, r, t, it, searched = _icp(self._p, self._t, tuple(self.tree_t), tuple(self.tree_p), self._gt, self._gp, r0, t0,
                                        int(max_iters), float(tol), stop)
         return ICPResult(float(obj), r, t, int(it), int(searched))
+
+
+def graph_for(tree: KDTree) -> DelaunayGraph | None:
+    """Delaunay graph of a tree's points in tree order (``None`` where Qhull cannot build one)."""
+    return build_graph(tree.points)
 
 
 _COMPILED = False
@@ -232,5 +277,8 @@ def compile_kernels() -> None:
     ta.query(b)
     chamfer_tree(a, tuple(ta), b, tuple(tb))
     CertifiedNN(a, ta).query(b)
+    nearest_positions(ta, graph_for(ta), b)
+    nearest_positions(ta, None, b)
     ICPProblem(a, b, tree_t=tb, tree_p=ta).run(np.eye(3), np.zeros(3), 3, 1e-9, stop_at=1e-4)
+    ICPProblem(a, b, tree_t=tb, tree_p=ta, graph_t=graph_for(tb), graph_p=graph_for(ta)).run(np.eye(3), np.zeros(3), 3, 1e-9)
     _COMPILED = True

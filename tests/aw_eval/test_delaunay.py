@@ -1,0 +1,128 @@
+"""Exact nearest neighbours by Delaunay walks, their Voronoi-margin certificate, and ICP with them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numba import njit
+
+from aw_eval.delaunay import build_graph, walk
+from aw_eval.fixtures import make_points_geometry, trajectory_checkpoints
+from aw_eval.icp import ICPProblem, build_tree, graph_for
+from aw_eval.reference import icp as ref_icp
+
+
+@njit
+def _walk_all(pts, graph, x, start):
+    out = np.empty(len(x), np.int64)
+    margin = np.empty(len(x))
+    for i in range(len(x)):
+        out[i], _, _, margin[i] = walk(pts, graph, x[i, 0], x[i, 1], x[i, 2], start[i])
+    return out, margin
+
+
+def _brute(x, ref):
+    return ((x[:, None, :] - ref[None, :, :]) ** 2).sum(-1).argmin(1)
+
+
+def _surface_cloud(rng, n=900):
+    """Points on the faces of two boxes: flat, nearly coplanar sheets, as sampled parts are."""
+    out = []
+    for centre, size in (((0, 0, 0), (1.0, 0.6, 0.1)), ((0.8, 0.2, 0.5), (0.2, 0.2, 0.9))):
+        u = rng.random((n // 2, 3)) - 0.5
+        face = rng.integers(0, 3, n // 2)
+        u[np.arange(n // 2), face] = np.sign(u[np.arange(n // 2), face]) * 0.5
+        out.append(np.asarray(centre) + u * np.asarray(size))
+    return np.concatenate(out)
+
+
+@pytest.mark.parametrize("cloud", ["gaussian", "surfaces"])
+def test_walk_from_any_start_finds_the_nearest_point(cloud):
+    rng = np.random.default_rng(0)
+    pts = rng.normal(size=(700, 3)) if cloud == "gaussian" else _surface_cloud(rng)
+    graph = build_graph(pts)
+    assert graph is not None
+    x = np.concatenate([rng.normal(size=(300, 3)) * 0.5,  # inside and near
+                        rng.normal(size=(200, 3)) * 6.0,  # far: wide, almost tied balls
+                        pts[:100] + rng.normal(size=(100, 3)) * 1e-3])  # on the cloud
+    start = rng.integers(0, len(pts), len(x))
+    got, margin = _walk_all(pts, tuple(graph), x, start)
+    assert np.array_equal(got, _brute(x, pts))
+    assert np.all(margin >= 0)
+
+
+def test_voronoi_margin_certifies_the_nearest_point():
+    """Any move shorter than the margin keeps the nearest point; far queries get real slack."""
+    rng = np.random.default_rng(1)
+    pts = _surface_cloud(rng)
+    graph = tuple(build_graph(pts))
+    x = np.concatenate([rng.normal(size=(300, 3)) * 0.4, rng.normal(size=(300, 3)) * 5.0])
+    j, margin = _walk_all(pts, graph, x, np.zeros(len(x), np.int64))
+    for scale in (0.999, 0.5, 0.1):
+        d = rng.normal(size=x.shape)
+        d *= (scale * margin / np.linalg.norm(d, axis=1))[:, None]
+        assert np.array_equal(_brute(x + d, pts), j)
+    # the ball certificate's slack (half the gap to the second nearest) is far smaller out there
+    dist = np.sqrt(np.sort(((x[300:, None, :] - pts[None]) ** 2).sum(-1), axis=1)[:, :2])
+    assert np.median(margin[300:]) > 5 * np.median((dist[:, 1] - dist[:, 0]) / 2)
+
+
+@pytest.mark.parametrize("case", ["few", "flat", "duplicate"])
+def test_build_graph_declines_what_a_walk_cannot_use(case):
+    rng = np.random.default_rng(2)
+    if case == "few":
+        pts = rng.normal(size=(4, 3))
+    elif case == "flat":
+        pts = np.c_[rng.normal(size=(50, 2)), np.zeros(50)]
+    else:
+        pts = rng.normal(size=(50, 3))
+        pts[7] = pts[3]
+    assert build_graph(pts) is None
+
+
+def test_icp_with_graphs_equals_icp_with_trees_and_the_reference():
+    rng = np.random.default_rng(3)
+    t_pts = _surface_cloud(rng, 600)
+    p = t_pts[rng.permutation(600)[:500]] + rng.normal(size=(500, 3)) * 0.01
+    tree_t, tree_p = build_tree(t_pts), build_tree(p)
+    plain = ICPProblem(p, t_pts, tree_t=tree_t, tree_p=tree_p)
+    walked = ICPProblem(p, t_pts, tree_t=tree_t, tree_p=tree_p, graph_t=graph_for(tree_t), graph_p=graph_for(tree_p))
+    for ang, shift in ((0.3, 0.05), (2.5, 3.0), (np.pi, 0.0)):  # near, far and flipped starts
+        r0 = np.array([[np.cos(ang), -np.sin(ang), 0], [np.sin(ang), np.cos(ang), 0], [0, 0, 1.0]])
+        t0 = np.array([shift, -0.5 * shift, 0.1])
+        a, b = plain.run(r0, t0, 100, 1e-9), walked.run(r0, t0, 100, 1e-9)
+        assert a.objective == b.objective and a.iterations == b.iterations
+        assert np.array_equal(a.rotation, b.rotation) and np.array_equal(a.translation, b.translation)
+        want = ref_icp(p, t_pts, r0, t0, 100, 1e-9)
+        assert abs(b.objective - want[0]) <= 1e-12 * max(want[0], 1.0)
+        assert b.searched <= a.searched  # the Voronoi margin is never the weaker certificate here
+
+
+def test_icp_falls_back_to_trees_without_a_graph():
+    """A flat target has no 3-D Delaunay graph: the search falls back to the KD-tree."""
+    rng = np.random.default_rng(4)
+    t_pts = np.c_[rng.random((200, 2)), np.zeros(200)]
+    p = t_pts + rng.normal(size=(200, 3)) * 0.01
+    tree_t = build_tree(t_pts)
+    assert graph_for(tree_t) is None
+    got = ICPProblem(p, t_pts, tree_t=tree_t, graph_t=graph_for(tree_t)).run(np.eye(3), np.zeros(3), 50, 1e-9)
+    want = ref_icp(p, t_pts, np.eye(3), np.zeros(3), 50, 1e-9)
+    assert abs(got.objective - want[0]) <= 1e-12 * max(want[0], 1.0)
+
+
+def test_exact_registration_of_trajectory_checkpoints_is_unchanged_by_graphs():
+    """Every start of a few synthetic-trajectory checkpoints, with and without graphs."""
+    from aw_eval.engine import starts_for, task_context
+    from aw_eval.settings import ProtocolSettings
+
+    geom, obj = make_points_geometry(3, 120, seed=3, settings=ProtocolSettings(n_fps=120, n_surface=1024))
+    ctx = task_context(geom)
+    for poses in trajectory_checkpoints(obj, 12, seed=5)[::4]:
+        pred = np.ascontiguousarray(geom.pred_parts(poses).reshape(-1, 3))
+        r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor)
+        tree_p = build_tree(pred)
+        plain = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p)
+        walked = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p, graph_t=ctx.graph_t, graph_p=graph_for(tree_p))
+        for k in range(len(r0)):
+            a, b = plain.run(r0[k], t0[k], 100, 1e-9), walked.run(r0[k], t0[k], 100, 1e-9)
+            assert a.objective == b.objective and np.array_equal(a.rotation, b.rotation)
