@@ -5,7 +5,8 @@ leaf the ball's shell cuts (about 1 us per query here), and the nearest neighbou
 query changes with every move, so no certificate survives. A walk on the Delaunay graph pays
 only for the distance it travels.
 
-Two classical facts make the walk exact (general position, i.e. up to exact distance ties):
+Three classical facts make the walk exact and its certificates free (general position, i.e. up
+to exact distance ties):
 
 - if a point ``a`` of the cloud is not the nearest to ``x``, some Delaunay neighbour of ``a`` is
   strictly nearer (the segment from ``a`` to ``x`` leaves the Voronoi cell of ``a`` through a face
@@ -26,7 +27,8 @@ per task, a prediction per checkpoint in its own frame). :func:`build_graph` ret
 where Qhull cannot triangulate every point (fewer than 5 points, a flat or a degenerate cloud,
 duplicate points); callers then keep the KD-tree search.
 
-Arrays: ``points (n, 3)`` float64; the graph in CSR form ``indptr (n + 1,)``, ``indices (nnz,)``.
+Arrays: ``points (n, 3)`` float64; the graph in CSR form ``indptr (n + 1,)``, ``indices (nnz,)``,
+with per-edge ``coords (3, nnz)`` and ``half_inv (nnz,)`` (see :class:`DelaunayGraph`).
 """
 
 from __future__ import annotations
@@ -81,8 +83,9 @@ def build_graph(points: np.ndarray) -> DelaunayGraph | None:
 def walk(pts: np.ndarray, graph, x0: float, x1: float, x2: float, j: int):
     """Steepest descent from row ``j`` to the nearest point of ``x = (x0, x1, x2)``: ``(row, d1, d2,
     margin)``, the squared distances of the nearest and the second nearest (a Delaunay neighbour
-    of the nearest), and the distance from ``x`` to the nearest face of its Voronoi cell (the bisector planes with its Delaunay neighbours): ``x`` can move by
-    less than ``margin`` and keep its nearest neighbour. ``graph``: a :class:`DelaunayGraph` of
+    of the nearest), and the distance from ``x`` to the nearest face of its Voronoi cell (the
+    bisector planes with its Delaunay neighbours): ``x`` can move by less than ``margin`` and
+    keep its nearest neighbour. ``graph``: a :class:`DelaunayGraph` of
     ``pts (n, 3)`` as a tuple."""
     indptr, indices, coords, half_inv = graph
     cx, cy, cz = coords[0], coords[1], coords[2]

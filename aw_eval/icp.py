@@ -3,16 +3,20 @@
 The iteration is the protocol's (see :func:`aw_eval.reference.icp`) and gives the same numbers
 up to floating-point summation order; only the nearest-neighbour search differs:
 
-- the target tree is built once per task, the prediction tree once per checkpoint: the
-  backward query maps the target points into the prediction's frame (``R^T (T - t)``) instead
-  of building a tree of the moved prediction in every iteration;
+- the target's search structures are built once per task, the prediction's once per
+  checkpoint: the backward query maps the target points into the prediction's frame
+  (``R^T (T - t)``) instead of building a tree of the moved prediction in every iteration;
 - consecutive iterations move little, so most neighbours are *certified* unchanged without a
-  search: if a query point was last searched exactly at ``x_ref``, where its nearest neighbour
-  was ``j`` and its second-nearest distance ``d2``, then at a new position ``x`` every other
-  reference point is at least ``d2 - |x - x_ref|`` away, so ``j`` is still the nearest whenever
-  ``|x - y_j| < d2 - |x - x_ref|``. Only the points that fail this test are searched again,
-  warm-started from ``j`` (:func:`aw_eval.kdtree.nearest2`). The result is the exact nearest
-  neighbour (up to exact distance ties), not an approximation;
+  search. Two certificates, either suffices: the ball one (a point last searched at ``x_ref``,
+  nearest ``j``, second-nearest distance ``d2``, keeps ``j`` at ``x`` while ``|x - y_j| + |x -
+  x_ref| < d2``) and, where the reference cloud has a Delaunay graph, the Voronoi one (it keeps
+  ``j`` while ``|x - x_ref|`` is below the distance from ``x_ref`` to the nearest face of ``j``'s
+  Voronoi cell; see :mod:`aw_eval.delaunay`), which stays wide far from the cloud where the
+  ball one collapses;
+- a point that fails both is searched again: by a walk on the Delaunay graph from its previous
+  neighbour (or from the previous query's answer, when nearer), else by a warm-started KD-tree
+  search (:func:`aw_eval.kdtree.nearest2`) where Qhull gave no graph. Either way the result is
+  the exact nearest neighbour (up to exact distance ties), not an approximation;
 - one compiled pass per direction and iteration does the transform, the certificate or search,
   the objective and the pairs of the next Kabsch fit (no NumPy temporaries).
 
