@@ -236,8 +236,16 @@ def main(argv=None) -> int:
     ap.add_argument("--agree-log", type=Path, default=None, help="JSON lines of every chunk's results, as they finish")
     ap.add_argument("--agree-workers", type=int, default=1,
                     help="processes for the agreement run (agreement does not depend on it; timings are worker seconds)")
+    ap.add_argument("--exact-margin", type=float, default=None,
+                    help="run fast with FastSettings(exact_margin=M), the opt-in exact fallback near thresholds")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "bench_eval.json"))
     args = ap.parse_args(argv)
+    if args.exact_margin is not None:
+        import dataclasses
+
+        from aw_eval import fast
+
+        fast.FAST = dataclasses.replace(fast.FAST, exact_margin=args.exact_margin)
     rows: list = []
     result = {"command": " ".join(["benchmarks/bench_eval.py"] + (argv if argv is not None else sys.argv[1:])),
               "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
