@@ -45,7 +45,8 @@ def _certified_pass(tree, graph, x: np.ndarray, cand: np.ndarray, xref: np.ndarr
     """Update ``cand (k,)`` (tree positions) to the exact nearest neighbours of ``x (k, 3)``;
     returns the number of points searched. Certificate state: ``xref (k, 3)`` where each point
     was last searched, ``slack (k, 2)`` the second-nearest squared distance there (the ball
-    certificate) and its Voronoi margin (graph searches only; see :mod:`aw_eval.delaunay`).
+    certificate) and the square of its Voronoi margin less the safety margin (graph searches
+    only, -1 where none is left; see :mod:`aw_eval.delaunay`).
     ``graph``: Delaunay graph of the tree's points in tree order (empty: KD-tree searches)."""
     pts = tree[0]
     use_graph = graph[0].shape[0] > 0
@@ -57,11 +58,11 @@ def _certified_pass(tree, graph, x: np.ndarray, cand: np.ndarray, xref: np.ndarr
         if not fresh:
             j = cand[i]
             e, f, g = x0 - xref[i, 0], x1 - xref[i, 1], x2 - xref[i, 2]
-            moved = np.sqrt(e * e + f * f + g * g)
-            if use_graph and moved + _MARGIN < slack[i, 1]:
+            moved2 = e * e + f * f + g * g
+            if use_graph and moved2 < slack[i, 1]:  # moved + _MARGIN < margin, without a root
                 continue
             a, b, c = x0 - pts[j, 0], x1 - pts[j, 1], x2 - pts[j, 2]
-            if np.sqrt(a * a + b * b + c * c) + moved + _MARGIN < np.sqrt(slack[i, 0]):
+            if np.sqrt(a * a + b * b + c * c) + np.sqrt(moved2) + _MARGIN < np.sqrt(slack[i, 0]):
                 continue
         if use_graph:
             if j < 0:  # the first query of a cold pass: its walk then only computes the margin
@@ -73,7 +74,9 @@ def _certified_pass(tree, graph, x: np.ndarray, cand: np.ndarray, xref: np.ndarr
                 e, f, g = x0 - pts[prev, 0], x1 - pts[prev, 1], x2 - pts[prev, 2]
                 if e * e + f * f + g * g < a * a + b * b + c * c:
                     j = prev
-            j, _, slack[i, 0], slack[i, 1] = walk(pts, graph, x0, x1, x2, j)
+            j, _, slack[i, 0], margin = walk(pts, graph, x0, x1, x2, j)
+            margin -= _MARGIN
+            slack[i, 1] = margin * margin if margin > 0.0 else -1.0
         else:
             j, _, slack[i, 0] = nearest2(tree, x0, x1, x2, j, stack, bounds)
         prev = j
@@ -138,30 +141,52 @@ def _evaluate(p, t, tree_t, tree_p, gt, gp, r, tr, fc, fx, fd, bc, bx, bd, fresh
 @njit(cache=True)
 def _kabsch_pairs(p, t, fc, bc):
     """Proper Kabsch fit of ``p`` onto ``t`` on the forward pairs ``(p_i, t_fc[i])`` and the backward
-    pairs ``(p_bc[k], t_k)``, two-pass like :func:`aw_eval.reference.kabsch`."""
+    pairs ``(p_bc[k], t_k)``, two-pass like :func:`aw_eval.reference.kabsch`: every sum runs over
+    the pairs in that order (forward, then backward), in scalar accumulators (no temporaries)."""
     n, m = p.shape[0], t.shape[0]
-    src = np.concatenate((np.arange(n), bc))  # pair k: p[src[k]] -> t[dst[k]]
-    dst = np.concatenate((fc, np.arange(m)))
-    cs = np.zeros(3)
-    cd = np.zeros(3)
-    for k in range(n + m):
-        for a in range(3):
-            cs[a] += p[src[k], a]
-            cd[a] += t[dst[k], a]
-    cs /= n + m
-    cd /= n + m
-    h = np.zeros((3, 3))
-    for k in range(n + m):
-        i, j = src[k], dst[k]
-        for a in range(3):
-            s = p[i, a] - cs[a]
-            for b in range(3):
-                h[a, b] += s * (t[j, b] - cd[b])
+    s0 = s1 = s2 = d0 = d1 = d2 = 0.0
+    for i in range(n):
+        j = fc[i]
+        s0 += p[i, 0]
+        s1 += p[i, 1]
+        s2 += p[i, 2]
+        d0 += t[j, 0]
+        d1 += t[j, 1]
+        d2 += t[j, 2]
+    for j in range(m):
+        i = bc[j]
+        s0 += p[i, 0]
+        s1 += p[i, 1]
+        s2 += p[i, 2]
+        d0 += t[j, 0]
+        d1 += t[j, 1]
+        d2 += t[j, 2]
+    k = n + m
+    cs = np.array([s0 / k, s1 / k, s2 / k])
+    cd = np.array([d0 / k, d1 / k, d2 / k])
+    h00 = h01 = h02 = h10 = h11 = h12 = h20 = h21 = h22 = 0.0
+    for q in range(k):
+        if q < n:
+            i, j = q, fc[q]
+        else:
+            i, j = bc[q - n], q - n
+        a0, a1, a2 = p[i, 0] - cs[0], p[i, 1] - cs[1], p[i, 2] - cs[2]
+        b0, b1, b2 = t[j, 0] - cd[0], t[j, 1] - cd[1], t[j, 2] - cd[2]
+        h00 += a0 * b0
+        h01 += a0 * b1
+        h02 += a0 * b2
+        h10 += a1 * b0
+        h11 += a1 * b1
+        h12 += a1 * b2
+        h20 += a2 * b0
+        h21 += a2 * b1
+        h22 += a2 * b2
+    h = np.array([[h00, h01, h02], [h10, h11, h12], [h20, h21, h22]])
     u, _, vt = np.linalg.svd(h)
     v = vt.T
     d = 1.0 if np.linalg.det(v @ u.T) >= 0 else -1.0
-    for k in range(3):
-        v[k, 2] *= d
+    for c in range(3):
+        v[c, 2] *= d
     r = v @ u.T
     return r, cd - r @ cs
 
