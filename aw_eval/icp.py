@@ -145,6 +145,7 @@ def _kabsch_pairs(p, t, fc, bc):
     the pairs in that order (forward, then backward), in scalar accumulators (no temporaries)."""
     n, m = p.shape[0], t.shape[0]
     s0 = s1 = s2 = d0 = d1 = d2 = 0.0
+    # two loops, not one with a branch per pair: that branch made an iteration's per-point cost 2-3x
     for i in range(n):
         j = fc[i]
         s0 += p[i, 0]
@@ -298,13 +299,10 @@ def compile_kernels() -> None:
     global _COMPILED
     if _COMPILED:
         return
-    from aw_eval.kdtree import chamfer_tree
-
     rng = np.random.default_rng(0)
     a, b = rng.normal(size=(40, 3)), rng.normal(size=(30, 3))
     ta, tb = build_tree(a), build_tree(b)
     ta.query(b)
-    chamfer_tree(a, tuple(ta), b, tuple(tb))
     CertifiedNN(a, ta).query(b)
     nearest_positions(ta, graph_for(ta), b)
     nearest_positions(ta, None, b)

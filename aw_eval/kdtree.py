@@ -27,7 +27,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-__all__ = ["KDTree", "build_tree", "nearest2", "nn_indices", "chamfer_tree"]
+__all__ = ["KDTree", "build_tree", "nearest2", "nn_indices"]
 
 LEAF_SIZE = 8
 STACK = 128  # pending subtrees: at most one per level of a median-split tree
@@ -242,12 +242,3 @@ def nn_indices(tree, x: np.ndarray):
         out_d[i] = d1
         out_j[i] = j
     return out_d, out_j
-
-
-@njit(cache=True)
-def chamfer_tree(x: np.ndarray, tree_x, y: np.ndarray, tree_y) -> float:
-    """Squared bidirectional Chamfer distance of ``x (n, 3)`` and ``y (m, 3)`` given their trees,
-    squared distances recomputed from coordinates (mean forward + mean backward)."""
-    dx, _ = nn_indices(tree_y, x)
-    dy, _ = nn_indices(tree_x, y)
-    return dx.mean() + dy.mean()
