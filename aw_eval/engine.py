@@ -74,16 +74,11 @@ def starts_for(pred: np.ndarray, target_frame, poses: np.ndarray, target_poses: 
     """
     mu_p, a_p = pca_frame(pred)
     mu_t, a_t = target_frame
-    rs, ts = [], []
-    for s in _CUBE:
-        r0 = a_t @ s @ a_p.T
-        rs.append(r0)
-        ts.append(mu_t - r0 @ mu_p)
-    for pose, tgt in zip(poses, target_poses):
-        r0 = quat_to_matrix(tgt[3:]) @ quat_to_matrix(pose[3:]).T
-        rs.append(r0)
-        ts.append((tgt[:3] - r0 @ pose[:3]) / divisor)
-    return np.stack(rs), np.stack(ts)
+    r_pca = a_t @ _CUBE @ a_p.T  # (24, 3, 3)
+    t_pca = mu_t - r_pca @ mu_p
+    r_part = quat_to_matrix(target_poses[:, 3:]) @ np.swapaxes(quat_to_matrix(poses[:, 3:]), 1, 2)  # (P, 3, 3)
+    t_part = (target_poses[:, :3] - (r_part @ poses[:, :3, None])[:, :, 0]) / divisor
+    return np.concatenate([r_pca, r_part]), np.concatenate([t_pca, t_part])
 
 
 def register_points(prob: ICPProblem, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float) -> Registration:

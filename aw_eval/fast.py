@@ -1,11 +1,11 @@
-"""``fast`` registration: all starts on a coarse subset in JAX, the best few refined.
+"""``fast`` registration: all starts on a coarse subset, the best few refined.
 
 Contract (measured, not guaranteed; see ``docs/performance.md``): same starts and the same ICP
 rule as ``exact``, but
 
 1. **coarse**: every start runs the protocol's ICP rule (at most ``coarse_iters`` iterations,
    tolerance ``tol``) on the first ``coarse`` farthest-point samples of every part (a prefix of an FPS order is itself an FPS
-   subset), all starts batched in one jitted JAX call with brute-force neighbours;
+   subset), with brute-force neighbours in one compiled call (:func:`coarse_icp`);
 2. **medium**: the ``keep`` best *distinct* coarse results (rotations more than ``distinct_deg``
    degrees or translations more than ``distinct_t`` apart) are refined with the same ICP (at
    most ``medium_iters`` iterations) on the first ``medium`` samples per part (KD-trees);
@@ -34,12 +34,11 @@ Near-identical starts (same-ID starts of parts already placed consistently) are 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
+from numba import njit
 
-from aw_eval.icp import ICPProblem, build_tree, graph_for
-from aw_eval.jaxcfg import jax_modules
+from aw_eval.icp import ICPProblem, build_tree, graph_for, kabsch_pairs
 from aw_eval.results import Registration
 
 __all__ = ["FastSettings", "register_fast", "coarse_icp"]
@@ -63,91 +62,83 @@ class FastSettings:
 FAST = FastSettings()
 
 
-@lru_cache(maxsize=None)
-def _coarse_fn(max_iters: int):
-    jax, jnp = jax_modules()
-    big = jnp.iinfo(jnp.int32).max
+@njit(cache=True)
+def _brute_evaluate(p, t, r, tr, xs, fc, bc, bd) -> float:
+    """Objective at ``(r, tr)`` with brute-force neighbours of both directions (``fc (n,)``,
+    ``bc (m,)``; ties to the lowest index, as a KD-tree-free reading of the protocol gives).
+    ``p (n, 3)``, ``t (m, 3)``; ``xs (n, 3)`` and ``bd (m,)`` are scratch space."""
+    n, m = p.shape[0], t.shape[0]
+    for i in range(n):
+        for k in range(3):
+            xs[i, k] = r[k, 0] * p[i, 0] + r[k, 1] * p[i, 1] + r[k, 2] * p[i, 2] + tr[k]
+    for j in range(m):
+        bd[j] = np.inf
+    sf = 0.0
+    for i in range(n):
+        x0, x1, x2 = xs[i, 0], xs[i, 1], xs[i, 2]
+        best = np.inf
+        bj = 0
+        for j in range(m):
+            a, b, c = x0 - t[j, 0], x1 - t[j, 1], x2 - t[j, 2]
+            d = a * a + b * b + c * c
+            if d < best:
+                best = d
+                bj = j
+            if d < bd[j]:
+                bd[j] = d
+                bc[j] = i
+        fc[i] = bj
+        sf += best
+    sb = 0.0
+    for j in range(m):
+        sb += bd[j]
+    return sf / n + sb / m
 
-    def nn(x, t_pts, vp, vt):
-        # Per-component differences: XLA fuses these far better than a trailing size-3 reduction.
-        dx = x[:, 0, None] - t_pts[None, :, 0]
-        dy = x[:, 1, None] - t_pts[None, :, 1]
-        dz = x[:, 2, None] - t_pts[None, :, 2]
-        d = dx * dx + dy * dy + dz * dz  # (N, M)
-        d = jnp.where(vt[None, :], d, jnp.inf)
-        d = jnp.where(vp[:, None], d, jnp.inf)
-        df = jnp.min(d, axis=1)
-        db = jnp.min(d, axis=0)
-        cols = jnp.arange(d.shape[1], dtype=jnp.int32)
-        rows = jnp.arange(d.shape[0], dtype=jnp.int32)
-        f = jnp.min(jnp.where(d == df[:, None], cols[None, :], big), axis=1)
-        b = jnp.min(jnp.where(d == db[None, :], rows[:, None], big), axis=0)
-        f = jnp.where(vp, f, 0)
-        b = jnp.where(vt, b, 0)
-        nvp, nvt = jnp.sum(vp), jnp.sum(vt)
-        obj = jnp.sum(jnp.where(vp, df, 0.0)) / nvp + jnp.sum(jnp.where(vt, db, 0.0)) / nvt
-        return obj, f, b
 
-    def kabsch(p, t_pts, f, b, vp, vt):
-        src = jnp.concatenate([p, p[b]])
-        dst = jnp.concatenate([t_pts[f], t_pts])
-        w = jnp.concatenate([vp, vt]).astype(p.dtype)
-        n = jnp.sum(w)
-        cs = jnp.sum(src * w[:, None], axis=0) / n
-        cd = jnp.sum(dst * w[:, None], axis=0) / n
-        h = ((src - cs) * w[:, None]).T @ (dst - cd)
-        u, _, vt_ = jnp.linalg.svd(h)
-        d = jnp.where(jnp.linalg.det(vt_.T @ u.T) >= 0, 1.0, -1.0)
-        r = vt_.T @ jnp.diag(jnp.stack([jnp.ones_like(d), jnp.ones_like(d), d])) @ u.T
-        return r, cd - r @ cs
-
-    def one(p, t_pts, vp, vt, r0, t0, tol):
-        obj0, f0, b0 = nn(p @ r0.T + t0, t_pts, vp, vt)
-
-        def cond(s):
-            return (s[0] < max_iters) & ~s[1]
-
-        def body(s):
-            k, done, r, t, f, b, prev, bo, br, bt = s
-            r, t = kabsch(p, t_pts, f, b, vp, vt)
-            new, f, b = nn(p @ r.T + t, t_pts, vp, vt)
-            better = new < bo
-            bo = jnp.where(better, new, bo)
-            br = jnp.where(better, r, br)
-            bt = jnp.where(better, t, bt)
-            return (k + 1, prev - new < tol, r, t, f, b, new, bo, br, bt)
-
-        init = (jnp.int32(0), jnp.bool_(False), r0, t0, f0, b0, obj0, obj0, r0, t0)
-        out = jax.lax.while_loop(cond, body, init)
-        return out[7], out[8], out[9]
-
-    return jax.jit(jax.vmap(one, in_axes=(None, None, None, None, 0, 0, None)))
+@njit(cache=True)
+def _coarse_starts(p, t, r0, t0, max_iters, tol):
+    """The protocol's ICP rule from every start ``r0 (S, 3, 3)``, ``t0 (S, 3)`` on ``p (n, 3)``,
+    ``t (m, 3)`` with brute-force neighbours: best objectives ``(S,)`` and their transforms."""
+    n_starts, n, m = r0.shape[0], p.shape[0], t.shape[0]
+    xs = np.empty((n, 3))
+    fc = np.zeros(n, np.int64)
+    bc = np.zeros(m, np.int64)
+    bd = np.empty(m)
+    objs = np.empty(n_starts)
+    rs = np.empty((n_starts, 3, 3))
+    ts = np.empty((n_starts, 3))
+    for s in range(n_starts):
+        r, tr = r0[s].copy(), t0[s].copy()
+        prev = _brute_evaluate(p, t, r, tr, xs, fc, bc, bd)
+        best, best_r, best_t = prev, r, tr
+        for _ in range(max_iters):
+            r, tr = kabsch_pairs(p, t, fc, bc)
+            new = _brute_evaluate(p, t, r, tr, xs, fc, bc, bd)
+            if new < best:
+                best, best_r, best_t = new, r, tr
+            if prev - new < tol:
+                break
+            prev = new
+        objs[s] = best
+        rs[s] = best_r
+        ts[s] = best_t
+    return objs, rs, ts
 
 
 def coarse_icp(pred_parts: np.ndarray, target_parts: np.ndarray, r0: np.ndarray, t0: np.ndarray, m: int,
                max_iters: int, tol: float):
-    """Protocol ICP of every start on the first ``m`` samples of every part (JAX, batched).
+    """Protocol ICP of every start on the first ``m`` samples of every part (compiled, brute-force
+    neighbours: at ``8 P`` points a side that beats any tree).
 
     ``pred_parts, target_parts (P, n, 3)``, ``r0 (S, 3, 3)``, ``t0 (S, 3)`` -> best objectives
-    ``(S,)``, rotations ``(S, 3, 3)``, translations ``(S, 3)``. Parts are padded to a multiple of
-    4 and starts to a multiple of 8 (padded points are masked out), so few shapes are compiled.
+    ``(S,)``, rotations ``(S, 3, 3)``, translations ``(S, 3)``.
     """
-    p, n, _ = pred_parts.shape
-    m = min(m, n)
-    pb = -(-p // 4) * 4  # parts to a multiple of 4, starts to a multiple of 8
-    sb = -(-len(r0) // 8) * 8
-    pts_p = np.zeros((pb, m, 3))
-    pts_t = np.zeros((pb, m, 3))
-    pts_p[:p] = pred_parts[:, :m]
-    pts_t[:p] = target_parts[:, :m]
-    valid = np.zeros((pb, m), dtype=bool)
-    valid[:p] = True
-    rr = np.concatenate([r0, np.repeat(r0[:1], sb - len(r0), axis=0)])
-    tt = np.concatenate([t0, np.repeat(t0[:1], sb - len(t0), axis=0)])
-    fn = _coarse_fn(int(max_iters))
-    obj, r, t = fn(pts_p.reshape(-1, 3), pts_t.reshape(-1, 3), valid.reshape(-1), valid.reshape(-1), rr, tt, float(tol))
-    k = len(r0)
-    return np.asarray(obj)[:k], np.asarray(r)[:k], np.asarray(t)[:k]
+    m = min(m, pred_parts.shape[1])
+    p = np.ascontiguousarray(pred_parts[:, :m].reshape(-1, 3), dtype=np.float64)
+    t = np.ascontiguousarray(target_parts[:, :m].reshape(-1, 3), dtype=np.float64)
+    r0 = np.ascontiguousarray(r0, dtype=np.float64)
+    t0 = np.ascontiguousarray(t0, dtype=np.float64)
+    return _coarse_starts(p, t, r0, t0, int(max_iters), float(tol))
 
 
 def _dedupe_starts(r0: np.ndarray, t0: np.ndarray, tol: float) -> np.ndarray:

@@ -33,7 +33,8 @@ from numba import njit
 from aw_eval.delaunay import DelaunayGraph, build_graph, no_graph, walk
 from aw_eval.kdtree import STACK, KDTree, build_tree, nearest2
 
-__all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "build_tree", "graph_for", "nearest_positions", "compile_kernels"]
+__all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "build_tree", "graph_for", "kabsch_pairs", "nearest_positions",
+           "compile_kernels"]
 
 # Safety margin of the certificate in normalized units (coordinates are O(1); rounding is ~1e-16).
 _MARGIN = 1e-10
@@ -139,7 +140,7 @@ def _evaluate(p, t, tree_t, tree_p, gt, gp, r, tr, fc, fx, fd, bc, bx, bd, fresh
 
 
 @njit(cache=True)
-def _kabsch_pairs(p, t, fc, bc):
+def kabsch_pairs(p, t, fc, bc):
     """Proper Kabsch fit of ``p`` onto ``t`` on the forward pairs ``(p_i, t_fc[i])`` and the backward
     pairs ``(p_bc[k], t_k)``, two-pass like :func:`aw_eval.reference.kabsch`: every sum runs over
     the pairs in that order (forward, then backward), in scalar accumulators (no temporaries)."""
@@ -213,7 +214,7 @@ def _icp(p, t, tree_t, tree_p, gt, gp, r0, t0, max_iters, tol, stop_at):
         return best, best_r, best_t, 0, searched
     while it < max_iters:
         it += 1
-        r, tr = _kabsch_pairs(p, t, fc, bc)
+        r, tr = kabsch_pairs(p, t, fc, bc)
         new, s = _evaluate(p, t, tree_t, tree_p, gt, gp, r, tr, fc, fx, fd, bc, bx, bd, False, xs, ys, stack, bounds)
         searched += s
         if new < best:
@@ -308,4 +309,7 @@ def compile_kernels() -> None:
     nearest_positions(ta, None, b)
     ICPProblem(a, b, tree_t=tb, tree_p=ta).run(np.eye(3), np.zeros(3), 3, 1e-9, stop_at=1e-4)
     ICPProblem(a, b, tree_t=tb, tree_p=ta, graph_t=graph_for(tb), graph_p=graph_for(ta)).run(np.eye(3), np.zeros(3), 3, 1e-9)
+    from aw_eval.fast import coarse_icp  # fast imports this module
+
+    coarse_icp(a.reshape(2, 20, 3), b[:20].reshape(2, 10, 3), np.eye(3)[None], np.zeros((1, 3)), 8, 3, 1e-9)
     _COMPILED = True

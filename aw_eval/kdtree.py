@@ -62,6 +62,36 @@ class KDTree(NamedTuple):
 
 
 @njit(cache=True)
+def _select(pts: np.ndarray, order: np.ndarray, dim: int, s: int, e: int, k: int) -> None:
+    """Reorder rows ``s:e`` of ``pts (n, 3)`` (and ``order`` with them) so that row ``k`` holds
+    the point of rank ``k - s`` along ``dim``, none after it smaller and none before it larger
+    (Hoare quickselect, median-of-three pivots): O(n) per level where a sort is O(n log n)."""
+    lo, hi = s, e - 1
+    while hi > lo:
+        a, b, c = pts[lo, dim], pts[(lo + hi) // 2, dim], pts[hi, dim]
+        pivot = max(min(a, b), min(max(a, b), c))
+        i, j = lo, hi
+        while i <= j:
+            while pts[i, dim] < pivot:
+                i += 1
+            while pts[j, dim] > pivot:
+                j -= 1
+            if i <= j:
+                for d in range(3):
+                    pts[i, d], pts[j, d] = pts[j, d], pts[i, d]
+                order[i], order[j] = order[j], order[i]
+                i += 1
+                j -= 1
+        # now rows lo..j <= pivot <= rows i..hi, and any row between j and i holds the pivot
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            return
+
+
+@njit(cache=True)
 def _build(points: np.ndarray, leaf: int):
     n = points.shape[0]
     cap = 2 * (n // leaf + 1) * 2 + 1
@@ -73,6 +103,7 @@ def _build(points: np.ndarray, leaf: int):
     right = np.full(cap, -1, np.int64)
     start = np.zeros(cap, np.int64)
     end = np.zeros(cap, np.int64)
+    pts = points.copy()  # permuted in place into tree order, with ``order``
     order = np.arange(n)
     stack = np.empty(STACK, np.int64)
     n_nodes = 1
@@ -88,7 +119,7 @@ def _build(points: np.ndarray, leaf: int):
             hi[node, d] = -np.inf
         for k in range(s, e):
             for d in range(3):
-                v = points[order[k], d]
+                v = pts[k, d]
                 if v < lo[node, d]:
                     lo[node, d] = v
                 if v > hi[node, d]:
@@ -99,12 +130,10 @@ def _build(points: np.ndarray, leaf: int):
         for d in range(1, 3):
             if hi[node, d] - lo[node, d] > hi[node, dim] - lo[node, dim]:
                 dim = d
-        seg = order[s:e]
-        seg = seg[np.argsort(points[seg, dim], kind="mergesort")]
-        order[s:e] = seg
         mid = s + (e - s) // 2
+        _select(pts, order, dim, s, e, mid)
         dims[node] = dim
-        split[node] = points[order[mid], dim]
+        split[node] = pts[mid, dim]
         a, b = n_nodes, n_nodes + 1
         n_nodes += 2
         left[node], right[node] = a, b
@@ -112,10 +141,6 @@ def _build(points: np.ndarray, leaf: int):
         stack[sp] = a
         stack[sp + 1] = b
         sp += 2
-    pts = np.empty((n, 3))
-    for k in range(n):
-        for d in range(3):
-            pts[k, d] = points[order[k], d]
     parent = np.full(n_nodes, -1, np.int64)
     leaf_of = np.zeros(n, np.int64)
     cell_lo = np.full((n_nodes, 3), -np.inf)

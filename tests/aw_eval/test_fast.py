@@ -84,3 +84,25 @@ def test_recorded_knife_edge_disagreement_is_resolved(monkeypatch):
     f = aw_eval.score(geom, poses, mode="fast")
     assert e.sr and (f.pa, f.sr) == (e.pa, e.sr)
     assert not without.sr  # the case is a real knife edge: without the fallback fast decides differently
+
+
+def test_coarse_stage_is_the_protocol_icp_on_the_subset():
+    """Every start of the coarse stage runs the reference ICP rule on the first ``m`` samples of
+    every part (brute-force neighbours instead of cKDTree: same neighbours without ties)."""
+    from scipy.spatial.transform import Rotation
+
+    from aw_eval import reference as ref
+
+    rng = np.random.default_rng(2)
+    pred = rng.normal(size=(3, 12, 3)) * [1.0, 0.6, 0.3]
+    target = pred @ Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix().T + [0.1, 0.0, -0.2]
+    target += rng.normal(size=target.shape) * 0.02
+    r0 = Rotation.random(7, random_state=3).as_matrix()
+    t0 = rng.normal(size=(7, 3)) * 0.1
+    m = 8
+    objs, rs, ts = fast.coarse_icp(pred, target, r0, t0, m, 8, 1e-9)
+    p, t = pred[:, :m].reshape(-1, 3), target[:, :m].reshape(-1, 3)
+    for k in range(len(r0)):
+        obj, r, tr = ref.icp(p, t, r0[k], t0[k], max_iters=8, tol=1e-9)
+        assert close(objs[k], obj, rel=1e-12)
+        assert np.allclose(rs[k], r, atol=1e-12) and np.allclose(ts[k], tr, atol=1e-12)

@@ -51,3 +51,31 @@ def test_duplicate_points_and_flat_clouds():
 def test_empty_cloud_is_rejected():
     with pytest.raises(ValueError, match="at least one point"):
         build_tree(np.zeros((0, 3)))
+
+
+@pytest.mark.parametrize("kind", ["spread", "ties"])
+def test_tree_layout_invariants(kind):
+    """Splits separate the children (left <= split <= right), the permutation is complete and
+    leaves hold at most LEAF_SIZE points, also with many equal coordinates (quickselect ties)."""
+    from aw_eval.kdtree import LEAF_SIZE
+
+    rng = np.random.default_rng(11)
+    pts = rng.normal(size=(3000, 3))
+    if kind == "ties":
+        pts = np.round(pts * 2) / 2  # a coarse lattice: most coordinates repeat
+    tree = build_tree(pts)
+    assert np.array_equal(np.sort(tree.index), np.arange(len(pts)))
+    assert np.array_equal(tree.points, pts[tree.index])
+    for node in range(len(tree.left)):
+        a, b = tree.left[node], tree.right[node]
+        seg = tree.points[tree.start[node]:tree.end[node]]
+        assert np.array_equal(tree.lo[node], seg.min(0)) and np.array_equal(tree.hi[node], seg.max(0))
+        if a < 0:
+            assert len(seg) <= LEAF_SIZE and np.all(tree.leaf_of[tree.start[node]:tree.end[node]] == node)
+            continue
+        dim, split = tree.dim[node], tree.split[node]
+        assert tree.points[tree.start[a]:tree.end[a], dim].max() <= split <= tree.points[tree.start[b]:tree.end[b], dim].min()
+        assert abs((tree.end[a] - tree.start[a]) - (tree.end[b] - tree.start[b])) <= 1  # median split
+    d, rows = tree.query(pts[:200] + 0.01)
+    want = _brute(pts[:200] + 0.01, pts)
+    assert np.allclose(d, want.min(1), rtol=1e-15, atol=0)
