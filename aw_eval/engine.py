@@ -21,9 +21,10 @@ from aw_eval.chamfer import chamfer_pairs
 from aw_eval.geometry import TaskGeometry
 from aw_eval.icp import ICPProblem, graph_for, nearest_positions
 from aw_eval.kdtree import build_tree
+from aw_eval.partwalk import PartClouds, build_part_clouds
 from aw_eval.results import BatchScores, Registration, ScoreResult, match_within_groups
 
-__all__ = ["task_context", "starts_for", "register_points", "register", "register_checkpoint", "finalize", "score", "score_batch", "part_diagnostics",
+__all__ = ["task_context", "starts_for", "prediction_problem", "register_points", "register", "register_checkpoint", "finalize", "score", "score_batch", "part_diagnostics",
            "PartDiagnostics", "MODES"]
 
 MODES = ("exact", "fast")
@@ -42,6 +43,7 @@ class TaskContext:
     part_graphs: list | None = None  # their Delaunay graphs (None entries: Qhull could not)
     baked: list | None = None  # (KD-tree, graph) of every part's cloud in its baked frame (unnormalized)
     target_boxes: tuple | None = None  # per-part axis-aligned boxes of the target parts
+    part_clouds: PartClouds | None = None  # ``baked`` joined for assembly searches (None: a part has no graph)
     _graph_t: object = False  # Delaunay graph of ``tree_t``'s points (None: Qhull could not)
 
     @property
@@ -101,6 +103,20 @@ def _part_structures(geom: TaskGeometry, ctx: TaskContext) -> None:
         ctx.part_graphs = [graph_for(t) for t in ctx.part_trees]
         ctx.target_boxes = (ctx.target_parts.min(axis=1), ctx.target_parts.max(axis=1))
         ctx.baked = [(tree, graph_for(tree)) for tree in (build_tree(c) for c in geom.clouds)]
+        ctx.part_clouds = build_part_clouds(ctx.baked)
+
+
+def prediction_problem(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, pred_parts: np.ndarray) -> ICPProblem:
+    """Full-resolution ICP of a checkpoint ``poses (P, 7)`` onto the task's target. The backward
+    search walks the parts' baked clouds (per task, :mod:`aw_eval.partwalk`): nothing is built
+    per checkpoint. Where a part has no Delaunay graph, the prediction gets its own tree and
+    graph (same results, slower)."""
+    _part_structures(geom, ctx)
+    if ctx.part_clouds is not None:
+        return ICPProblem.for_assembly(pred_parts, poses, geom.divisor, ctx.part_clouds, ctx.target, tree_t=ctx.tree_t,
+                                       graph_t=ctx.graph_t)
+    tree_p = build_tree(pred_parts.reshape(-1, 3))
+    return ICPProblem(tree_p.points, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p, graph_t=ctx.graph_t, graph_p=graph_for(tree_p))
 
 
 def _part_cd(ctx: TaskContext, moved_parts: np.ndarray, to_baked: tuple, i: int, j: int) -> float:
@@ -194,9 +210,7 @@ def finalize(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, pred_parts
 def _register_exact(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, pred_parts: np.ndarray) -> Registration:
     pred = np.ascontiguousarray(pred_parts.reshape(-1, 3))
     r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor)
-    tree_p = build_tree(pred)
-    # every start walks both Delaunay graphs: the prediction's (once per checkpoint) pays for itself
-    prob = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p, graph_t=ctx.graph_t, graph_p=graph_for(tree_p))
+    prob = prediction_problem(geom, ctx, poses, pred_parts)
     return register_points(prob, r0, t0, geom.settings.max_iters, geom.settings.tol)
 
 
@@ -256,7 +270,7 @@ def score(geom: TaskGeometry, poses, mode: str = "exact") -> ScoreResult:
     reg = fast.register_fast(geom, ctx, poses, pred_parts, fast.FAST)
     res = finalize(geom, ctx, poses, pred_parts, reg, mode)
     if fast.FAST.margin > 1 and fast.near_threshold(res, geom.settings, fast.FAST.margin):
-        res = finalize(geom, ctx, poses, pred_parts, fast.escalate(geom, ctx, pred_parts, reg), mode)
+        res = finalize(geom, ctx, poses, pred_parts, fast.escalate(geom, ctx, poses, pred_parts, reg), mode)
     if fast.FAST.exact_margin > 1 and fast.near_threshold(res, geom.settings, fast.FAST.exact_margin):
         # a knife-edge decision: the last digits of the registration decide it, so only the
         # protocol's own registration (every start at full resolution) gives the protocol's answer

@@ -171,7 +171,7 @@ def _distinct(order, r, t, keep: int, deg: float, dt: float) -> list[int]:
 
 def register_fast(geom, ctx, poses: np.ndarray, pred_parts: np.ndarray, fast: FastSettings | None = None) -> Registration:
     """Coarse-to-fine registration of one checkpoint (see the module docstring; no escalation)."""
-    from aw_eval.engine import starts_for
+    from aw_eval.engine import prediction_problem, starts_for
 
     fast = fast or FAST
     st = geom.settings
@@ -196,7 +196,7 @@ def register_fast(geom, ctx, poses: np.ndarray, pred_parts: np.ndarray, fast: Fa
     else:
         best_k = 0
         r_s, t_s = c_r[chosen[0]], c_t[chosen[0]]
-    full = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, graph_t=ctx.graph_t).run(r_s, t_s, min(fast.full_iters, st.max_iters), st.tol)
+    full = prediction_problem(geom, ctx, poses, pred_parts).run(r_s, t_s, min(fast.full_iters, st.max_iters), st.tol)
     return Registration(full.objective, full.rotation, full.translation, int(uniq[chosen[best_k]]), None)
 
 
@@ -218,11 +218,12 @@ def near_threshold(result, settings, margin: float) -> bool:
     return bool(near_part or near_scd)
 
 
-def escalate(geom, ctx, pred_parts: np.ndarray, reg: Registration) -> Registration:
+def escalate(geom, ctx, poses: np.ndarray, pred_parts: np.ndarray, reg: Registration) -> Registration:
     """Refine ``reg`` at full resolution with the protocol's iteration budget; keep the better."""
+    from aw_eval.engine import prediction_problem
+
     st = geom.settings
-    pred = np.ascontiguousarray(pred_parts.reshape(-1, 3))
-    res = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, graph_t=ctx.graph_t).run(reg.rotation, reg.translation, st.max_iters, st.tol)
+    res = prediction_problem(geom, ctx, poses, pred_parts).run(reg.rotation, reg.translation, st.max_iters, st.tol)
     if res.objective < reg.scd:
         return Registration(res.objective, res.rotation, res.translation, reg.start_index, None)
     return reg

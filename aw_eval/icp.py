@@ -3,9 +3,11 @@
 The iteration is the protocol's (see :func:`aw_eval.reference.icp`) and gives the same numbers
 up to floating-point summation order; only the nearest-neighbour search differs:
 
-- the target's search structures are built once per task, the prediction's once per
-  checkpoint: the backward query maps the target points into the prediction's frame
-  (``R^T (T - t)``) instead of building a tree of the moved prediction in every iteration;
+- the target's search structures are built once per task: the backward query maps the target
+  points into the prediction's frame (``R^T (T - t)``) instead of building a tree of the moved
+  prediction in every iteration, and searches there either the prediction's own tree and graph
+  or, for a checkpoint of a task (:meth:`ICPProblem.for_assembly`), each part's baked cloud,
+  whose structures are built once per task too (:mod:`aw_eval.partwalk`);
 - consecutive iterations move little, so most neighbours are *certified* unchanged without a
   search. Two certificates, either suffices: the ball one (a point last searched at ``x_ref``,
   nearest ``j``, second-nearest distance ``d2``, keeps ``j`` at ``x`` while ``|x - y_j| + |x -
@@ -32,6 +34,7 @@ from numba import njit
 
 from aw_eval.delaunay import DelaunayGraph, build_graph, no_graph, walk
 from aw_eval.kdtree import STACK, KDTree, build_tree, nearest2
+from aw_eval.partwalk import PartClouds, build_part_clouds, no_part_clouds, part_maps, parts_pass
 
 __all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "build_tree", "graph_for", "kabsch_pairs", "nearest_positions",
            "compile_kernels"]
@@ -113,9 +116,11 @@ class CertifiedNN:
 
 
 @njit(cache=True)
-def _evaluate(p, t, tree_t, tree_p, gt, gp, r, tr, fc, fx, fd, bc, bx, bd, fresh, xs, ys, stack, bounds):
+def _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r, tr, fc, fx, fd, bc, bx, bd, fresh, xs, ys, stack, bounds):
     """Objective at ``(r, tr)`` and neighbours of both directions (tree positions into ``fc``,
-    ``bc``); returns ``(objective, searched)``. ``p (n, 3)``, ``t (m, 3)`` in tree order."""
+    ``bc``); returns ``(objective, searched)``. ``p (n, 3)``, ``t (m, 3)`` in tree order (``p`` in
+    the part clouds' order when ``parts = (clouds, A, b, divisor, warm)`` has parts: the
+    backward search then walks the parts' graphs, see :mod:`aw_eval.partwalk`)."""
     n, m = p.shape[0], t.shape[0]
     for i in range(n):
         for k in range(3):
@@ -125,7 +130,10 @@ def _evaluate(p, t, tree_t, tree_p, gt, gp, r, tr, fc, fx, fd, bc, bx, bd, fresh
         for k in range(3):  # R^T (T - t)
             ys[i, k] = r[0, k] * a + r[1, k] * b + r[2, k] * c
     searched = _certified_pass(tree_t, gt, xs, fc, fx, fd, fresh, stack, bounds)
-    searched += _certified_pass(tree_p, gp, ys, bc, bx, bd, fresh, stack, bounds)
+    if parts[0][1].shape[0] > 0:
+        searched += parts_pass(parts[0], parts[1], parts[2], parts[3], ys, bc, bx, bd, fresh, parts[4])
+    else:
+        searched += _certified_pass(tree_p, gp, ys, bc, bx, bd, fresh, stack, bounds)
     sf = 0.0
     for i in range(n):
         j = fc[i]
@@ -194,7 +202,7 @@ def kabsch_pairs(p, t, fc, bc):
 
 
 @njit(cache=True)
-def _icp(p, t, tree_t, tree_p, gt, gp, r0, t0, max_iters, tol, stop_at):
+def _icp(p, t, tree_t, tree_p, gt, gp, parts, r0, t0, max_iters, tol, stop_at):
     n, m = p.shape[0], t.shape[0]
     fc = np.zeros(n, np.int64)
     bc = np.zeros(m, np.int64)
@@ -206,7 +214,7 @@ def _icp(p, t, tree_t, tree_p, gt, gp, r0, t0, max_iters, tol, stop_at):
     ys = np.empty((m, 3))
     stack = np.empty(STACK, np.int64)
     bounds = np.empty(STACK)
-    obj, searched = _evaluate(p, t, tree_t, tree_p, gt, gp, r0, t0, fc, fx, fd, bc, bx, bd, True, xs, ys, stack, bounds)
+    obj, searched = _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r0, t0, fc, fx, fd, bc, bx, bd, True, xs, ys, stack, bounds)
     best, best_r, best_t = obj, r0.copy(), t0.copy()
     prev = obj
     it = 0
@@ -215,7 +223,7 @@ def _icp(p, t, tree_t, tree_p, gt, gp, r0, t0, max_iters, tol, stop_at):
     while it < max_iters:
         it += 1
         r, tr = kabsch_pairs(p, t, fc, bc)
-        new, s = _evaluate(p, t, tree_t, tree_p, gt, gp, r, tr, fc, fx, fd, bc, bx, bd, False, xs, ys, stack, bounds)
+        new, s = _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r, tr, fc, fx, fd, bc, bx, bd, False, xs, ys, stack, bounds)
         searched += s
         if new < best:
             best, best_r, best_t = new, r, tr
@@ -258,7 +266,8 @@ class ICPProblem:
 
     ``tree_t`` (target) may be shared across checkpoints of a task; ``tree_p`` is built here
     unless given (both from :func:`aw_eval.kdtree.build_tree`). The search always certifies
-    (it never changes a result).
+    (it never changes a result). :meth:`for_assembly` searches the prediction through its parts'
+    clouds instead (no structure built per checkpoint).
     """
 
     def __init__(self, p: np.ndarray, t_pts: np.ndarray, tree_t: KDTree | None = None, tree_p: KDTree | None = None,
@@ -270,6 +279,24 @@ class ICPProblem:
         self._t = self.tree_t.points
         self._gt = tuple(graph_t or no_graph())
         self._gp = tuple(graph_p or no_graph())
+        self._parts = _NO_PARTS
+
+    @classmethod
+    def for_assembly(cls, pred_parts: np.ndarray, poses: np.ndarray, divisor: float, clouds: PartClouds,
+                     t_pts: np.ndarray, tree_t: KDTree | None = None, graph_t: DelaunayGraph | None = None) -> "ICPProblem":
+        """The prediction ``pred_parts (P, n, 3)`` of the poses ``(P, 7)`` (normalized by
+        ``divisor``), searched by walks in its parts' baked clouds ``clouds`` (built once per
+        task, :func:`aw_eval.partwalk.build_part_clouds`) instead of a tree of its own."""
+        prob = cls.__new__(cls)
+        prob.tree_t = build_tree(t_pts) if tree_t is None else tree_t
+        prob.tree_p = _no_tree()
+        prob._p = np.ascontiguousarray(pred_parts[clouds.part_of, clouds.rows])  # the clouds' row order
+        prob._t = prob.tree_t.points
+        prob._gt = tuple(graph_t or no_graph())
+        prob._gp = tuple(no_graph())
+        a, b = part_maps(poses, divisor)
+        prob._parts = (tuple(clouds), a, b, float(divisor), np.zeros(len(a), np.int64))
+        return prob
 
     def run(self, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float, stop_at: float | None = None) -> ICPResult:
         """The protocol's ICP from ``(r0, t0)``; returns the best state visited.
@@ -280,9 +307,20 @@ class ICPProblem:
         r0 = np.ascontiguousarray(r0, dtype=np.float64)
         t0 = np.ascontiguousarray(t0, dtype=np.float64)
         stop = -np.inf if stop_at is None else float(stop_at)
-        obj, r, t, it, searched = _icp(self._p, self._t, tuple(self.tree_t), tuple(self.tree_p), self._gt, self._gp, r0, t0,
-                                       int(max_iters), float(tol), stop)
+        obj, r, t, it, searched = _icp(self._p, self._t, tuple(self.tree_t), tuple(self.tree_p), self._gt, self._gp,
+                                       self._parts, r0, t0, int(max_iters), float(tol), stop)
         return ICPResult(float(obj), r, t, int(it), int(searched))
+
+
+_NO_PARTS = (tuple(no_part_clouds()), np.zeros((0, 3, 3)), np.zeros((0, 3)), 1.0, np.zeros(0, np.int64))
+_NO_TREE: list = []
+
+
+def _no_tree() -> KDTree:
+    """A one-point tree standing in for the prediction's when the part clouds are searched."""
+    if not _NO_TREE:
+        _NO_TREE.append(build_tree(np.zeros((1, 3))))
+    return _NO_TREE[0]
 
 
 def graph_for(tree: KDTree) -> DelaunayGraph | None:
@@ -309,6 +347,11 @@ def compile_kernels() -> None:
     nearest_positions(ta, None, b)
     ICPProblem(a, b, tree_t=tb, tree_p=ta).run(np.eye(3), np.zeros(3), 3, 1e-9, stop_at=1e-4)
     ICPProblem(a, b, tree_t=tb, tree_p=ta, graph_t=graph_for(tb), graph_p=graph_for(ta)).run(np.eye(3), np.zeros(3), 3, 1e-9)
+    parts = rng.normal(size=(2, 20, 3))
+    trees = [build_tree(c) for c in parts]
+    clouds = build_part_clouds([(tree, graph_for(tree)) for tree in trees])
+    poses = np.array([[0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], [0.0, 0.2, 0.0, 0.0, 1.0, 0.0, 0.0]])
+    ICPProblem.for_assembly(parts, poses, 1.0, clouds, b, tree_t=tb, graph_t=graph_for(tb)).run(np.eye(3), np.zeros(3), 3, 1e-9)
     from aw_eval.fast import coarse_icp  # fast imports this module
 
     coarse_icp(a.reshape(2, 20, 3), b[:20].reshape(2, 10, 3), np.eye(3)[None], np.zeros((1, 3)), 8, 3, 1e-9)
