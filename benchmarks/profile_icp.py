@@ -1,13 +1,16 @@
-"""Where `exact`'s time goes on one checkpoint: ICP over every start vs the prediction's graph.
+"""Where `exact`'s time goes on one checkpoint: ICP over every start, by neighbour search.
 
 Scores the first checkpoint of the benchmark trajectories (as ``bench_eval.py`` does) with every
 start of the protocol at full resolution, timing the ICP runs (best of ``--repeat``) apart from
-the prediction's Delaunay graph, and counts ICP iterations, query evaluations (points x
+what is built for the checkpoint, and counts ICP iterations, query evaluations (points x
 evaluations, both directions) and searches (walks or tree searches; the rest were certified).
-``--no-graphs`` runs the same ICP on KD-trees alone (the previous round's search) and checks
-that the objectives are identical.
+Searches (``--searches``): ``parts`` (what ``exact`` does: the backward direction walks the
+parts' baked clouds, built once per task, ``aw_eval.partwalk``), ``graph`` (the prediction's
+own Delaunay graph, built per checkpoint: the previous round), ``kd`` (KD-trees alone: the round
+before). Objectives are compared: ``kd`` and ``graph`` bitwise, ``parts`` to 1e-12 relative (it
+sums in another point order).
 
-    .venv/bin/python benchmarks/profile_icp.py --parts 2 5 10
+    .venv/bin/python benchmarks/profile_icp.py --parts 2 5 10 --searches parts graph kd
 """
 
 from __future__ import annotations
@@ -22,24 +25,30 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import aw_eval  # noqa: E402
-from aw_eval.engine import starts_for, task_context  # noqa: E402
+from aw_eval.engine import _part_structures, prediction_problem, starts_for, task_context  # noqa: E402
 from aw_eval.fixtures import make_points_geometry, trajectory_checkpoints  # noqa: E402
 from aw_eval.icp import ICPProblem, build_tree, compile_kernels, graph_for  # noqa: E402
 
 
-def profile(p: int, checkpoint: int, repeat: int, graphs: bool) -> dict:
+def profile(p: int, checkpoint: int, repeat: int, search: str) -> dict:
     st = aw_eval.ProtocolSettings(n_fps=1000, n_surface=4096)
     geom, obj = make_points_geometry(p, 1000, seed=p, settings=st)
     poses = trajectory_checkpoints(obj, checkpoint + 1, seed=1000 + p)[checkpoint]
     ctx = task_context(geom)
-    pred = np.ascontiguousarray(geom.pred_parts(poses).reshape(-1, 3))
+    pred_parts = geom.pred_parts(poses)
+    pred = np.ascontiguousarray(pred_parts.reshape(-1, 3))
     r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor)
-    tree_p = build_tree(pred)
+    _part_structures(geom, ctx)  # per task, not timed
+    _ = ctx.graph_t
     t = time.perf_counter()
-    graph_p = graph_for(tree_p) if graphs else None
-    t_graph = time.perf_counter() - t
-    prob = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p,
-                      graph_t=ctx.graph_t if graphs else None, graph_p=graph_p)
+    if search == "parts":
+        prob = prediction_problem(geom, ctx, poses, pred_parts)
+    else:
+        tree_p = build_tree(pred)
+        graph_p = graph_for(tree_p) if search == "graph" else None
+        prob = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p,
+                          graph_t=ctx.graph_t if search == "graph" else None, graph_p=graph_p)
+    t_build = time.perf_counter() - t
     best = np.inf
     for _ in range(repeat):
         t = time.perf_counter()
@@ -47,9 +56,9 @@ def profile(p: int, checkpoint: int, repeat: int, graphs: bool) -> dict:
         best = min(best, time.perf_counter() - t)
     iters = sum(r.iterations for r in res)
     evals = (iters + len(r0)) * (len(pred) + len(ctx.target))
-    return {"parts": p, "graphs": graphs, "starts": len(r0), "icp_s": best, "prediction_graph_s": t_graph,
+    return {"parts": p, "search": search, "starts": len(r0), "icp_s": best, "per_checkpoint_build_s": t_build,
             "iterations": iters, "query_evaluations": evals, "searches": sum(r.searched for r in res),
-            "ns_per_query_evaluation": 1e9 * best / evals, "objectives": [r.objective for r in res]}
+            "ns_per_query_evaluation": 1e9 * best / evals, "objectives": np.array([r.objective for r in res])}
 
 
 def main(argv=None) -> int:
@@ -57,21 +66,22 @@ def main(argv=None) -> int:
     ap.add_argument("--parts", type=int, nargs="+", default=[2, 5, 10])
     ap.add_argument("--checkpoint", type=int, default=0, help="index into the benchmark trajectories")
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--no-graphs", action="store_true", help="also run on KD-trees alone and compare")
+    ap.add_argument("--searches", nargs="+", choices=["parts", "graph", "kd"], default=["parts", "graph"])
     args = ap.parse_args(argv)
     compile_kernels()
     for p in args.parts:
-        runs = [profile(p, args.checkpoint, args.repeat, True)]
-        if args.no_graphs:
-            runs.append(profile(p, args.checkpoint, args.repeat, False))
-        for r in runs:
-            print(f"parts={p} graphs={r['graphs']}: {r['starts']} starts, {r['iterations']} iterations, ICP {r['icp_s']:.3f} s "
-                  f"(best of {args.repeat}), prediction graph {r['prediction_graph_s']:.3f} s, "
+        runs = {s: profile(p, args.checkpoint, args.repeat, s) for s in args.searches}
+        for r in runs.values():
+            print(f"parts={p} search={r['search']}: {r['starts']} starts, {r['iterations']} iterations, ICP {r['icp_s']:.3f} s "
+                  f"(best of {args.repeat}), built per checkpoint {r['per_checkpoint_build_s']:.3f} s, "
                   f"{r['query_evaluations'] / 1e6:.2f} M query evaluations, {r['searches'] / 1e6:.2f} M searches, "
                   f"{r['ns_per_query_evaluation']:.0f} ns per query evaluation", flush=True)
-        if args.no_graphs:
-            same = runs[0]["objectives"] == runs[1]["objectives"]
-            print(f"parts={p}: objectives with and without graphs identical: {same}", flush=True)
+        if "kd" in runs and "graph" in runs:
+            print(f"parts={p}: objectives kd == graph bitwise: {np.array_equal(runs['kd']['objectives'], runs['graph']['objectives'])}")
+        if "parts" in runs:
+            for other in set(runs) - {"parts"}:
+                a, b = runs["parts"]["objectives"], runs[other]["objectives"]
+                print(f"parts={p}: objectives parts vs {other}: max relative difference {np.max(np.abs(a - b) / b):.1e}")
     return 0
 
 
