@@ -22,12 +22,13 @@ Near-identical starts (same-ID starts of parts already placed consistently) are 
 5. **exact fallback** (opt-in, ``exact_margin > 1``; off by default): when a decision is still
    within a factor ``exact_margin`` of its threshold, the checkpoint is registered as ``exact``
    does (every start at full resolution): such knife-edge decisions turn on the last digits of
-   the registration. Measured (see ``docs/performance.md``): two of the four disagreements among
-   1,008 paper-resolution checkpoints were knife edges, part errors 0.00999 (exact) vs 0.01008
-   (fast) and 0.00991 vs 0.01012 under registrations whose SCD differed by 1e-4 and 2e-3
-   relative; ``exact_margin=1.02`` resolves both, but where many parts sit near the threshold
-   it costs a full ``exact`` registration for many checkpoints (10 parts, a batch of 100
-   trajectory checkpoints: 2.4x slower; no measurable cost at 5 parts). Final states are
+   the registration. Measured (see ``docs/performance.md``): with an 8-point coarse stage, two
+   of the four disagreements among 1,008 paper-resolution checkpoints were knife edges, part
+   errors 0.00999 (exact) vs 0.01008 (fast) and 0.00991 vs 0.01012 under registrations whose
+   SCD differed by 1e-4 and 2e-3 relative; ``exact_margin=1.02`` resolves such cases, but where
+   many parts sit near the threshold it costs a full ``exact`` registration for many
+   checkpoints (10 parts, a batch of 100 trajectory checkpoints: several times slower). Final
+   states are
    scored in ``exact`` by default anyway (``aw-score --final exact``).
 """
 
@@ -46,7 +47,7 @@ __all__ = ["FastSettings", "register_fast", "coarse_icp"]
 
 @dataclass(frozen=True)
 class FastSettings:
-    coarse: int = 8
+    coarse: int = 16
     coarse_iters: int = 8
     medium: int = 50
     medium_iters: int = 15

@@ -96,9 +96,33 @@ def bench_parts(p: int, args, rows: list, agree: list) -> None:
 _GEOMS: dict = {}
 
 
+def _fast_settings(pairs: list[str], exact_margin: float | None) -> dict:
+    """``KEY=VALUE`` strings (and ``--exact-margin``) -> FastSettings fields, typed like the defaults."""
+    from aw_eval import fast
+
+    kw = {}
+    for item in pairs:
+        key, _, value = item.partition("=")
+        if not hasattr(fast.FAST, key) or not value:
+            raise SystemExit(f"--fast-set: {item!r} is not KEY=VALUE for a FastSettings field")
+        kw[key] = type(getattr(fast.FAST, key))(value)
+    if exact_margin is not None:
+        kw["exact_margin"] = exact_margin
+    return kw
+
+
+def _apply_fast_settings(kw: dict) -> None:
+    import dataclasses
+
+    from aw_eval import fast
+
+    fast.FAST = dataclasses.replace(fast.FastSettings(), **kw)
+
+
 def _agreement_chunk(job):
     """Exact and fast on checkpoints ``lo:hi`` of the ``p``-part trajectory set (one worker)."""
-    p, fps, seed, k, lo, hi = job
+    p, fps, seed, k, lo, hi, fast_kw = job
+    _apply_fast_settings(fast_kw)  # spawned workers start from the defaults
     if (p, fps) not in _GEOMS:
         st = aw_eval.ProtocolSettings(n_fps=fps, n_surface=max(4096, 4 * fps))
         geom, obj = make_points_geometry(p, fps, seed=p, settings=st)
@@ -127,12 +151,12 @@ def _log_chunk(log: Path | None, out) -> None:
 
 
 def bench_agreement(parts: list[int], n: int, fps: int, seed: int = 0, workers: int = 1, chunk: int = 6,
-                    log: Path | None = None) -> dict:
+                    log: Path | None = None, fast_kw: dict | None = None) -> dict:
     """Fast vs exact (exact == reference by the tests) on ``n`` trajectory checkpoints, split
     evenly over ``parts``; ``workers`` processes share the chunks (largest tasks first). Agreement
     does not depend on the worker count; the seconds are summed over workers."""
     per = {p: n // len(parts) + (1 if i < n % len(parts) else 0) for i, p in enumerate(parts)}
-    jobs = [(p, fps, seed, k, lo, min(k, lo + chunk)) for p, k in sorted(per.items(), reverse=True)
+    jobs = [(p, fps, seed, k, lo, min(k, lo + chunk), fast_kw or {}) for p, k in sorted(per.items(), reverse=True)
             for lo in range(0, k, chunk)]
     if workers > 1:
         import multiprocessing as mp
@@ -238,14 +262,13 @@ def main(argv=None) -> int:
                     help="processes for the agreement run (agreement does not depend on it; timings are worker seconds)")
     ap.add_argument("--exact-margin", type=float, default=None,
                     help="run fast with FastSettings(exact_margin=M), the opt-in exact fallback near thresholds")
+    ap.add_argument("--fast-set", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="run fast with these FastSettings fields (e.g. coarse=16), in this process and the workers")
+    ap.add_argument("--agree-seed", type=int, default=0, help="seed of the agreement trajectories (0: the recorded set)")
     ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "bench_eval.json"))
     args = ap.parse_args(argv)
-    if args.exact_margin is not None:
-        import dataclasses
-
-        from aw_eval import fast
-
-        fast.FAST = dataclasses.replace(fast.FAST, exact_margin=args.exact_margin)
+    fast_kw = _fast_settings(args.fast_set, args.exact_margin)
+    _apply_fast_settings(fast_kw)
     rows: list = []
     result = {"command": " ".join(["benchmarks/bench_eval.py"] + (argv if argv is not None else sys.argv[1:])),
               "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
@@ -253,10 +276,12 @@ def main(argv=None) -> int:
     for p in args.parts:
         bench_parts(p, args, rows, [])
     if args.agreement:
-        result["agreement"] = bench_agreement(args.agree_parts, args.agreement, args.agree_fps, workers=args.agree_workers, log=args.agree_log)
+        result["agreement"] = bench_agreement(args.agree_parts, args.agreement, args.agree_fps, seed=args.agree_seed,
+                                              workers=args.agree_workers, log=args.agree_log, fast_kw=fast_kw)
         print(json.dumps({k: v for k, v in result["agreement"].items() if k != "disagreements"}), flush=True)
     if args.agree_exact_log:
-        result["agreement_vs_logged_exact"] = agreement_from_logs(args.agree_exact_log, args.agree_fps)
+        result["agreement_vs_logged_exact"] = agreement_from_logs(args.agree_exact_log, args.agree_fps, seed=args.agree_seed)
+        result["agreement_vs_logged_exact"]["fast_settings"] = fast_kw
         a = result["agreement_vs_logged_exact"]
         print(json.dumps({k: v for k, v in a.items() if k != "disagreements"}), flush=True)
         for d in a["disagreements"]:

@@ -6,7 +6,7 @@ The schemas are documented in ``docs/formats.md``.
 
 from aw.formats.errors import FormatError
 from aw.formats.run import RunInfo, TokenUsage, read_run_info, write_run_info
-from aw.formats.suite import SuiteEntry, SuiteManifest, read_manifest, write_manifest
+from aw.formats.suite import SuiteEntry, SuiteManifest, read_manifest, suite_paths, write_manifest
 from aw.formats.targets import PartTarget, Targets, read_targets, write_targets
 from aw.formats.task import CONVENTIONS, Task, TaskPart, read_task, write_task
 from aw.formats.trajectory import (
@@ -38,6 +38,7 @@ __all__ = [
     "write_targets",
     "SuiteEntry",
     "SuiteManifest",
+    "suite_paths",
     "read_manifest",
     "write_manifest",
     "Trajectory",
