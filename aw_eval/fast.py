@@ -28,8 +28,7 @@ Near-identical starts (same-ID starts of parts already placed consistently) are 
    SCD differed by 1e-4 and 2e-3 relative; ``exact_margin=1.02`` resolves such cases, but where
    many parts sit near the threshold it costs a full ``exact`` registration for many
    checkpoints (10 parts, a batch of 100 trajectory checkpoints: several times slower). Final
-   states are
-   scored in ``exact`` by default anyway (``aw-score --final exact``).
+   states are scored in ``exact`` by default anyway (``aw-score --final exact``).
 """
 
 from __future__ import annotations
