@@ -27,7 +27,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-__all__ = ["KDTree", "build_tree", "nearest2", "nn_indices"]
+__all__ = ["KDTree", "box_d2", "build_tree", "nearest2", "nn_indices"]
 
 LEAF_SIZE = 8
 STACK = 128  # pending subtrees: at most one per level of a median-split tree
@@ -170,8 +170,8 @@ def build_tree(points: np.ndarray) -> KDTree:
 
 
 @njit(cache=True, inline="always")
-def _box_d2(x0, x1, x2, lo, hi, node):
-    """Squared distance from the point to the bounding box of ``node`` (0 inside)."""
+def box_d2(x0, x1, x2, lo, hi, node):
+    """Squared distance from the point to the box ``lo[node], hi[node]`` (0 inside)."""
     d = 0.0
     for k, v in enumerate((x0, x1, x2)):
         g = max(lo[node, k] - v, v - hi[node, k], 0.0)
@@ -202,7 +202,7 @@ def _subtree(tree, x0, x1, x2, root, j1, d1, d2, stack, bounds):
                 near, far = l, r
             else:
                 near, far = r, l
-            bf = _box_d2(x0, x1, x2, lo, hi, far)
+            bf = box_d2(x0, x1, x2, lo, hi, far)
             if bf < d2:
                 stack[sp] = far
                 bounds[sp] = bf
@@ -248,7 +248,7 @@ def nearest2(tree, x0: float, x1: float, x2: float, warm: int, stack: np.ndarray
                 and chi[node, 1] - x1 >= rad and x2 - clo[node, 2] >= rad and chi[node, 2] - x2 >= rad):
             break
         sib = right[up] if left[up] == node else left[up]
-        if _box_d2(x0, x1, x2, lo, hi, sib) < d2:
+        if box_d2(x0, x1, x2, lo, hi, sib) < d2:
             j1, d1, d2 = _subtree(tree, x0, x1, x2, sib, j1, d1, d2, stack, bounds)
         node = up
     return j1, d1, d2

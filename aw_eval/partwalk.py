@@ -34,6 +34,7 @@ import numpy as np
 from numba import njit
 
 from aw_eval.delaunay import DelaunayGraph, walk
+from aw_eval.kdtree import box_d2
 
 __all__ = ["PartClouds", "build_part_clouds", "no_part_clouds", "part_maps", "parts_pass"]
 
@@ -91,12 +92,11 @@ def part_maps(poses: np.ndarray, divisor: float) -> tuple[np.ndarray, np.ndarray
 
 
 @njit(cache=True, inline="always")
-def _box_d2(c0, c1, c2, lo, hi, q):
-    d = 0.0
-    for k, v in enumerate((c0, c1, c2)):
-        g = max(lo[q, k] - v, v - hi[q, k], 0.0)
-        d += g * g
-    return d
+def _to_part(a, b, q, x0, x1, x2):
+    """The point ``x`` in part ``q``'s baked frame: ``A_q x + b_q``."""
+    return (a[q, 0, 0] * x0 + a[q, 0, 1] * x1 + a[q, 0, 2] * x2 + b[q, 0],
+            a[q, 1, 0] * x0 + a[q, 1, 1] * x1 + a[q, 1, 2] * x2 + b[q, 1],
+            a[q, 2, 0] * x0 + a[q, 2, 1] * x1 + a[q, 2, 2] * x2 + b[q, 2])
 
 
 @njit(cache=True)
@@ -125,10 +125,7 @@ def parts_pass(clouds, a: np.ndarray, b: np.ndarray, divisor: float, x: np.ndarr
             moved2 = (e * e + f * f + g * g) * scale
             if moved2 < slack[i, 1]:
                 continue
-            q = part_of[hint]
-            c0 = a[q, 0, 0] * x0 + a[q, 0, 1] * x1 + a[q, 0, 2] * x2 + b[q, 0]
-            c1 = a[q, 1, 0] * x0 + a[q, 1, 1] * x1 + a[q, 1, 2] * x2 + b[q, 1]
-            c2 = a[q, 2, 0] * x0 + a[q, 2, 1] * x1 + a[q, 2, 2] * x2 + b[q, 2]
+            c0, c1, c2 = _to_part(a, b, part_of[hint], x0, x1, x2)
             u, v, w = c0 - pts[hint, 0], c1 - pts[hint, 1], c2 - pts[hint, 2]
             if np.sqrt(u * u + v * v + w * w) + np.sqrt(moved2) + safety < np.sqrt(slack[i, 0]):
                 continue
@@ -138,10 +135,8 @@ def parts_pass(clouds, a: np.ndarray, b: np.ndarray, divisor: float, x: np.ndarr
             q = first + step
             if q >= n_parts:
                 q -= n_parts
-            c0 = a[q, 0, 0] * x0 + a[q, 0, 1] * x1 + a[q, 0, 2] * x2 + b[q, 0]
-            c1 = a[q, 1, 0] * x0 + a[q, 1, 1] * x1 + a[q, 1, 2] * x2 + b[q, 1]
-            c2 = a[q, 2, 0] * x0 + a[q, 2, 1] * x1 + a[q, 2, 2] * x2 + b[q, 2]
-            lb = _box_d2(c0, c1, c2, lo, hi, q)
+            c0, c1, c2 = _to_part(a, b, q, x0, x1, x2)
+            lb = box_d2(c0, c1, c2, lo, hi, q)
             if lb >= best:  # every point of this part is at least that far
                 other = min(other, lb)
                 continue
