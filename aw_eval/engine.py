@@ -43,6 +43,7 @@ class TaskContext:
     part_graphs: list | None = None  # their Delaunay graphs (None entries: Qhull could not)
     baked: list | None = None  # (KD-tree, graph) of every part's cloud in its baked frame (unnormalized)
     target_boxes: tuple | None = None  # per-part axis-aligned boxes of the target parts
+    target_means: np.ndarray | None = None  # (P, 3) per-part means of the target parts
     part_clouds: PartClouds | None = None  # ``baked`` joined for assembly searches (None: a part has no graph)
     _graph_t: object = False  # Delaunay graph of ``tree_t``'s points (None: Qhull could not)
 
@@ -68,19 +69,29 @@ def task_context(geom: TaskGeometry) -> TaskContext:
 _CUBE = cube_rotations()  # exact 0/+-1 entries: computing them once changes no number
 
 
-def starts_for(pred: np.ndarray, target_frame, poses: np.ndarray, target_poses: np.ndarray, divisor: float):
+def starts_for(pred: np.ndarray, target_frame, poses: np.ndarray, target_poses: np.ndarray, divisor: float,
+               rotations: tuple[np.ndarray, np.ndarray] | None = None):
     """All starts ``(R0 (S, 3, 3), t0 (S, 3))``: 24 PCA starts then one same-ID start per part.
 
     Same arithmetic, in the same order, as :func:`aw_eval.reference.pca_starts` and
-    :func:`aw_eval.reference.part_starts`.
+    :func:`aw_eval.reference.part_starts`. ``rotations``: the matrices of ``poses`` and
+    ``target_poses`` ``(P, 3, 3)`` where the caller has them already.
     """
     mu_p, a_p = pca_frame(pred)
     mu_t, a_t = target_frame
     r_pca = a_t @ _CUBE @ a_p.T  # (24, 3, 3)
     t_pca = mu_t - r_pca @ mu_p
-    r_part = quat_to_matrix(target_poses[:, 3:]) @ np.swapaxes(quat_to_matrix(poses[:, 3:]), 1, 2)  # (P, 3, 3)
+    if rotations is None:
+        rotations = (quat_to_matrix(poses[:, 3:]), quat_to_matrix(target_poses[:, 3:]))
+    r_part = rotations[1] @ np.swapaxes(rotations[0], 1, 2)  # (P, 3, 3)
     t_part = (target_poses[:, :3] - (r_part @ poses[:, :3, None])[:, :, 0]) / divisor
     return np.concatenate([r_pca, r_part]), np.concatenate([t_pca, t_part])
+
+
+def checkpoint_rotations(geom: TaskGeometry, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation matrices of a checkpoint's ``poses (P, 7)`` and of the task's target poses,
+    as :func:`starts_for` takes them (computed once per checkpoint and task)."""
+    return geom.rotations(poses), geom.target_rotations()
 
 
 def register_points(prob: ICPProblem, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float) -> Registration:
@@ -102,6 +113,7 @@ def _part_structures(geom: TaskGeometry, ctx: TaskContext) -> None:
         ctx.part_trees = [build_tree(t) for t in ctx.target_parts]
         ctx.part_graphs = [graph_for(t) for t in ctx.part_trees]
         ctx.target_boxes = (ctx.target_parts.min(axis=1), ctx.target_parts.max(axis=1))
+        ctx.target_means = ctx.target_parts.mean(axis=1)
         ctx.baked = [(tree, graph_for(tree)) for tree in (build_tree(c) for c in geom.clouds)]
         ctx.part_clouds = build_part_clouds(ctx.baked)
 
@@ -114,7 +126,7 @@ def prediction_problem(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, 
     _part_structures(geom, ctx)
     if ctx.part_clouds is not None:
         return ICPProblem.for_assembly(pred_parts, poses, geom.divisor, ctx.part_clouds, ctx.target, tree_t=ctx.tree_t,
-                                       graph_t=ctx.graph_t)
+                                       graph_t=ctx.graph_t, rotations=geom.rotations(poses))
     tree_p = build_tree(pred_parts.reshape(-1, 3))
     return ICPProblem(tree_p.points, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p, graph_t=ctx.graph_t, graph_p=graph_for(tree_p))
 
@@ -129,11 +141,18 @@ def _part_cd(ctx: TaskContext, moved_parts: np.ndarray, to_baked: tuple, i: int,
     # walk starts next to its answer (FPS order would jump across the part)
     x, y = moved_parts[i][tree_b.index], tree_t.points
     fwd = nearest_positions(tree_t, ctx.part_graphs[j], x)
-    df = x - tree_t.points[fwd]
     a, b = to_baked
     bwd = nearest_positions(tree_b, graph_b, y @ a[i].T + b[i])  # tree positions of part i = rows of x
-    db = y - x[bwd]
-    return float(np.mean(np.sum(df * df, axis=1)) + np.mean(np.sum(db * db, axis=1)))
+    return mean_squared_norm(x - tree_t.points[fwd]) + mean_squared_norm(y - x[bwd])
+
+
+def mean_squared_norm(d: np.ndarray) -> float:
+    """``mean(sum(d * d, axis=1))`` of ``d (k, 3)``, the same sums in the same order (each row's
+    ``(d0^2 + d1^2) + d2^2``, then NumPy's mean) without the slow short-axis reduction."""
+    s = d[:, 0] * d[:, 0]
+    s += d[:, 1] * d[:, 1]
+    s += d[:, 2] * d[:, 2]
+    return float(np.mean(s))
 
 
 def _box_gap_sq(point: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> float:
@@ -154,9 +173,8 @@ def match_parts(ctx: TaskContext, moved_parts: np.ndarray, groups, to_baked: tup
     p = moved_parts.shape[0]
     assign = np.arange(p)
     errors = np.empty(p)
-    pm, plo, phi = moved_parts.mean(axis=1), moved_parts.min(axis=1), moved_parts.max(axis=1)
-    tm = ctx.target_parts.mean(axis=1)
-    tlo, thi = ctx.target_boxes
+    tm, (tlo, thi) = ctx.target_means, ctx.target_boxes
+    pm = plo = phi = None
     for g in groups:
         g = list(g)
         if len(g) == 1:
@@ -164,6 +182,8 @@ def match_parts(ctx: TaskContext, moved_parts: np.ndarray, groups, to_baked: tup
             errors[i] = _part_cd(ctx, moved_parts, to_baked, i, i)
             continue
         k = len(g)
+        if pm is None:  # only groups of equivalent parts need the bounds
+            pm, plo, phi = moved_parts.mean(axis=1), moved_parts.min(axis=1), moved_parts.max(axis=1)
         cost = np.array([[_box_gap_sq(pm[i], tlo[j], thi[j]) + _box_gap_sq(tm[j], plo[i], phi[i]) for j in g] for i in g])
         exact = np.zeros((k, k), dtype=bool)
         while True:
@@ -188,7 +208,7 @@ def finalize(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, pred_parts
     moved = pred_parts @ reg.rotation.T + reg.translation
     _part_structures(geom, ctx)
     # registered normalized y = R_reg (R_i c + t_i) / div + t_reg  <=>  c = A_i y + b_i
-    rot_i = quat_to_matrix(poses[:, 3:])
+    rot_i = geom.rotations(poses)
     a = geom.divisor * np.einsum("pji,kj->pik", rot_i, reg.rotation)  # div R_i^T R_reg^T
     b = -np.einsum("pji,pj->pi", rot_i, geom.divisor * (reg.rotation.T @ reg.translation) + poses[:, :3])
     assign, errors = match_parts(ctx, moved, geom.groups, (a, b))
@@ -209,7 +229,7 @@ def finalize(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, pred_parts
 
 def _register_exact(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, pred_parts: np.ndarray) -> Registration:
     pred = np.ascontiguousarray(pred_parts.reshape(-1, 3))
-    r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor)
+    r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor, checkpoint_rotations(geom, poses))
     prob = prediction_problem(geom, ctx, poses, pred_parts)
     return register_points(prob, r0, t0, geom.settings.max_iters, geom.settings.tol)
 

@@ -145,11 +145,12 @@ def _dedupe_starts(r0: np.ndarray, t0: np.ndarray, tol: float) -> np.ndarray:
     """Indices of the first of every group of starts equal within ``tol`` (entrywise): a start is
     kept unless an earlier kept start is within ``tol`` of it."""
     flat = np.concatenate([r0.reshape(len(r0), -1), t0.reshape(len(t0), -1)], axis=1)
-    close = np.abs(flat[:, None, :] - flat[None, :, :]).max(axis=2) <= tol  # (S, S)
-    kept = np.zeros(len(r0), dtype=bool)
-    for k in range(len(r0)):
-        kept[k] = not np.any(close[k, :k] & kept[:k])
-    return np.flatnonzero(kept).astype(np.int64)
+    close = (np.abs(flat[:, None, :] - flat[None, :, :]).max(axis=2) <= tol).tolist()  # (S, S)
+    kept: list[int] = []
+    for k in range(len(r0)):  # a few dozen starts: plain Python beats small NumPy calls here
+        if not any(close[k][j] for j in kept):
+            kept.append(k)
+    return np.asarray(kept, dtype=np.int64)
 
 
 def _distinct(order, r, t, keep: int, deg: float, dt: float) -> list[int]:
@@ -171,12 +172,12 @@ def _distinct(order, r, t, keep: int, deg: float, dt: float) -> list[int]:
 
 def register_fast(geom, ctx, poses: np.ndarray, pred_parts: np.ndarray, fast: FastSettings | None = None) -> Registration:
     """Coarse-to-fine registration of one checkpoint (see the module docstring; no escalation)."""
-    from aw_eval.engine import prediction_problem, starts_for
+    from aw_eval.engine import checkpoint_rotations, prediction_problem, starts_for
 
     fast = fast or FAST
     st = geom.settings
     pred = np.ascontiguousarray(pred_parts.reshape(-1, 3))
-    r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor)
+    r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor, checkpoint_rotations(geom, poses))
     uniq = _dedupe_starts(r0, t0, fast.same_start_tol)
     c_obj, c_r, c_t = coarse_icp(pred_parts, ctx.target_parts, r0[uniq], t0[uniq], fast.coarse,
                                  min(fast.coarse_iters, st.max_iters), st.tol)

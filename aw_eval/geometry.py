@@ -22,7 +22,7 @@ import numpy as np
 import trimesh
 
 from aw.formats import FormatError
-from aw.pose import apply_pose, as_finite, pca_frame
+from aw.pose import apply_pose, as_finite, pca_frame, quat_to_matrix
 from aw_eval.settings import PROTOCOL_VERSION, ProtocolSettings
 
 __all__ = ["TaskGeometry", "load_task_geometry", "part_divisor", "default_cache_dir", "normalize_groups"]
@@ -151,7 +151,30 @@ class TaskGeometry:
 
     def pred_parts(self, poses: np.ndarray) -> np.ndarray:
         """``(P, n, 3)`` normalized predicted points for ``poses (P, 7)``."""
-        return apply_pose(self.check_poses(poses), self.clouds) / self.divisor
+        poses = self.check_poses(poses)
+        # apply_pose's arithmetic, with the rotations the rest of the checkpoint's scoring reuses
+        return (np.einsum("...ij,...nj->...ni", self.rotations(poses), self.clouds) + poses[..., None, :3]) / self.divisor
+
+    def rotations(self, poses: np.ndarray) -> np.ndarray:
+        """``(..., 3, 3)`` rotation matrices of validated ``poses (..., 7)``
+        (:func:`aw.pose.quat_to_matrix`). The last poses' are kept: scoring one checkpoint asks
+        for them several times."""
+        key = (poses.shape, poses[..., 3:].tobytes())
+        last = self._derived.get("rotations")
+        if last is None or last[0] != key:
+            rot = quat_to_matrix(poses[..., 3:])
+            rot.flags.writeable = False  # shared by the callers
+            last = (key, rot)
+            self._derived["rotations"] = last
+        return last[1]
+
+    def target_rotations(self) -> np.ndarray:
+        """``(P, 3, 3)`` rotation matrices of the target poses (cached)."""
+        if "target_rotations" not in self._derived:
+            rot = quat_to_matrix(self.target_poses[:, 3:])
+            rot.flags.writeable = False
+            self._derived["target_rotations"] = rot
+        return self._derived["target_rotations"]
 
     def check_poses(self, poses) -> np.ndarray:
         """Validated ``(P, 7)`` or ``(N, P, 7)`` float64 poses (quaternions must be non-zero)."""

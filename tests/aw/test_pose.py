@@ -49,6 +49,23 @@ def random_rotations(rng, n):
 
 
 # ---------------------------------------------------------------- quaternions and matrices
+def test_quat_to_matrix_is_the_textbook_formula_bitwise():
+    """The matrices are the unit-quaternion formula evaluated entry by entry, bit for bit (every
+    score's arithmetic builds on them), for any batch shape and any quaternion scale."""
+    rng = np.random.default_rng(5)
+    for shape in [(4,), (1, 4), (6, 4), (3, 5, 4), (0, 4)]:
+        q = rng.normal(size=shape) * 10.0 ** rng.uniform(-4, 4, size=shape[:-1] + (1,))
+        u = q / np.linalg.norm(q, axis=-1, keepdims=True)
+        w, x, y, z = np.moveaxis(u, -1, 0)
+        want = np.stack([
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ], axis=-2)
+        got = quat_to_matrix(q)
+        assert got.shape == shape[:-1] + (3, 3) and np.array_equal(got, want)
+
+
 def test_quat_to_matrix_hand_values():
     np.testing.assert_allclose(quat_to_matrix(QZ90), RZ90, atol=1e-15)
     np.testing.assert_allclose(quat_to_matrix(QX90), RX90, atol=1e-15)
