@@ -284,11 +284,12 @@ class Pose:
         return Pose(-(quat_to_matrix(qi) @ self.position), qi)
 
 
-def apply_pose(poses, points) -> np.ndarray:
-    """Apply wire-form ``poses: (..., 7)`` to ``points: (..., n, 3)`` (broadcast over leading dims)."""
+def apply_pose(poses, points, rotations: np.ndarray | None = None) -> np.ndarray:
+    """Apply wire-form ``poses: (..., 7)`` to ``points: (..., n, 3)`` (broadcast over leading dims).
+    ``rotations``: ``quat_to_matrix`` of the poses' quaternions, where the caller has them."""
     poses = as_finite(poses, (7,), "poses")
     pts = as_finite(points, (3,), "points")
-    rot = quat_to_matrix(poses[..., 3:])
+    rot = quat_to_matrix(poses[..., 3:]) if rotations is None else rotations
     return np.einsum("...ij,...nj->...ni", rot, pts) + poses[..., None, :3]
 
 

@@ -152,8 +152,7 @@ class TaskGeometry:
     def pred_parts(self, poses: np.ndarray) -> np.ndarray:
         """``(P, n, 3)`` normalized predicted points for ``poses (P, 7)``."""
         poses = self.check_poses(poses)
-        # apply_pose's arithmetic, with the rotations the rest of the checkpoint's scoring reuses
-        return (np.einsum("...ij,...nj->...ni", self.rotations(poses), self.clouds) + poses[..., None, :3]) / self.divisor
+        return apply_pose(poses, self.clouds, self.rotations(poses)) / self.divisor  # rotations reused by the scoring
 
     def rotations(self, poses: np.ndarray) -> np.ndarray:
         """``(..., 3, 3)`` rotation matrices of validated ``poses (..., 7)``
