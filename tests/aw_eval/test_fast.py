@@ -108,3 +108,84 @@ def test_coarse_stage_is_the_protocol_icp_on_the_subset():
         obj, r, tr = ref.icp(p, t, r0[k], t0[k], max_iters=8, tol=1e-9)
         assert close(objs[k], obj, rel=1e-12)
         assert np.allclose(rs[k], r, atol=1e-12) and np.allclose(ts[k], tr, atol=1e-12)
+
+
+def _nudged_trajectory(geom, n: int, seed: int = 0) -> np.ndarray:
+    """``n`` checkpoints ``(n, P, 7)``: the target poses with one part off by a few percent, then
+    one small nudge of one part per checkpoint (a trajectory near its end)."""
+    rng = np.random.default_rng(seed)
+    poses = np.array(geom.target_poses, dtype=float)
+    poses[0, 0] += 0.05 * geom.divisor
+    out = []
+    for k in range(n):
+        poses = poses.copy()
+        poses[k % len(poses), :3] += rng.normal(scale=2e-3, size=3) * geom.divisor
+        out.append(poses)
+    return np.stack(out)
+
+
+def test_same_basin_bounds_rotation_and_translation():
+    from scipy.spatial.transform import Rotation
+
+    from aw_eval.results import Registration
+
+    def reg(deg, t):
+        return Registration(0.0, Rotation.from_rotvec([0.0, 0.0, np.radians(deg)]).as_matrix(), np.array([t, 0.0, 0.0]), 0, None)
+
+    assert fast.same_basin(reg(0, 0), reg(4.9, 0.04), 5.0, 0.05)
+    assert not fast.same_basin(reg(0, 0), reg(5.1, 0.0), 5.0, 0.05)
+    assert not fast.same_basin(reg(0, 0), reg(0.0, 0.051), 5.0, 0.05)
+
+
+def test_escalation_starts_from_a_warm_registration_in_the_same_basin():
+    from aw_eval.engine import prediction_problem, task_context
+    from aw_eval.results import Registration
+
+    geom, obj = small_task(4, n_points=24, seed=3, max_iters=60)
+    cks = _nudged_trajectory(geom, 2)
+    ctx = task_context(geom)
+    prev_pp = geom.pred_parts(cks[0])
+    prev = fast.escalate(geom, ctx, cks[0], prev_pp, fast.register_fast(geom, ctx, cks[0], prev_pp))
+    pp = geom.pred_parts(cks[1])
+    reg = fast.register_fast(geom, ctx, cks[1], pp)
+    assert fast.same_basin(prev, reg, fast.FAST.warm_deg, fast.FAST.warm_t)
+    st = geom.settings
+    from_warm = prediction_problem(geom, ctx, cks[1], pp).run(prev.rotation, prev.translation, st.max_iters, st.tol)
+    got = fast.escalate(geom, ctx, cks[1], pp, reg, warm=prev)
+    want = from_warm if from_warm.objective < reg.scd else reg
+    assert got.scd == min(from_warm.objective, reg.scd) and np.array_equal(got.rotation, want.rotation)
+    # a registration of another basin is ignored: the refinement starts at the fast transform
+    far = Registration(prev.scd, prev.rotation @ np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+                       prev.translation, 0, None)
+    alone = fast.escalate(geom, ctx, cks[1], pp, reg)
+    ignored = fast.escalate(geom, ctx, cks[1], pp, reg, warm=far)
+    assert ignored.scd == alone.scd and np.array_equal(ignored.rotation, alone.rotation)
+
+
+def test_fast_batch_is_scored_as_a_trajectory(monkeypatch):
+    """``score_batch`` in fast mode passes each row's refined registration to the next row's
+    escalation; its first row, and ``score`` on any row, start cold."""
+    from aw_eval.engine import finalize, task_context
+    from aw_eval.results import Registration
+
+    monkeypatch.setattr(fast, "FAST", fast.FastSettings(margin=1e12))  # every row is refined
+    geom, obj = small_task(4, n_points=120, seed=3, max_iters=100)
+    cks = _nudged_trajectory(geom, 4)
+    b = aw_eval.score_batch(geom, cks, mode="fast")
+    first = aw_eval.score(geom, cks[0], mode="fast")
+    assert b.scd[0] == first.scd and np.array_equal(b.part_errors[0], first.part_errors)
+    ctx = task_context(geom)
+    warmed = 0
+    for k in range(1, len(cks)):
+        pp = geom.pred_parts(cks[k])
+        reg = fast.register_fast(geom, ctx, cks[k], pp)
+        warm = Registration(b.scd[k - 1], b.reg_rotation[k - 1], b.reg_translation[k - 1], 0, None)
+        want = finalize(geom, ctx, cks[k], pp, fast.escalate(geom, ctx, cks[k], pp, reg, warm=warm), "fast")
+        assert b.scd[k] == want.scd and np.array_equal(b.part_errors[k], want.part_errors)
+        assert b.pa[k] == want.pa and b.sr[k] == want.sr
+        cold = aw_eval.score(geom, cks[k], mode="fast")
+        warmed += cold.scd != b.scd[k]
+    assert warmed  # the warm start changed at least one refinement's last digits
+    # exact rows stay independent of their neighbours
+    e = aw_eval.score_batch(geom, cks[::-1], mode="exact")
+    assert e.scd[0] == aw_eval.score(geom, cks[-1], mode="exact").scd
