@@ -96,8 +96,11 @@ def checkpoint_rotations(geom: TaskGeometry, poses: np.ndarray) -> tuple[np.ndar
     return geom.rotations(poses), geom.target_rotations()
 
 
-def register_points(prob: ICPProblem, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float) -> Registration:
-    """Every start refined by the protocol's ICP; the lowest objective wins, ties to the earlier."""
+def register_points(prob: ICPProblem, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float,
+                    after_first=None) -> Registration:
+    """Every start refined by the protocol's ICP; the lowest objective wins, ties to the earlier.
+    ``after_first``: optional ``(problem, first start's ICPResult) -> problem`` for the remaining
+    starts (the same registration problem with another search structure: same answers)."""
     objs = np.empty(len(r0))
     best = None
     for k in range(len(r0)):
@@ -105,6 +108,8 @@ def register_points(prob: ICPProblem, r0: np.ndarray, t0: np.ndarray, max_iters:
         objs[k] = res.objective
         if best is None or res.objective < best[0]:
             best = (res.objective, res.rotation, res.translation, k)
+        if k == 0 and after_first is not None:
+            prob = after_first(prob, res)
     return Registration(float(best[0]), best[1], best[2], int(best[3]), objs)
 
 
@@ -229,11 +234,40 @@ def finalize(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, pred_parts
     )
 
 
+# Part walks per backward search from which a prediction gets its own Delaunay graph (see
+# _own_graph_where_parts_touch). Measured on the first start (benchmarks/profile_icp.py and the
+# box final states of bench_score.py): 1.04-1.16 on the benchmark checkpoints, whose own graph
+# would cost more to build (0.08-1.2 s) than it saves (net -0.13 to -0.32 s); 1.47-1.53 on box
+# assemblies whose parts touch face to face, where it saves 1.1-2.0 s of 4.5-5.7 s.
+CONTACT_WALKS = 1.3
+
+
+def _own_graph_where_parts_touch(ctx: TaskContext, pred_parts: np.ndarray):
+    """``after_first`` hook of :func:`register_points` for ``exact``: where the first start's
+    backward search walked more than ``CONTACT_WALKS`` parts per query (parts in contact: every
+    query near a contact walks both parts), the remaining starts search the prediction's own
+    Delaunay graph instead (the union's Voronoi cells need one walk; a Qhull build per
+    checkpoint). The neighbours are exact either way; only the objective's summation order
+    changes (last digits)."""
+
+    def after_first(prob: ICPProblem, first) -> ICPProblem:
+        if first.part_searches == 0 or first.part_walks <= CONTACT_WALKS * first.part_searches:
+            return prob
+        tree_p = build_tree(pred_parts.reshape(-1, 3))
+        graph_p = graph_for(tree_p)
+        if graph_p is None:
+            return prob
+        return ICPProblem(tree_p.points, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p, graph_t=ctx.graph_t, graph_p=graph_p)
+
+    return after_first
+
+
 def _register_exact(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, pred_parts: np.ndarray) -> Registration:
     pred = np.ascontiguousarray(pred_parts.reshape(-1, 3))
     r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor, checkpoint_rotations(geom, poses))
     prob = prediction_problem(geom, ctx, poses, pred_parts)
-    return register_points(prob, r0, t0, geom.settings.max_iters, geom.settings.tol)
+    return register_points(prob, r0, t0, geom.settings.max_iters, geom.settings.tol,
+                           _own_graph_where_parts_touch(ctx, pred_parts))
 
 
 def register(pred, target, starts=None, settings=None) -> Registration:

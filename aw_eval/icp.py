@@ -116,11 +116,12 @@ class CertifiedNN:
 
 
 @njit(cache=True)
-def _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r, tr, fc, fx, fd, bc, bx, bd, fresh, xs, ys, stack, bounds):
+def _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r, tr, fc, fx, fd, bc, bx, bd, fresh, xs, ys, stack, bounds, stats):
     """Objective at ``(r, tr)`` and neighbours of both directions (tree positions into ``fc``,
     ``bc``); returns ``(objective, searched)``. ``p (n, 3)``, ``t (m, 3)`` in tree order (``p`` in
     the part clouds' order when ``parts = (clouds, A, b, divisor, warm)`` has parts: the
-    backward search then walks the parts' graphs, see :mod:`aw_eval.partwalk`)."""
+    backward search then walks the parts' graphs, see :mod:`aw_eval.partwalk`, adding its
+    searches and walks to ``stats (2,)``)."""
     n, m = p.shape[0], t.shape[0]
     for i in range(n):
         for k in range(3):
@@ -131,7 +132,7 @@ def _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r, tr, fc, fx, fd, bc, bx, bd
             ys[i, k] = r[0, k] * a + r[1, k] * b + r[2, k] * c
     searched = _certified_pass(tree_t, gt, xs, fc, fx, fd, fresh, stack, bounds)
     if parts[0][1].shape[0] > 0:
-        searched += parts_pass(parts[0], parts[1], parts[2], parts[3], ys, bc, bx, bd, fresh, parts[4])
+        searched += parts_pass(parts[0], parts[1], parts[2], parts[3], ys, bc, bx, bd, fresh, parts[4], stats)
     else:
         searched += _certified_pass(tree_p, gp, ys, bc, bx, bd, fresh, stack, bounds)
     sf = 0.0
@@ -214,16 +215,19 @@ def _icp(p, t, tree_t, tree_p, gt, gp, parts, r0, t0, max_iters, tol, stop_at):
     ys = np.empty((m, 3))
     stack = np.empty(STACK, np.int64)
     bounds = np.empty(STACK)
-    obj, searched = _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r0, t0, fc, fx, fd, bc, bx, bd, True, xs, ys, stack, bounds)
+    stats = np.zeros(2, np.int64)
+    obj, searched = _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r0, t0, fc, fx, fd, bc, bx, bd, True, xs, ys, stack, bounds,
+                              stats)
     best, best_r, best_t = obj, r0.copy(), t0.copy()
     prev = obj
     it = 0
     if obj <= stop_at:
-        return best, best_r, best_t, 0, searched
+        return best, best_r, best_t, 0, searched, stats
     while it < max_iters:
         it += 1
         r, tr = kabsch_pairs(p, t, fc, bc)
-        new, s = _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r, tr, fc, fx, fd, bc, bx, bd, False, xs, ys, stack, bounds)
+        new, s = _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r, tr, fc, fx, fd, bc, bx, bd, False, xs, ys, stack, bounds,
+                           stats)
         searched += s
         if new < best:
             best, best_r, best_t = new, r, tr
@@ -232,7 +236,7 @@ def _icp(p, t, tree_t, tree_p, gt, gp, parts, r0, t0, max_iters, tol, stop_at):
         if prev - new < tol:
             break
         prev = new
-    return best, best_r, best_t, it, searched
+    return best, best_r, best_t, it, searched, stats
 
 
 @njit(cache=True)
@@ -259,6 +263,8 @@ class ICPResult:
     translation: np.ndarray  # (3,)
     iterations: int  # Kabsch fits done
     searched: int  # query points that needed a tree search (both directions)
+    part_searches: int = 0  # of which backward searches through the parts' clouds (for_assembly)
+    part_walks: int = 0  # the part walks those took (several per search where parts touch)
 
 
 class ICPProblem:
@@ -309,9 +315,9 @@ class ICPProblem:
         r0 = np.ascontiguousarray(r0, dtype=np.float64)
         t0 = np.ascontiguousarray(t0, dtype=np.float64)
         stop = -np.inf if stop_at is None else float(stop_at)
-        obj, r, t, it, searched = _icp(self._p, self._t, tuple(self.tree_t), tuple(self.tree_p), self._gt, self._gp,
+        obj, r, t, it, searched, stats = _icp(self._p, self._t, tuple(self.tree_t), tuple(self.tree_p), self._gt, self._gp,
                                        self._parts, r0, t0, int(max_iters), float(tol), stop)
-        return ICPResult(float(obj), r, t, int(it), int(searched))
+        return ICPResult(float(obj), r, t, int(it), int(searched), int(stats[0]), int(stats[1]))
 
 
 _NO_PARTS = (tuple(no_part_clouds()), np.zeros((0, 3, 3)), np.zeros((0, 3)), 1.0, np.zeros(0, np.int64))

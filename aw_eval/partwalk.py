@@ -102,21 +102,23 @@ def _to_part(a, b, q, x0, x1, x2):
 
 @njit(cache=True)
 def parts_pass(clouds, a: np.ndarray, b: np.ndarray, divisor: float, x: np.ndarray, cand: np.ndarray,
-               xref: np.ndarray, slack: np.ndarray, fresh: bool, warm: np.ndarray) -> int:
+               xref: np.ndarray, slack: np.ndarray, fresh: bool, warm: np.ndarray, stats: np.ndarray) -> int:
     """Update ``cand (k,)`` (rows of ``clouds.points``) to the exact nearest neighbours of the
     queries ``x (k, 3)`` (normalized prediction frame) in the posed assembly; returns the number
     of queries searched. ``a (P, 3, 3)``, ``b (P, 3)``: :func:`part_maps` for ``divisor``.
     Certificate state as in :func:`aw_eval.icp._certified_pass`, in baked units: ``xref (k, 3)``
     (normalized) where each query was last searched, ``slack (k, 2)`` the union's second-nearest
     squared distance (a lower bound) and the squared union margin less a safety margin (-1 where
-    none is left). ``warm (P,)``: scratch for each part's last answer."""
+    none is left). ``warm (P,)``: scratch for each part's last answer. ``stats (2,)`` int64 adds
+    the queries searched and the part walks they took (more than one walk per search where the
+    query is within reach of several parts: parts in contact)."""
     pts, offsets, part_of, _, lo, hi, graph = clouds
     n_parts = offsets.shape[0] - 1
     scale = divisor * divisor  # normalized -> baked squared distances
     safety = _SAFETY * divisor
     for q in range(n_parts):
         warm[q] = offsets[q]
-    searched = 0
+    searched = walks = 0
     for i in range(x.shape[0]):
         x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
         hint = -1
@@ -148,6 +150,7 @@ def parts_pass(clouds, a: np.ndarray, b: np.ndarray, divisor: float, x: np.ndarr
                 if e * e + f * f + g * g < u * u + v * v + w * w:
                     j = hint
             j, d1, d2, margin = walk(pts, graph, c0, c1, c2, j)
+            walks += 1
             warm[q] = j
             if d1 < best:
                 other = min(other, best)
@@ -160,4 +163,6 @@ def parts_pass(clouds, a: np.ndarray, b: np.ndarray, divisor: float, x: np.ndarr
         slack[i, 1] = margin * margin if margin > 0.0 else -1.0
         xref[i, 0], xref[i, 1], xref[i, 2] = x0, x1, x2
         searched += 1
+    stats[0] += searched
+    stats[1] += walks
     return searched

@@ -38,15 +38,17 @@ def test_nearest_in_the_union_along_a_moving_path(n_parts):
     a, b = part_maps(poses, divisor)
     x = np.concatenate([rng.normal(size=(200, 3)) * 0.4, rng.normal(size=(100, 3)) * 3.0, union[::7] + 1e-3])
     cand, xref, slack = np.zeros(len(x), np.int64), np.zeros((len(x), 3)), np.zeros((len(x), 2))
-    warm = np.zeros(n_parts, np.int64)
+    warm, stats = np.zeros(n_parts, np.int64), np.zeros(2, np.int64)
     drift = rng.normal(size=x.shape) * 0.004
     searched = []
     for step in range(25):
         xs = np.ascontiguousarray(x + step * drift + 0.01 * np.sin(step) * np.array([1.0, -0.5, 0.2]))
-        searched.append(parts_pass(tuple(clouds), a, b, divisor, xs, cand, xref, slack, step == 0, warm))
+        searched.append(parts_pass(tuple(clouds), a, b, divisor, xs, cand, xref, slack, step == 0, warm, stats))
         want, _ = _brute(xs, union)
         assert np.array_equal(cand, want), step
     assert searched[0] == len(x) and min(searched[1:]) < len(x) // 2  # the certificates do hold points
+    # every search walks at least the part it ends in, at most every part
+    assert stats[0] == sum(searched) and stats[0] <= stats[1] <= n_parts * stats[0]
 
 
 def test_certificate_state_bounds_the_union():
@@ -59,7 +61,7 @@ def test_certificate_state_bounds_the_union():
     a, b = part_maps(poses, divisor)
     x = np.ascontiguousarray(rng.normal(size=(300, 3)))
     cand, xref, slack = np.zeros(len(x), np.int64), np.zeros((len(x), 3)), np.zeros((len(x), 2))
-    parts_pass(tuple(clouds), a, b, divisor, x, cand, xref, slack, True, np.zeros(4, np.int64))
+    parts_pass(tuple(clouds), a, b, divisor, x, cand, xref, slack, True, np.zeros(4, np.int64), np.zeros(2, np.int64))
     nearest, d = _brute(x, union)
     assert np.array_equal(cand, nearest)
     assert np.all(slack[:, 0] <= d[:, 1] * divisor**2 * (1 + 1e-12))
