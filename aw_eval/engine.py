@@ -1,9 +1,10 @@
 """Scoring of checkpoints: registration, part matching and metrics (``exact`` and ``fast`` modes).
 
 ``exact`` runs every start of the protocol at full resolution with the same arithmetic as
-:mod:`aw_eval.reference` (so results equal the reference's), using KD-trees built once per task
-(target) and once per checkpoint (prediction) and certified warm-started neighbours
-(:mod:`aw_eval.icp`). ``fast`` (:mod:`aw_eval.fast`) prunes starts coarse-to-fine.
+:mod:`aw_eval.reference` (so results equal the reference's), with certified warm-started
+neighbours (:mod:`aw_eval.icp`) in search structures built once per task (the target's, the
+parts' baked clouds'); a prediction whose parts touch gets its own Delaunay graph after the
+first start (:data:`CONTACT_WALKS`). ``fast`` (:mod:`aw_eval.fast`) prunes starts coarse-to-fine.
 
 Scoring one checkpoint (:func:`score`) is a pure function of ``(geometry, poses, mode)``. A batch
 (:func:`score_batch`) removes duplicate rows; in ``fast`` mode it also reads its rows as a
