@@ -49,7 +49,7 @@ __all__ = ["FastSettings", "register_fast", "coarse_icp", "escalate", "near_thre
 @dataclass(frozen=True)
 class FastSettings:
     coarse: int = 16
-    coarse_iters: int = 8
+    coarse_iters: int = 15
     medium: int = 50
     medium_iters: int = 15
     keep: int = 2
