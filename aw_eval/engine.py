@@ -135,8 +135,16 @@ def prediction_problem(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, 
     if ctx.part_clouds is not None:
         return ICPProblem.for_assembly(pred_parts, poses, geom.divisor, ctx.part_clouds, ctx.target, tree_t=ctx.tree_t,
                                        graph_t=ctx.graph_t, rotations=geom.rotations(poses))
+    return _own_structures_problem(ctx, pred_parts)[0]
+
+
+def _own_structures_problem(ctx: TaskContext, pred_parts: np.ndarray) -> tuple[ICPProblem, bool]:
+    """ICP of the prediction ``pred_parts (P, n, 3)`` searched through its own KD-tree and
+    Delaunay graph (built here, per checkpoint); the flag says whether Qhull gave a graph."""
     tree_p = build_tree(pred_parts.reshape(-1, 3))
-    return ICPProblem(tree_p.points, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p, graph_t=ctx.graph_t, graph_p=graph_for(tree_p))
+    graph_p = graph_for(tree_p)
+    prob = ICPProblem(tree_p.points, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p, graph_t=ctx.graph_t, graph_p=graph_p)
+    return prob, graph_p is not None
 
 
 def _part_cd(ctx: TaskContext, moved_parts: np.ndarray, to_baked: tuple, i: int, j: int) -> float:
@@ -254,11 +262,8 @@ def _own_graph_where_parts_touch(ctx: TaskContext, pred_parts: np.ndarray):
     def after_first(prob: ICPProblem, first) -> ICPProblem:
         if first.part_searches == 0 or first.part_walks <= CONTACT_WALKS * first.part_searches:
             return prob
-        tree_p = build_tree(pred_parts.reshape(-1, 3))
-        graph_p = graph_for(tree_p)
-        if graph_p is None:
-            return prob
-        return ICPProblem(tree_p.points, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p, graph_t=ctx.graph_t, graph_p=graph_p)
+        own, has_graph = _own_structures_problem(ctx, pred_parts)
+        return own if has_graph else prob
 
     return after_first
 

@@ -157,17 +157,18 @@ def _dedupe_starts(r0: np.ndarray, t0: np.ndarray, tol: float) -> np.ndarray:
     return np.asarray(kept, dtype=np.int64)
 
 
+def _within(ra: np.ndarray, ta: np.ndarray, rb: np.ndarray, tb: np.ndarray, cos_lim: float, max_t: float) -> bool:
+    """Rotations ``(3, 3)`` closer than the angle whose cosine is ``cos_lim`` and translations
+    ``(3,)`` within ``max_t`` of each other."""
+    c = (np.trace(ra.T @ rb) - 1.0) / 2.0
+    return bool(c > cos_lim and np.linalg.norm(ta - tb) <= max_t)
+
+
 def _distinct(order, r, t, keep: int, deg: float, dt: float) -> list[int]:
     chosen: list[int] = []
     cos_lim = np.cos(np.radians(deg))
     for k in order:
-        ok = True
-        for j in chosen:
-            c = (np.trace(r[k].T @ r[j]) - 1.0) / 2.0
-            if c > cos_lim and np.linalg.norm(t[k] - t[j]) <= dt:
-                ok = False
-                break
-        if ok:
+        if not any(_within(r[k], t[k], r[j], t[j], cos_lim, dt) for j in chosen):
             chosen.append(int(k))
             if len(chosen) == keep:
                 break
@@ -226,8 +227,7 @@ def near_threshold(result, settings, margin: float) -> bool:
 def same_basin(a: Registration, b: Registration, max_deg: float, max_t: float) -> bool:
     """True when two registrations' rotations are within ``max_deg`` degrees and their
     translations within ``max_t`` (normalized units) of each other."""
-    c = (np.trace(a.rotation.T @ b.rotation) - 1.0) / 2.0
-    return bool(c > np.cos(np.radians(max_deg)) and np.linalg.norm(a.translation - b.translation) <= max_t)
+    return _within(a.rotation, a.translation, b.rotation, b.translation, np.cos(np.radians(max_deg)), max_t)
 
 
 def escalate(geom, ctx, poses: np.ndarray, pred_parts: np.ndarray, reg: Registration,
