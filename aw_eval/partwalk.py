@@ -12,11 +12,11 @@ and a query is walked in each part's graph in that part's baked frame (``c = A_q
 - the parts' graphs are stored as one disjoint graph (no edge joins two parts), so a walk started
   in a part stays in it; each part keeps the last answer of the previous query as its warm start
   (queries come in a spatially coherent order);
-- certificates for the next query of a moving point (see :mod:`aw_eval.icp`): the second-nearest
-  distance of the union is at least ``min(d2 in the winning part, nearest distance of any other
-  part)`` (ball certificate), and the winner stays nearest while the query moves less than
-  ``min(its Voronoi margin in its part, (other - nearest) / 2)`` (every other part's distance
-  shrinks by at most the motion while the winner's grows by at most as much).
+- the certificate for the next query of a moving point (see :mod:`aw_eval.icp`): the winner
+  stays nearest while the query moves less than ``min(its Voronoi margin in its part, (other -
+  nearest) / 2)`` (every other part's distance shrinks by at most the motion while the
+  winner's grows by at most as much). Queries are certified first, then those that failed are
+  searched, in order (:func:`aw_eval.delaunay.uncertified`).
 
 Exact (up to exact distance ties), like the walks it is made of. Distances are compared in
 baked units (normalized distance times the divisor; rigid maps keep the order).
@@ -33,7 +33,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from aw_eval.delaunay import DelaunayGraph, walk
+from aw_eval.delaunay import DelaunayGraph, uncertified, walk
 from aw_eval.kdtree import box_d2
 
 __all__ = ["PartClouds", "build_part_clouds", "no_part_clouds", "part_maps", "parts_pass"]
@@ -107,9 +107,8 @@ def parts_pass(clouds, a: np.ndarray, b: np.ndarray, divisor: float, x: np.ndarr
     queries ``x (k, 3)`` (normalized prediction frame) in the posed assembly; returns the number
     of queries searched. ``a (P, 3, 3)``, ``b (P, 3)``: :func:`part_maps` for ``divisor``.
     Certificate state as in :func:`aw_eval.icp._certified_pass`, in baked units: ``xref (k, 3)``
-    (normalized) where each query was last searched, ``slack (k, 2)`` the union's second-nearest
-    squared distance (a lower bound) and the squared union margin less a safety margin (-1 where
-    none is left). ``warm (P,)``: scratch for each part's last answer. ``stats (2,)`` int64 adds
+    (normalized) where each query was last searched, ``slack (k, 2)``: column 1 the squared
+    union margin less a safety margin (-1 where none is left; column 0 is not used here). ``warm (P,)``: scratch for each part's last answer. ``stats (2,)`` int64 adds
     the queries searched and the part walks they took (more than one walk per search where the
     query is within reach of several parts: parts in contact)."""
     pts, offsets, part_of, _, lo, hi, graph = clouds
@@ -118,22 +117,20 @@ def parts_pass(clouds, a: np.ndarray, b: np.ndarray, divisor: float, x: np.ndarr
     safety = _SAFETY * divisor
     for q in range(n_parts):
         warm[q] = offsets[q]
-    searched = walks = 0
-    for i in range(x.shape[0]):
+    todo = np.empty(x.shape[0], np.int64)
+    if fresh:
+        searched = x.shape[0]
+        for i in range(searched):
+            todo[i] = i
+    else:
+        searched = uncertified(x, xref, slack[:, 1], scale, todo)
+    walks = 0
+    for k in range(searched):
+        i = todo[k]
         x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
-        hint = -1
-        if not fresh:
-            hint = cand[i]
-            e, f, g = x0 - xref[i, 0], x1 - xref[i, 1], x2 - xref[i, 2]
-            moved2 = (e * e + f * f + g * g) * scale
-            if moved2 < slack[i, 1]:
-                continue
-            c0, c1, c2 = _to_part(a, b, part_of[hint], x0, x1, x2)
-            u, v, w = c0 - pts[hint, 0], c1 - pts[hint, 1], c2 - pts[hint, 2]
-            if np.sqrt(u * u + v * v + w * w) + np.sqrt(moved2) + safety < np.sqrt(slack[i, 0]):
-                continue
+        hint = -1 if fresh else cand[i]
         first = part_of[hint] if hint >= 0 else (part_of[cand[i - 1]] if i > 0 else 0)
-        best, best_j, best_d2, best_margin, other = np.inf, -1, np.inf, np.inf, np.inf
+        best, best_j, best_margin, other = np.inf, -1, np.inf, np.inf
         for step in range(n_parts):
             q = first + step
             if q >= n_parts:
@@ -149,20 +146,18 @@ def parts_pass(clouds, a: np.ndarray, b: np.ndarray, divisor: float, x: np.ndarr
                 e, f, g = c0 - pts[hint, 0], c1 - pts[hint, 1], c2 - pts[hint, 2]
                 if e * e + f * f + g * g < u * u + v * v + w * w:
                     j = hint
-            j, d1, d2, margin = walk(pts, graph, c0, c1, c2, j)
+            j, d1, _, margin = walk(pts, graph, c0, c1, c2, j)
             walks += 1
             warm[q] = j
             if d1 < best:
                 other = min(other, best)
-                best, best_j, best_d2, best_margin = d1, j, d2, margin
+                best, best_j, best_margin = d1, j, margin
             else:
                 other = min(other, d1)
         cand[i] = best_j
-        slack[i, 0] = min(best_d2, other)
         margin = min(best_margin, 0.5 * (np.sqrt(other) - np.sqrt(best))) - safety
         slack[i, 1] = margin * margin if margin > 0.0 else -1.0
         xref[i, 0], xref[i, 1], xref[i, 2] = x0, x1, x2
-        searched += 1
     stats[0] += searched
     stats[1] += walks
     return searched
