@@ -30,7 +30,8 @@ duplicate points); callers then keep the KD-tree search.
 A walk is a few scans of about 14 neighbours, and a scan is two minima (distance and margin)
 over them: it runs in explicit 4-wide SIMD vectors (:func:`_scan`; numba leaves such
 min-reductions scalar), over rows padded to whole vectors with far sentinels. Same numbers,
-bitwise, 2.2x faster per scan.
+bitwise (ICP about 30% faster with it and the
+certificate pass of :func:`uncertified`: docs/performance.md, round 7).
 
 Arrays: ``points (n, 3)`` float64; the graph in CSR form ``indptr (n + 1,)``, ``indices (nnz,)``,
 with per-edge ``coords (3, nnz)`` and ``half_inv (nnz,)`` (see :class:`DelaunayGraph`).
