@@ -47,7 +47,7 @@ from numba import njit, types
 from numba.extending import intrinsic
 from scipy.spatial import Delaunay, QhullError
 
-__all__ = ["DelaunayGraph", "build_graph", "walk", "no_graph", "uncertified"]
+__all__ = ["DelaunayGraph", "build_graph", "walk", "no_graph", "uncertified", "to_search"]
 
 
 # Every row of a graph holds a multiple of LANES entries (padded with SENTINEL neighbours), so
@@ -203,12 +203,22 @@ def uncertified(x: np.ndarray, xref: np.ndarray, margin2: np.ndarray, scale: flo
     """The queries of ``x (k, 3)`` that moved as far as their Voronoi margin since they were
     searched at ``xref (k, 3)`` (``margin2 (k,)``: squared margins less the safety margin, in
     units whose squares are ``scale`` times those of ``x``), in order, into ``todo``; returns
-    their count. Branch-free: during ICP about half the
-    queries fail, in no pattern a branch predictor learns, and a branch per query cost more
-    than this pass."""
+    their count. Branch-free: during ICP about half the queries fail, in no pattern a branch
+    predictor learns, and a branch per query cost more than this pass."""
     count = 0
     for i in range(x.shape[0]):
         e, f, g = x[i, 0] - xref[i, 0], x[i, 1] - xref[i, 1], x[i, 2] - xref[i, 2]
         todo[count] = i
         count += 0 if (e * e + f * f + g * g) * scale < margin2[i] else 1  # moved + margin, without a root
     return count
+
+
+@njit(cache=True)
+def to_search(x: np.ndarray, xref: np.ndarray, margin2: np.ndarray, scale: float, fresh: bool, todo: np.ndarray) -> int:
+    """The queries of a certified pass to search, in order, into ``todo``; returns their count:
+    every query of a ``fresh`` pass (no certificate yet), else :func:`uncertified`."""
+    if not fresh:
+        return uncertified(x, xref, margin2, scale, todo)
+    for i in range(x.shape[0]):
+        todo[i] = i
+    return x.shape[0]

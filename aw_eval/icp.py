@@ -14,8 +14,8 @@ up to floating-point summation order; only the nearest-neighbour search differs:
   distance from ``x_ref`` to the nearest face of ``j``'s Voronoi cell; see
   :mod:`aw_eval.delaunay`), which stays wide far from the cloud; else the ball one (nearest
   ``j``, second-nearest distance ``d2``: ``j`` stays while ``|x - y_j| + |x - x_ref| < d2``).
-  Checking the ball one as well where there is a graph certified 18% more queries but cost
-  more than their searches (its roots, a branch per query);
+  Checking the ball one as well where there is a graph saved 1-3% of the searches and cost
+  more than they did (its roots, a branch per query);
 - a point that fails both is searched again: by a walk on the Delaunay graph from its previous
   neighbour (or from the previous query's answer, when nearer), else by a warm-started KD-tree
   search (:func:`aw_eval.kdtree.nearest2`) where Qhull gave no graph. Either way the result is
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from aw_eval.delaunay import DelaunayGraph, build_graph, no_graph, uncertified, walk
+from aw_eval.delaunay import DelaunayGraph, build_graph, no_graph, to_search, walk
 from aw_eval.kdtree import STACK, KDTree, build_tree, nearest2
 from aw_eval.partwalk import PartClouds, build_part_clouds, no_part_clouds, part_maps, parts_pass
 
@@ -54,22 +54,18 @@ def _certified_pass(tree, graph, x: np.ndarray, cand: np.ndarray, xref: np.ndarr
     (graph searches, -1 where none is left; see :mod:`aw_eval.delaunay`).
     ``graph``: Delaunay graph of the tree's points in tree order (empty: KD-tree searches).
 
-    With a graph only the Voronoi certificate is checked: the ball one certified 18% of the
-    queries that failed it, and its three roots cost more than the searches it saved
+    With a graph only the Voronoi certificate is checked: the ball one saved 1-3% of the
+    searches, and its three roots cost more than those searches
     (``docs/performance.md``, round 7). The certificates are checked first, then the queries
     that failed are searched, in order."""
     pts = tree[0]
     use_graph = graph[0].shape[0] > 0
     k = x.shape[0]
     todo = np.empty(k, np.int64)
-    count = 0
-    if fresh:
-        for i in range(k):
-            todo[i] = i
-        count = k
-    elif use_graph:
-        count = uncertified(x, xref, slack[:, 1], 1.0, todo)
+    if fresh or use_graph:
+        count = to_search(x, xref, slack[:, 1], 1.0, fresh, todo)
     else:
+        count = 0
         for i in range(k):
             x0, x1, x2 = x[i, 0], x[i, 1], x[i, 2]
             j = cand[i]

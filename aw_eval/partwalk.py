@@ -16,7 +16,7 @@ and a query is walked in each part's graph in that part's baked frame (``c = A_q
   stays nearest while the query moves less than ``min(its Voronoi margin in its part, (other -
   nearest) / 2)`` (every other part's distance shrinks by at most the motion while the
   winner's grows by at most as much). Queries are certified first, then those that failed are
-  searched, in order (:func:`aw_eval.delaunay.uncertified`).
+  searched, in order (:func:`aw_eval.delaunay.to_search`).
 
 Exact (up to exact distance ties), like the walks it is made of. Distances are compared in
 baked units (normalized distance times the divisor; rigid maps keep the order).
@@ -33,7 +33,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from aw_eval.delaunay import DelaunayGraph, uncertified, walk
+from aw_eval.delaunay import DelaunayGraph, to_search, walk
 from aw_eval.kdtree import box_d2
 
 __all__ = ["PartClouds", "build_part_clouds", "no_part_clouds", "part_maps", "parts_pass"]
@@ -108,7 +108,8 @@ def parts_pass(clouds, a: np.ndarray, b: np.ndarray, divisor: float, x: np.ndarr
     of queries searched. ``a (P, 3, 3)``, ``b (P, 3)``: :func:`part_maps` for ``divisor``.
     Certificate state as in :func:`aw_eval.icp._certified_pass`, in baked units: ``xref (k, 3)``
     (normalized) where each query was last searched, ``slack (k, 2)``: column 1 the squared
-    union margin less a safety margin (-1 where none is left; column 0 is not used here). ``warm (P,)``: scratch for each part's last answer. ``stats (2,)`` int64 adds
+    union margin less a safety margin (-1 where none is left; column 0 is not used here).
+    ``warm (P,)``: scratch for each part's last answer. ``stats (2,)`` int64 adds
     the queries searched and the part walks they took (more than one walk per search where the
     query is within reach of several parts: parts in contact)."""
     pts, offsets, part_of, _, lo, hi, graph = clouds
@@ -118,12 +119,7 @@ def parts_pass(clouds, a: np.ndarray, b: np.ndarray, divisor: float, x: np.ndarr
     for q in range(n_parts):
         warm[q] = offsets[q]
     todo = np.empty(x.shape[0], np.int64)
-    if fresh:
-        searched = x.shape[0]
-        for i in range(searched):
-            todo[i] = i
-    else:
-        searched = uncertified(x, xref, slack[:, 1], scale, todo)
+    searched = to_search(x, xref, slack[:, 1], scale, fresh, todo)
     walks = 0
     for k in range(searched):
         i = todo[k]
