@@ -426,8 +426,8 @@ class Episode:
         changed = self.scene.set_pose(id, position, quaternion)
         return _Outcome(self._status(changed), changed)
 
-    def _group(self, ids, name=None) -> _Outcome:
-        g = self.scene.group(ids, name)
+    def _group(self, ids, name=None, exclusive=False) -> _Outcome:
+        g = self.scene.group(ids, name, exclusive)
         return _Outcome({"status": "ok", "group": self.scene.group_record(g.id), "changed": []})
 
     def _ungroup(self, ids) -> _Outcome:
@@ -438,6 +438,19 @@ class Episode:
         cam = self.scene.move_camera(yaw, pitch, zoom, right, up)
         return _Outcome({"status": "ok", "camera": cam.describe()})
 
+    def ensure_started(self) -> None:
+        """Start the episode clock and budget if they are not running, without recording a call:
+        the official surface starts the episode with the agent's first page-tool call."""
+        with self._lock:
+            if self._t0 is None and not self._closed:
+                self._begin()
+
+    def _begin(self) -> None:
+        self._t0 = self._clock()
+        self._timer = threading.Timer(self.budget_s + 0.05, self._on_timer)
+        self._timer.daemon = True
+        self._timer.start()
+
     def _start(self, task=None) -> _Outcome:
         if task is not None and (not isinstance(task, str) or len(task) > MAX_GROUP_NAME):
             raise SceneError(f"task must be a string of at most {MAX_GROUP_NAME} characters")
@@ -447,10 +460,7 @@ class Episode:
                 "message": f"the episode was already started {self.elapsed():.1f} s ago; nothing changed",
                 "episode": self.episode_info(),
             })
-        self._t0 = self._clock()
-        self._timer = threading.Timer(self.budget_s + 0.05, self._on_timer)
-        self._timer.daemon = True
-        self._timer.start()
+        self._begin()
         return _Outcome({
             "status": "ok",
             "message": f"episode started; the execution budget is {self.budget_s / 60:.4g} minutes",

@@ -245,14 +245,24 @@ class Scene:
         return self._commit({id: p})
 
     # ---------------------------------------------------------------- groups
-    def group(self, ids, name: str | None = None) -> Group:
-        """Create a logical transform group; nothing moves or snaps."""
+    def group(self, ids, name: str | None = None, exclusive: bool = False) -> Group:
+        """Create a logical transform group; nothing moves or snaps.
+
+        ``exclusive`` gives the official runtime's rule: the group needs at least two objects,
+        and every existing group that shares a member with it is dissolved first."""
         members = self.resolve(ids)
+        if not isinstance(exclusive, bool):
+            raise SceneError("exclusive must be true or false")
+        if exclusive and len(members) < 2:
+            raise SceneError("ids must name at least two objects to group (a group id counts its members)")
         if name is not None:
             if not isinstance(name, str):
                 raise SceneError("name must be a string")
             if len(name) > MAX_GROUP_NAME:
                 raise SceneError(f"name must be at most {MAX_GROUP_NAME} characters")
+        if exclusive:
+            for gid in [g.id for g in self.groups.values() if set(g.members) & set(members)]:
+                del self.groups[gid]
         gid = f"g{self._next_group}"
         while gid in self.groups or gid in self.parts:
             self._next_group += 1

@@ -2,6 +2,7 @@
 
     aw-serve TASK_DIR --record RUN_DIR [--system LABEL] [--budget-minutes 60]
              [--transport stdio|http] [--host 127.0.0.1] [--port 8765] [--overwrite]
+             [--surface default|official]
     aw-serve TASK_DIR --print-prompt        # the task text, then exit
     aw-serve TASK_DIR --print-references    # absolute paths of the reference images, in order
 
@@ -60,6 +61,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--host", default="127.0.0.1", help="HTTP bind address (default 127.0.0.1, loopback only)")
     p.add_argument("--port", type=_port, default=8765, help="HTTP port (default 8765)")
     p.add_argument("--overwrite", action="store_true", help="replace an earlier recording in RUN_DIR")
+    p.add_argument("--surface", choices=("default", "official"), default="default",
+                   help="tools the agent sees: the project's scene tools (default), or the official benchmark's "
+                        "list_pages / list_webmcp_tools / execute_webmcp_tool / read_manual_page")
     p.add_argument("--print-prompt", action="store_true", help="print the task text and exit")
     p.add_argument("--print-references", action="store_true",
                    help="print the reference image paths (absolute, in order, one per line) and exit")
@@ -114,7 +118,10 @@ def main(argv: list[str] | None = None) -> int:
         if hasattr(signal, name):
             signal.signal(getattr(signal, name), on_signal)
 
-    from aw_server.app import build_server
+    if args.surface == "official":
+        from aw_server.official_surface import build_official_server as build_server
+    else:
+        from aw_server.app import build_server
 
     reason, message = "disconnect", ""
     try:
