@@ -32,12 +32,12 @@ from PIL import Image as PILImage
 
 from mcp.server.mcpserver import MCPServer
 from mcp.server.mcpserver.tools import Tool
-from mcp.server.mcpserver.utilities.func_metadata import FuncMetadata
+from mcp.server.mcpserver.utilities.func_metadata import ArgModelBase, FuncMetadata
 from mcp_types import CallToolResult, ImageContent, TextContent, ToolAnnotations
 
 from aw.episode import Episode
 from aw.webmcp import NotRegistered, WebMcpPage, check_arguments
-from aw_server.tools import CONVENTIONS_TEXT, NoArgs
+from aw_server.tools import CONVENTIONS_TEXT
 
 SERVER_NAME = "assembly-browser"
 PAGE_ID = 1
@@ -82,6 +82,10 @@ def _text(text: str, *, error: bool = False) -> CallToolResult:
     return CallToolResult(content=[TextContent(type="text", text=text)], is_error=error)
 
 
+class _RawArgs(ArgModelBase):
+    """Placeholder model: the meta-tools check their raw arguments themselves (``check_arguments``)."""
+
+
 class _MetaTool(Tool):
     """A tool that takes its raw arguments and returns a finished ``CallToolResult``."""
 
@@ -94,7 +98,7 @@ class _MetaTool(Tool):
 def _tool(name: str, handler: Callable[[dict], CallToolResult], read_only: bool) -> _MetaTool:
     return _MetaTool(
         fn=handler, name=name, title=name.replace("_", " "), description=DESCRIPTIONS[name],
-        parameters=META_SCHEMAS[name], fn_metadata=FuncMetadata(arg_model=NoArgs), is_async=False,
+        parameters=META_SCHEMAS[name], fn_metadata=FuncMetadata(arg_model=_RawArgs), is_async=False,
         annotations=ToolAnnotations(read_only_hint=read_only, open_world_hint=False), handler=handler,
     )
 
