@@ -283,9 +283,10 @@ class WebMcpPage:
 
     def not_registered_message(self, name: Any) -> str:
         why = ""
-        if name in PAGE_TOOLS:
-            why = " (it needs physics, which is disabled in this episode)" if name in ("apply_force", "advance_simulation") \
-                else " (it is not enabled in this episode)"
+        if name in ("apply_force", "advance_simulation"):
+            why = " (it needs physics, which is disabled in this episode)"
+        elif name in PAGE_TOOLS:
+            why = " (it is not enabled in this episode)"
         return (f"toolName {_short(name)} is not registered on the episode page{why}; "
                 f"registered tools: {', '.join(self.tools)}")
 

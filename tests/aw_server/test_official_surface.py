@@ -94,7 +94,8 @@ async def test_meta_tools_and_every_page_tool(manual_task, tmp_path):
         _, scene, _ = await execute(c, "get_scene", {})
         assert (scene["units"], scene["up"], scene["quaternion"]) == ("normalized", "Z", "wxyz")
         assert scene["runtime"]["physics"]["enabled"] is False
-        assert "apply_force" not in scene["runtime"]["enabledTools"] and "capture_scene" in scene["runtime"]["enabledTools"]
+        enabled = scene["runtime"]["enabledTools"]
+        assert "apply_force" not in enabled and "capture_scene" in enabled
         assert [o["id"] for o in scene["objects"]] == ["part-0001", "part-0002", "part-0003"]
         _, objs, _ = await execute(c, "list_objects", {})
         assert [o["name"] for o in objs["objects"]] == ["Part p01", "Part p02", "Part p03"] and objs["groups"] == []
