@@ -263,3 +263,14 @@ async def test_official_first_steps_work_unchanged(box_task, tmp_path):
     assert [x.tool for x in traj.calls] == ["get_scene", "start_episode", "translate_objects", "capture_scene"]
     assert all(x.episode_active for x in traj.calls)
     assert traj.calls[2].args == {"ids": ["p01"], "delta": [0.1, 0, 0]}
+
+
+def test_surface_option_is_checked(box_task, tmp_path):
+    import subprocess
+    import sys
+
+    task_dir, _, _ = box_task
+    cmd = [sys.executable, "-m", "aw_server.cli", str(task_dir), "--record", str(tmp_path / "run"), "--surface", "web"]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and "--surface: invalid choice: 'web'" in done.stderr
+    assert not (tmp_path / "run").exists()
