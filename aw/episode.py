@@ -206,6 +206,11 @@ class Episode:
 
     # ------------------------------------------------------------------ state
     @property
+    def meshes(self) -> tuple:
+        """The baked part meshes, in ``task.parts`` order (never shown to the agent)."""
+        return tuple(self._meshes)
+
+    @property
     def tools(self) -> list[str]:
         return list(self._handlers)
 

@@ -36,6 +36,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from aw.camera import IMAGE_HEIGHT, IMAGE_WIDTH, VERTICAL_FOV_DEG
 from aw.episode import Capture, Episode, EpisodeError
 
@@ -126,6 +128,34 @@ RENDER = {"width": IMAGE_WIDTH, "height": IMAGE_HEIGHT, "pixelRatio": 1,
 # (assembly-world-agent episodes.py: unit mass, diagonal inertia 0.1, no collision) and MuJoCo's
 # default geom friction and contact dimension. Geometry type 7 is MuJoCo's mesh.
 _MASS, _INERTIA, _FRICTION, _CONDIM, _MESH = 1.0, [0.1, 0.1, 0.1], [1.0, 0.005, 0.0001], 3, 7
+
+
+
+def mesh_geom_sizes(meshes) -> list[list[float]]:
+    """What MuJoCo reports as each mesh geom's ``size``: the half-sizes of the mesh's bounding box
+    in its principal (shell-inertia) frame, as the benchmark's MJCF compiles it. The value does not
+    depend on where the mesh is placed, so the baked task meshes give the official numbers. A mesh
+    that MuJoCo cannot compile falls back to half its axis-aligned bounding box.
+
+    ``meshes``: trimesh meshes; returns ``(n_meshes, 3)`` as lists.
+    """
+    import mujoco  # lazy: only the official surface's object queries need it
+
+    out = []
+    for m in meshes:
+        spec = mujoco.MjSpec()
+        mesh = spec.add_mesh(name="m", inertia=mujoco.mjtMeshInertia.mjMESH_INERTIA_SHELL)
+        mesh.uservert = np.asarray(m.vertices, float).ravel().tolist()
+        mesh.userface = np.asarray(m.faces, int).ravel().tolist()
+        body = spec.worldbody.add_body(name="b", mass=_MASS, inertia=_INERTIA, explicitinertial=True)
+        body.add_freejoint()
+        body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname="m", contype=0, conaffinity=0)
+        try:
+            out.append([float(v) for v in spec.compile().geom_size[0]])
+        except Exception:  # a degenerate mesh: MuJoCo refuses it; keep a meaningful size
+            out.append([float(v) / 2 for v in np.ptp(np.asarray(m.vertices, float), axis=0)])
+    return out
+
 
 _MUTATIONS = frozenset({"translate_objects", "rotate_objects", "set_object_pose", "group_objects",
                         "ungroup_objects", "move_camera"})
@@ -273,6 +303,7 @@ class WebMcpPage:
         self.catalogue = [{"id": self._to_official[pid], "name": f"Part {pid}", "type": "rigid",
                            "collisionEnabled": False} for pid in pids]
         self._states = 0  # states committed since the start: the official "index"
+        self._sizes: dict[str, list[float]] | None = None  # mesh geom sizes, computed on first use
         self._lock = threading.Lock()
 
     # -------------------------------------------------------------------- definitions
@@ -315,14 +346,18 @@ class WebMcpPage:
         cam = self.episode.scene.camera
         return {"position": [float(v) for v in cam.position], "target": [float(v) for v in cam.target]}
 
+    def _size(self, pid: str) -> list[float]:
+        if self._sizes is None:
+            self._sizes = dict(zip(self.episode.part_ids, mesh_geom_sizes(self.episode.meshes)))
+        return self._sizes[pid]
+
     def _object(self, pid: str, position: list[float], quaternion: list[float]) -> dict:
-        info = self.episode.scene.parts[pid]
         k = sorted(self.episode.part_ids).index(pid)
         return {
             **self.catalogue[k], "position": position, "quaternion": quaternion, "velocity": [0.0] * 6,
             "mass": _MASS, "movable": True, "inertia": list(_INERTIA), "centerOfMass": [0.0, 0.0, 0.0],
             "inertiaQuaternion": [1.0, 0.0, 0.0, 0.0],
-            "geometries": [{"index": k, "type": _MESH, "size": [float(v) / 2 for v in info.extents],
+            "geometries": [{"index": k, "type": _MESH, "size": self._size(pid),
                             "friction": list(_FRICTION), "condim": _CONDIM, "collidable": False}],
         }
 

@@ -10,7 +10,8 @@ import trimesh
 from aw.episode import Episode
 from aw.formats import Task, TaskPart, read_trajectory
 from aw.prompt import task_prompt
-from aw.webmcp import ENABLED_TOOLS, PAGE_TOOLS, NotRegistered, WebMcpPage, check_arguments, registered_tools
+from aw.webmcp import (ENABLED_TOOLS, PAGE_TOOLS, NotRegistered, WebMcpPage, check_arguments, mesh_geom_sizes,
+                       registered_tools)
 
 
 class Clock:
@@ -98,7 +99,8 @@ def test_catalogue_ids_and_recording(page):
     assert ep.scene.poses["z9"][:3].tolist() == [0.5, 0.0, 0.0]
     obj = page.execute("get_object", {"id": "part-0003"}).output
     assert obj["position"] == [0.5, 0.0, 0.0] and obj["quaternion"] == [1.0, 0.0, 0.0, 0.0]
-    assert obj["geometries"][0]["index"] == 2 and obj["geometries"][0]["size"] == pytest.approx([0.2, 0.1, 0.05])
+    # MuJoCo's mesh geom size: half-sizes in the principal frame (box 0.4 x 0.2 x 0.1, smallest first).
+    assert obj["geometries"][0]["index"] == 2 and obj["geometries"][0]["size"] == pytest.approx([0.05, 0.1, 0.2])
     assert obj["velocity"] == [0.0] * 6 and obj["mass"] == 1.0
     # A scene message that names a part names it by its official id.
     page.execute("translate_objects", {"ids": ["part-0003"], "delta": [900, 0, 0]})
@@ -176,3 +178,18 @@ def test_budget_end_gives_episode_ended(page):
     assert page.execute("get_scene", {}).output["runtime"]["enabledTools"] == list(ENABLED_TOOLS)
     page.episode.close()
     assert page.execute("list_objects", {}).output["code"] == "episode_ended"
+
+
+def test_geom_sizes_do_not_depend_on_the_placement():
+    """The baked task mesh gives the size the official episode reports for the unbaked part."""
+    from scipy.spatial.transform import Rotation
+
+    part = trimesh.creation.box([0.3, 0.12, 0.05])
+    baked = part.copy()
+    baked.apply_transform(np.vstack([np.hstack([Rotation.from_euler("xyz", [20, -50, 75], degrees=True).as_matrix(),
+                                                [[1.0], [-2.0], [0.5]]]), [0, 0, 0, 1]]))
+    a, b = mesh_geom_sizes([part, baked])
+    assert a == pytest.approx([0.025, 0.06, 0.15], abs=1e-6) and b == pytest.approx(a, abs=1e-6)
+    # A mesh MuJoCo refuses (a single triangle) still gets a size: half its bounding box.
+    tri = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 2, 0]], [[0, 1, 2]], process=False)
+    assert mesh_geom_sizes([tri]) == [[0.5, 1.0, 0.0]]
