@@ -230,6 +230,21 @@ def test_group_ids_avoid_part_ids():
     assert s.group(["g1", "p1"]).id == "g3"
 
 
+def test_exclusive_group_replaces_overlapping_groups():
+    s = make_scene()
+    s.group(["p1", "p2"])
+    s.group(["p3"])  # the default rule allows one member and overlapping groups
+    with pytest.raises(SceneError, match="at least two objects"):
+        s.group(["p3"], exclusive=True)
+    with pytest.raises(SceneError, match="at least two objects"):
+        s.group(["g2"], exclusive=True)  # a group id counts its members: one here
+    g = s.group(["p2", "p3"], exclusive=True)
+    assert list(s.groups) == [g.id] and g.members == ["p2", "p3"]
+    with pytest.raises(SceneError, match="exclusive"):
+        s.group(["p1", "p2"], exclusive="yes")
+    assert list(s.groups) == [g.id]
+
+
 def test_set_pose_rejects_group_ids_with_a_hint():
     s = make_scene()
     s.group(["p1", "p2"])
