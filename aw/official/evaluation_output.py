@@ -1,0 +1,171 @@
+"""The official evaluation's outputs: ``metrics.jsonl`` (one row per counted attempt) and
+``summary.json`` (block, source and overall means), read, written and computed from rows.
+
+Facts from ``assembly_world_bench/scoring.py`` of AssemblyWorld/assembly-world-bench
+(``_score_job``, ``score_episode``, ``summarize``, ``evaluate``) and ``geometry.py``:
+
+* a row starts with ``block, sample_id, run, duration_seconds, usage, cost_usd, tool_calls,
+  attempt_finished``; a scored row goes on with ``status: "scored", SCD, PA, SR,
+  protocol_version, episode_sha256, state_index, parts, alignment, scale_divisor``; an error
+  row with ``status: "error", error: "<ExceptionType>: <message>", SCD: null, PA: 0.0, SR: 0,
+  protocol_version``. SCD is 1000 x the aligned squared Chamfer, PA the fraction of parts within
+  0.01, SR 1 when all are;
+* rows are sorted by (block, sample id), one ``json.dumps`` line each;
+* a block's SCD is the mean over its scored rows, its PA and SR the means over all its rows
+  (errors count 0); a run is ``complete`` only when its rows are exactly the benchmark's
+  (block, sample) pairs and every attempt finished, and only then are source means (each the
+  mean of its blocks) and the overall means (the mean over sources) given: a partial run has
+  ``official_overall: null`` and no ``sources``;
+* resources (duration, cost, tool calls) and token counts (usage keys ending ``_tokens``) are
+  means over the rows that report them.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aw.formats import FormatError
+from aw.official.runlog import SampleAttempt, write_json
+
+__all__ = ["PROTOCOL", "EXPECTED_TOTAL", "METRICS_FILE", "SUMMARY_FILE", "RESOURCE_NOTE", "row_base", "scored_row", "error_row",
+           "sort_rows", "summarize", "write_evaluation", "read_metrics", "read_summary"]
+
+PROTOCOL = "assembly-evaluation-v1"
+EXPECTED_TOTAL = 100
+METRICS_FILE = "metrics.jsonl"
+SUMMARY_FILE = "summary.json"
+RESOURCE_NOTE = "Selected final attempt only; unknown values remain null"
+_METRICS = ("SCD", "PA", "SR")
+
+
+def row_base(attempt: SampleAttempt) -> dict[str, Any]:
+    """The fields every row of an attempt carries, whatever its scoring gives."""
+    execution = attempt.execution
+    return {"block": attempt.block, "sample_id": attempt.sample_id, "run": str(attempt.run),
+            "duration_seconds": attempt.result.get("duration_seconds"), "usage": execution.get("usage"),
+            "cost_usd": execution.get("cost_usd"), "tool_calls": attempt.tool_calls, "attempt_finished": attempt.finished}
+
+
+def scored_row(base: Mapping[str, Any], *, scd: float, pa: float, sr: bool, episode_sha256: str, state_index: int,
+               parts: list[dict[str, Any]], alignment: dict[str, Any], scale_divisor: float) -> dict[str, Any]:
+    """A scored row; ``parts`` are ``{part_id, target_part_id, chamfer, correct}`` sorted by part."""
+    return {**base, "status": "scored", "SCD": float(scd), "PA": float(pa), "SR": int(bool(sr)), "protocol_version": PROTOCOL,
+            "episode_sha256": episode_sha256, "state_index": int(state_index), "parts": parts, "alignment": alignment,
+            "scale_divisor": float(scale_divisor)}
+
+
+def error_row(base: Mapping[str, Any], exc: BaseException) -> dict[str, Any]:
+    """An error row: the attempt counts, with PA and SR 0 and no SCD."""
+    return {**base, "status": "error", "error": f"{type(exc).__name__}: {exc}", "SCD": None, "PA": 0.0, "SR": 0,
+            "protocol_version": PROTOCOL}
+
+
+def sort_rows(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    return sorted((dict(r) for r in rows), key=lambda r: (r["block"], r["sample_id"]))
+
+
+def _mean(values: Sequence[float]) -> float:
+    return float(np.mean(values))
+
+
+def _reported(rows: Sequence[Mapping[str, Any]], get) -> dict[str, Any]:
+    values = [v for v in map(get, rows) if v is not None]
+    return {"reported_samples": len(values), "mean": _mean(values) if values else None}
+
+
+def summarize(rows: Sequence[Mapping[str, Any]], benchmark: Mapping[str, Any]) -> dict[str, Any]:
+    """``summary.json`` of ``rows`` for a ``benchmark.json`` (its ``blocks`` with ``name``,
+    ``source`` and ``samples``, and its ``sources``), by the official rules (module doc)."""
+    block_list = list(benchmark["blocks"])
+    blocks: dict[str, Any] = {}
+    for block in block_list:
+        mine = [r for r in rows if r["block"] == block["name"]]
+        if not mine:
+            continue
+        scored = [r for r in mine if r["status"] == "scored"]
+        blocks[block["name"]] = {
+            "attempted": len(mine), "expected": len(block["samples"]), "scored": len(scored),
+            "SCD": _mean([r["SCD"] for r in scored]) if scored else None,
+            "PA": _mean([r["PA"] for r in mine]), "SR": _mean([r["SR"] for r in mine]),
+        }
+    expected = {(b["name"], sid) for b in block_list for sid in b["samples"]}
+    complete = ({(r["block"], r["sample_id"]) for r in rows} == expected
+                and all(r.get("attempt_finished", True) for r in rows))
+    summary: dict[str, Any] = {
+        "protocol": PROTOCOL, "status": "complete" if complete else "partial", "attempted": len(rows),
+        "expected": EXPECTED_TOTAL, "scored": sum(r["status"] == "scored" for r in rows), "blocks": blocks,
+        "official_overall": None, "resource_accounting": RESOURCE_NOTE,
+    }
+    if complete:
+        def means(parts: list[Mapping[str, Any]]) -> dict[str, float | None]:
+            return {m: _mean([p[m] for p in parts]) if all(p[m] is not None for p in parts) else None for m in _METRICS}
+
+        sources = {s: means([blocks[b["name"]] for b in block_list if b["source"] == s]) for s in benchmark["sources"]}
+        summary["sources"] = sources
+        summary["official_overall"] = means(list(sources.values()))
+    summary["resources"] = {name: _reported(rows, lambda r, n=name: r.get(n))
+                            for name in ("duration_seconds", "cost_usd", "tool_calls")}
+    usage_keys = sorted({k for r in rows for k in (r.get("usage") or {}) if k.endswith("_tokens")})
+    tokens = {k: _reported(rows, lambda r, k=k: (r.get("usage") or {}).get(k)) for k in usage_keys}
+    summary["token_usage"] = {k: v for k, v in tokens.items() if v["reported_samples"]}
+    return summary
+
+
+def write_evaluation(out_dir: str | Path, rows: Sequence[Mapping[str, Any]], summary: Mapping[str, Any]) -> Path:
+    """Write ``metrics.jsonl`` (rows sorted by block and sample id) and ``summary.json`` into a
+    new folder ``out_dir``."""
+    out = Path(out_dir)
+    if out.exists():
+        raise FileExistsError(f"{out}: evaluation folder already exists (use a new one)")
+    out.mkdir(parents=True)
+    (out / METRICS_FILE).write_text("".join(json.dumps(r) + "\n" for r in sort_rows(rows)), encoding="utf-8")
+    write_json(out / SUMMARY_FILE, summary)
+    return out
+
+
+def read_metrics(path: str | Path) -> list[dict[str, Any]]:
+    """The rows of an official ``metrics.jsonl`` (each checked for block, sample id, status and
+    the three metrics)."""
+    file = Path(path)
+    rows = []
+    try:
+        lines = file.read_text(encoding="utf-8").splitlines()
+    except FileNotFoundError:
+        raise FormatError(file, "file not found") from None
+    for n, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            row = json.loads(line)
+        except ValueError as exc:
+            raise FormatError(file, f"line {n}: not valid JSON ({exc})") from None
+        if not isinstance(row, dict):
+            raise FormatError(file, f"line {n}: expected a JSON object")
+        missing = [k for k in ("block", "sample_id", "status", *_METRICS) if k not in row]
+        if missing:
+            raise FormatError(file, f"line {n}: missing {missing}")
+        if row["status"] not in ("scored", "error"):
+            raise FormatError(file, f"line {n}: status {row['status']!r} is neither 'scored' nor 'error'")
+        rows.append(row)
+    return rows
+
+
+def read_summary(path: str | Path) -> dict[str, Any]:
+    """An official ``summary.json`` (checked for its protocol, status and blocks)."""
+    file = Path(path)
+    try:
+        value = json.loads(file.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FormatError(file, "file not found") from None
+    except ValueError as exc:
+        raise FormatError(file, f"not valid JSON ({exc})") from None
+    if not isinstance(value, dict) or value.get("protocol") != PROTOCOL:
+        raise FormatError(file, f"not an official summary (protocol {PROTOCOL!r} expected)")
+    if value.get("status") not in ("complete", "partial") or not isinstance(value.get("blocks"), dict):
+        raise FormatError(file, "status must be 'complete' or 'partial', blocks an object")
+    return value
