@@ -2,9 +2,9 @@
 
 ``exact`` runs every start of the protocol at full resolution with the same arithmetic as
 :mod:`aw_eval.reference` (so results equal the reference's), with certified warm-started
-neighbours (:mod:`aw_eval.icp`) in search structures built once per task (the target's, the
+neighbours (:mod:`aw_eval.kernels.icp`) in search structures built once per task (the target's, the
 parts' baked clouds'); a prediction whose parts touch gets its own Delaunay graph after the
-first start (:data:`CONTACT_WALKS`). ``fast`` (:mod:`aw_eval.fast`) prunes starts coarse-to-fine.
+first start (:data:`CONTACT_WALKS`). ``fast`` (:mod:`aw_eval.kernels.fast`) prunes starts coarse-to-fine.
 
 Scoring one checkpoint (:func:`score`) is a pure function of ``(geometry, poses, mode)``. A batch
 (:func:`score_batch`) removes duplicate rows; in ``fast`` mode it also reads its rows as a
@@ -22,9 +22,9 @@ import numpy as np
 from aw.pose import as_finite, cube_rotations, pca_frame, quat_to_matrix
 from aw_eval.chamfer import chamfer_pairs
 from aw_eval.geometry import TaskGeometry
-from aw_eval.icp import ICPProblem, graph_for, nearest_positions
-from aw_eval.kdtree import build_tree
-from aw_eval.partwalk import PartClouds, build_part_clouds
+from aw_eval.kernels.icp import ICPProblem, graph_for, nearest_positions
+from aw_eval.kernels.kdtree import build_tree
+from aw_eval.kernels.partwalk import PartClouds, build_part_clouds
 from aw_eval.results import BatchScores, Registration, ScoreResult, match_within_groups
 
 __all__ = ["task_context", "starts_for", "prediction_problem", "register_points", "register", "register_checkpoint", "finalize", "score", "score_batch", "part_diagnostics",
@@ -128,7 +128,7 @@ def _part_structures(geom: TaskGeometry, ctx: TaskContext) -> None:
 
 def prediction_problem(geom: TaskGeometry, ctx: TaskContext, poses: np.ndarray, pred_parts: np.ndarray) -> ICPProblem:
     """Full-resolution ICP of a checkpoint ``poses (P, 7)`` onto the task's target. The backward
-    search walks the parts' baked clouds (per task, :mod:`aw_eval.partwalk`): nothing is built
+    search walks the parts' baked clouds (per task, :mod:`aw_eval.kernels.partwalk`): nothing is built
     per checkpoint. Where a part has no Delaunay graph, the prediction gets its own tree and
     graph (same results, slower)."""
     _part_structures(geom, ctx)
@@ -306,7 +306,7 @@ def register_checkpoint(geom: TaskGeometry, poses, mode: str = "exact") -> Regis
     pred_parts = geom.pred_parts(poses)
     if mode == "exact":
         return _register_exact(geom, ctx, poses, pred_parts)
-    from aw_eval.fast import register_fast
+    from aw_eval.kernels.fast import register_fast
 
     return register_fast(geom, ctx, poses, pred_parts)
 
@@ -328,13 +328,13 @@ def score(geom: TaskGeometry, poses, mode: str = "exact") -> ScoreResult:
 def _score_one(geom: TaskGeometry, poses: np.ndarray, mode: str, warm: Registration | None) -> tuple[ScoreResult, Registration | None]:
     """Score checked ``poses (P, 7)``; returns the result and, in ``fast`` mode, the refined
     registration when the checkpoint was near a threshold (else ``None``): the next checkpoint
-    of a trajectory passes it back as ``warm`` (see :func:`aw_eval.fast.escalate`)."""
+    of a trajectory passes it back as ``warm`` (see :func:`aw_eval.kernels.fast.escalate`)."""
     ctx = task_context(geom)
     pred_parts = geom.pred_parts(poses)
     if mode == "exact":
         reg = _register_exact(geom, ctx, poses, pred_parts)
         return finalize(geom, ctx, poses, pred_parts, reg, mode), None
-    from aw_eval import fast
+    from aw_eval.kernels import fast
 
     reg = fast.register_fast(geom, ctx, poses, pred_parts, fast.FAST)
     res = finalize(geom, ctx, poses, pred_parts, reg, mode)
@@ -354,7 +354,7 @@ def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None) -
     occurrence). ``exact`` rows equal :func:`score`'s. In ``fast`` mode the rows are taken as a
     trajectory: a row refined near a threshold starts its refinement from the previous row's
     refined registration when both lie in the same basin (consecutive checkpoints differ by one
-    edit; :func:`aw_eval.fast.escalate`), so a fast row depends on the row before it: the same
+    edit; :func:`aw_eval.kernels.fast.escalate`), so a fast row depends on the row before it: the same
     batch gives the same numbers in any process or worker layout, but splitting a trajectory
     into other batches may change the last digits of a refined row.
 

@@ -1,4 +1,4 @@
-"""Time ``fast``'s coarse stage (``aw_eval.fast.coarse_icp``: every start on a few samples per part).
+"""Time ``fast``'s coarse stage (``aw_eval.kernels.fast.coarse_icp``: every start on a few samples per part).
 
 Same inputs at every run (random clouds, 24 + P random starts, 8 ICP iterations, ``--samples``
 points per part), median of
@@ -33,7 +33,7 @@ def main(argv=None) -> int:
     os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(args.repo.resolve() / ".jax_cache"))
     from scipy.spatial.transform import Rotation
 
-    from aw_eval.fast import coarse_icp
+    from aw_eval.kernels.fast import coarse_icp
 
     print(f"coarse stage of {args.repo.resolve()}, {args.samples} points per part")
     rng = np.random.default_rng(0)

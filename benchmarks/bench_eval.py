@@ -98,7 +98,7 @@ _GEOMS: dict = {}
 
 def _fast_settings(pairs: list[str], exact_margin: float | None) -> dict:
     """``KEY=VALUE`` strings (and ``--exact-margin``) -> FastSettings fields, typed like the defaults."""
-    from aw_eval import fast
+    from aw_eval.kernels import fast
 
     kw = {}
     for item in pairs:
@@ -114,7 +114,7 @@ def _fast_settings(pairs: list[str], exact_margin: float | None) -> dict:
 def _apply_fast_settings(kw: dict) -> None:
     import dataclasses
 
-    from aw_eval import fast
+    from aw_eval.kernels import fast
 
     fast.FAST = dataclasses.replace(fast.FastSettings(), **kw)
 
@@ -162,7 +162,7 @@ def bench_agreement(parts: list[int], n: int, fps: int, seed: int = 0, workers: 
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor
 
-        from aw_eval.icp import compile_kernels
+        from aw_eval.kernels.icp import compile_kernels
 
         compile_kernels()  # fill numba's on-disk cache once, before the workers load it
 

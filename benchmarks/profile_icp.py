@@ -5,7 +5,7 @@ start of the protocol at full resolution, timing the ICP runs (best of ``--repea
 what is built for the checkpoint, and counts ICP iterations, query evaluations (points x
 evaluations, both directions) and searches (walks or tree searches; the rest were certified).
 Searches (``--searches``): ``parts`` (what ``exact`` does: the backward direction walks the
-parts' baked clouds, built once per task, ``aw_eval.partwalk``), ``graph`` (the prediction's
+parts' baked clouds, built once per task, ``aw_eval.kernels.partwalk``), ``graph`` (the prediction's
 own Delaunay graph, built per checkpoint: the previous round), ``kd`` (KD-trees alone: the round
 before). Objectives are compared: ``kd`` and ``graph`` bitwise, ``parts`` to 1e-12 relative (it
 sums in another point order). The cost outside the searches is measured by 200 more
@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import aw_eval  # noqa: E402
 from aw_eval.engine import _part_structures, prediction_problem, starts_for, task_context  # noqa: E402
 from aw_eval.fixtures import make_points_geometry, trajectory_checkpoints  # noqa: E402
-from aw_eval.icp import ICPProblem, build_tree, compile_kernels, graph_for  # noqa: E402
+from aw_eval.kernels.icp import ICPProblem, build_tree, compile_kernels, graph_for  # noqa: E402
 
 
 def profile(p: int, checkpoint: int, repeat: int, search: str) -> dict:

@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import aw_eval  # noqa: E402
 from aw_eval import engine, fast  # noqa: E402
-from aw_eval.icp import ICPProblem  # noqa: E402
+from aw_eval.kernels.icp import ICPProblem  # noqa: E402
 
 
 class _CountRefinements:

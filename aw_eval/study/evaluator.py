@@ -31,6 +31,7 @@ def evaluator_version() -> str:
 
     core = Path(aw_eval.__file__).parent
     files = sorted(p for p in core.glob("*.py") if p.name not in ("cli.py", "__init__.py"))
+    files += sorted((core / "kernels").glob("*.py"))
     files += [core / "study" / f for f in ("episode.py", "job.py", "decreases.py", "evaluator.py", "model.py")]
     files.append(Path(aw.formats.trajectory.__file__))
     h = hashlib.sha256()
@@ -42,7 +43,7 @@ def evaluator_version() -> str:
 def prepare_thread() -> None:
     """Per-thread setup before scoring in this thread: loads the compiled kernels (numba's
     on-disk cache) up front, so the first checkpoint's timing is not a compile."""
-    from aw_eval.icp import compile_kernels
+    from aw_eval.kernels.icp import compile_kernels
 
     compile_kernels()
 

@@ -53,7 +53,7 @@ def test_full_resolution_icp_agrees():
     certified ICP from PCA and same-ID starts equals the reference ICP start by start."""
     from aw_eval.engine import starts_for, task_context
     from aw_eval.fixtures import make_points_geometry
-    from aw_eval.icp import ICPProblem
+    from aw_eval.kernels.icp import ICPProblem
 
     geom, obj = make_points_geometry(3, 1000, seed=5, settings=aw_eval.ProtocolSettings())
     poses = random_checkpoints(obj, 1, seed=9, kinds=("small",))[0]

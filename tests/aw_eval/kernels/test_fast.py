@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import aw_eval
-from aw_eval import fast
+from aw_eval.kernels import fast
 from aw_eval.fixtures import random_checkpoints
 from aw_eval.results import ScoreResult
 from eval_helpers import close, small_task

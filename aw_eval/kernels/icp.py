@@ -7,18 +7,18 @@ up to floating-point summation order; only the nearest-neighbour search differs:
   points into the prediction's frame (``R^T (T - t)``) instead of building a tree of the moved
   prediction in every iteration, and searches there either the prediction's own tree and graph
   or, for a checkpoint of a task (:meth:`ICPProblem.for_assembly`), each part's baked cloud,
-  whose structures are built once per task too (:mod:`aw_eval.partwalk`);
+  whose structures are built once per task too (:mod:`aw_eval.kernels.partwalk`);
 - consecutive iterations move little, so most neighbours are *certified* unchanged without a
   search. Where the reference cloud has a Delaunay graph, the Voronoi certificate (a point
   last searched at ``x_ref`` keeps its nearest ``j`` while ``|x - x_ref|`` is below the
   distance from ``x_ref`` to the nearest face of ``j``'s Voronoi cell; see
-  :mod:`aw_eval.delaunay`), which stays wide far from the cloud; else the ball one (nearest
+  :mod:`aw_eval.kernels.delaunay`), which stays wide far from the cloud; else the ball one (nearest
   ``j``, second-nearest distance ``d2``: ``j`` stays while ``|x - y_j| + |x - x_ref| < d2``).
   Checking the ball one as well where there is a graph saved 1-3% of the searches and cost
   more than they did (its roots, a branch per query);
 - a point that fails both is searched again: by a walk on the Delaunay graph from its previous
   neighbour (or from the previous query's answer, when nearer), else by a warm-started KD-tree
-  search (:func:`aw_eval.kdtree.nearest2`) where Qhull gave no graph. Either way the result is
+  search (:func:`aw_eval.kernels.kdtree.nearest2`) where Qhull gave no graph. Either way the result is
   the exact nearest neighbour (up to exact distance ties), not an approximation;
 - one compiled pass per direction and iteration does the transform, the certificate or search,
   the objective and the pairs of the next Kabsch fit (no NumPy temporaries).
@@ -33,9 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from aw_eval.delaunay import DelaunayGraph, build_graph, no_graph, to_search, walk
-from aw_eval.kdtree import STACK, KDTree, build_tree, nearest2
-from aw_eval.partwalk import PartClouds, build_part_clouds, no_part_clouds, part_maps, parts_pass
+from aw_eval.kernels.delaunay import DelaunayGraph, build_graph, no_graph, to_search, walk
+from aw_eval.kernels.kdtree import STACK, KDTree, build_tree, nearest2
+from aw_eval.kernels.partwalk import PartClouds, build_part_clouds, no_part_clouds, part_maps, parts_pass
 
 __all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "build_tree", "graph_for", "kabsch_pairs", "nearest_positions",
            "compile_kernels"]
@@ -51,7 +51,7 @@ def _certified_pass(tree, graph, x: np.ndarray, cand: np.ndarray, xref: np.ndarr
     returns the number of points searched. Certificate state: ``xref (k, 3)`` where each point
     was last searched, ``slack (k, 2)`` the second-nearest squared distance there (the ball
     certificate, KD-tree searches) and the square of its Voronoi margin less the safety margin
-    (graph searches, -1 where none is left; see :mod:`aw_eval.delaunay`).
+    (graph searches, -1 where none is left; see :mod:`aw_eval.kernels.delaunay`).
     ``graph``: Delaunay graph of the tree's points in tree order (empty: KD-tree searches).
 
     With a graph only the Voronoi certificate is checked: the ball one saved 1-3% of the
@@ -130,7 +130,7 @@ def _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r, tr, fc, fx, fd, bc, bx, bd
     """Objective at ``(r, tr)`` and neighbours of both directions (tree positions into ``fc``,
     ``bc``); returns ``(objective, searched)``. ``p (n, 3)``, ``t (m, 3)`` in tree order (``p`` in
     the part clouds' order when ``parts = (clouds, A, b, divisor, warm)`` has parts: the
-    backward search then walks the parts' graphs, see :mod:`aw_eval.partwalk`, adding its
+    backward search then walks the parts' graphs, see :mod:`aw_eval.kernels.partwalk`, adding its
     searches and walks to ``stats (2,)``)."""
     n, m = p.shape[0], t.shape[0]
     for i in range(n):
@@ -281,7 +281,7 @@ class ICPProblem:
     """Registration of one prediction ``p (n, 3)`` onto one target ``t_pts (m, 3)``.
 
     ``tree_t`` (target) may be shared across checkpoints of a task; ``tree_p`` is built here
-    unless given (both from :func:`aw_eval.kdtree.build_tree`). The search always certifies
+    unless given (both from :func:`aw_eval.kernels.kdtree.build_tree`). The search always certifies
     (it never changes a result). :meth:`for_assembly` searches the prediction through its parts'
     clouds instead (no structure built per checkpoint).
     """
@@ -303,7 +303,7 @@ class ICPProblem:
                      rotations: np.ndarray | None = None) -> "ICPProblem":
         """The prediction ``pred_parts (P, n, 3)`` of the poses ``(P, 7)`` (normalized by
         ``divisor``), searched by walks in its parts' baked clouds ``clouds`` (built once per
-        task, :func:`aw_eval.partwalk.build_part_clouds`) instead of a tree of its own.
+        task, :func:`aw_eval.kernels.partwalk.build_part_clouds`) instead of a tree of its own.
         ``rotations``: the poses' rotation matrices ``(P, 3, 3)`` where the caller has them."""
         prob = cls.__new__(cls)
         prob.tree_t = build_tree(t_pts) if tree_t is None else tree_t
@@ -370,7 +370,7 @@ def compile_kernels() -> None:
     clouds = build_part_clouds([(tree, graph_for(tree)) for tree in trees])
     poses = np.array([[0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], [0.0, 0.2, 0.0, 0.0, 1.0, 0.0, 0.0]])
     ICPProblem.for_assembly(parts, poses, 1.0, clouds, b, tree_t=tb, graph_t=graph_for(tb)).run(np.eye(3), np.zeros(3), 3, 1e-9)
-    from aw_eval.fast import coarse_icp  # fast imports this module
+    from aw_eval.kernels.fast import coarse_icp  # fast imports this module
 
     coarse_icp(a.reshape(2, 20, 3), b[:20].reshape(2, 10, 3), np.eye(3)[None], np.zeros((1, 3)), 8, 3, 1e-9)
     _COMPILED = True

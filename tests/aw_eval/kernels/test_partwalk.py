@@ -1,4 +1,4 @@
-"""Nearest neighbours in a posed assembly by walks in its parts' baked clouds (``aw_eval.partwalk``)."""
+"""Nearest neighbours in a posed assembly by walks in its parts' baked clouds (``aw_eval.kernels.partwalk``)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ from scipy.spatial.transform import Rotation
 import aw_eval
 from aw_eval.engine import _part_structures, prediction_problem, starts_for, task_context
 from aw_eval.fixtures import make_points_geometry, trajectory_checkpoints
-from aw_eval.icp import ICPProblem, build_tree, graph_for
-from aw_eval.partwalk import build_part_clouds, part_maps, parts_pass
+from aw_eval.kernels.icp import ICPProblem, build_tree, graph_for
+from aw_eval.kernels.partwalk import build_part_clouds, part_maps, parts_pass
 
 
 def _assembly(rng, n_parts, n=300, divisor=2.5):

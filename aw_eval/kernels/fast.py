@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from aw_eval.icp import ICPProblem, build_tree, graph_for, kabsch_pairs
+from aw_eval.kernels.icp import ICPProblem, build_tree, graph_for, kabsch_pairs
 from aw_eval.results import Registration
 
 __all__ = ["FastSettings", "register_fast", "coarse_icp", "escalate", "near_threshold", "same_basin"]
