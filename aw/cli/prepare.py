@@ -29,9 +29,13 @@ class CliError(Exception):
     """A problem to report in one line (exit status 1)."""
 
 
-def add_suite_options(p: argparse.ArgumentParser) -> None:
-    """Options every suite-building subcommand shares."""
+def add_suite_options(p: argparse.ArgumentParser, protocol: str = "official") -> None:
+    """Options every suite-building subcommand shares; ``protocol`` is its default preparation."""
     p.add_argument("--out", required=True, metavar="DIR", help="suite directory to write")
+    p.add_argument("--protocol", choices=("official", "native"), default=protocol,
+                   help="official: the official benchmark's preparation (its layout, part ids and evaluation points "
+                   "in eval_points/); native: this project's standardization, needed for --variants "
+                   f"(default {protocol})")
     p.add_argument("--seed", type=int, default=0, help="initialization (and generation) seed (default 0)")
     p.add_argument("--variants", type=int, default=0, metavar="K",
                    help="also build the Appendix E robustness variants (two layouts, one removed part, "
@@ -76,11 +80,13 @@ def run_suite(args: argparse.Namespace, specs: list[ObjectSpec], sources: list[s
         raise CliError("--variants must be >= 0")
     if args.jobs is not None and args.jobs < 1:
         raise CliError("--jobs must be >= 1")
+    if args.variants and args.protocol != "native":
+        raise CliError("--variants needs --protocol native (the official preparation has no robustness variants)")
     plans = variant_plans(specs, sources, args.variants, args.seed) if args.variants else None
     start = time.perf_counter()
     manifest, results = build_suite(
         specs, args.out, name=name, generator=generator, seed=args.seed, variants=plans, jobs=args.jobs,
-        force=args.force, progress=not args.no_progress,
+        force=args.force, progress=not args.no_progress, protocol=args.protocol,
     )
     elapsed = time.perf_counter() - start
     print(format_summary(summarize(manifest, results)))
@@ -94,7 +100,7 @@ def register_synthetic(sub) -> None:
                        description="Generate the procedural benchmark: PartNet-like furniture (none and image), "
                        "IKEA-like furniture with manuals, AssemblyBench-like industrial assemblies with step "
                        "diagrams, and two-fragment fractures.")
-    add_suite_options(p)
+    add_suite_options(p, protocol="native")
     p.add_argument("--per-source", type=int, default=20, metavar="N", help="objects per block (default 20)")
     p.add_argument("--blocks", default=None, metavar="B1,B2",
                    help="comma-separated subset of partnet, ikea_manual, assemblybench, fantastic_breaks")
@@ -131,7 +137,7 @@ def register_folder(sub) -> None:
                        description="Import SRC/<object>/<part>.obj|ply|stl|glb|gltf|off (assembled frame) with an "
                        "optional meta.json per object; see aw.sources.folder.")
     p.add_argument("src", metavar="SRC", help="folder with one subfolder per object")
-    add_suite_options(p)
+    add_suite_options(p, protocol="native")
     p.add_argument("--source", default="custom", help="benchmark block name for objects whose meta.json has none (default custom)")
     p.set_defaults(func=_cmd_folder)
 

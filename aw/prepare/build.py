@@ -13,9 +13,10 @@ from aw.prepare.standardize import PreparedObject, standardize
 from aw.prepare.variants import add_distractor, layout_variant, remove_part
 from aw.prepare.writer import task_id_for, write_prepared
 
-__all__ = ["VariantPlan", "prepare_object", "CONDITIONS"]
+__all__ = ["VariantPlan", "prepare_object", "CONDITIONS", "PROTOCOLS"]
 
 CONDITIONS = ("none", "image", "manual")
+PROTOCOLS = ("official", "native")
 
 
 @dataclass(frozen=True)
@@ -47,18 +48,33 @@ def prepare_object(
     donor: AssembledObject | None = None,
     image_size: tuple[int, int] = IMAGE_SIZE,
     manual_size: tuple[int, int] = MANUAL_SIZE,
+    protocol: str = "native",
 ) -> list[SuiteEntry]:
     """Write every task of ``obj`` into ``suite_dir`` and return their manifest entries.
 
     All conditions share the standardized geometry, layout, ids and targets (seed ``seed``);
     references are rendered (or copied from the source) once per condition and shared by the
     condition's variants. Task ids: ``<source>-<object>-<condition>[-<variant>]``.
+
+    ``protocol``: ``native`` (this project's standardization, :func:`standardize`) or
+    ``official`` (the official preparation, :mod:`aw.prepare.official_task`: its layout, part ids,
+    and ``eval_points/<task_id>.npz`` with its points, divisor and groups; no variants).
     """
     conditions = list(dict.fromkeys(conditions))
     bad = [c for c in conditions if c not in CONDITIONS]
     if bad or not conditions:
         raise ValueError(f"conditions must be a non-empty subset of {CONDITIONS}, got {list(conditions)}")
-    prep = standardize(obj, seed)
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"protocol must be one of {PROTOCOLS}, got {protocol!r}")
+    official = None
+    if protocol == "official":
+        if variants is not None:
+            raise ValueError("the robustness variants are built by the native protocol only")
+        from aw.prepare.official_task import prepare_official_object
+
+        prep, official = prepare_official_object(obj, seed)
+    else:
+        prep = standardize(obj, seed)
     refs = {c: reference_images(prep, c, image_size, manual_size) for c in conditions}
 
     derived: list[tuple[str, PreparedObject]] = []
@@ -76,6 +92,10 @@ def prepare_object(
     for cond in conditions:
         base_id = task_id_for(obj.source, obj.object_id, cond)
         entries.append(write_prepared(prep, suite_dir, base_id, cond, refs[cond]))
+        if official is not None:
+            from aw.prepare.official_task import write_eval_points
+
+            write_eval_points(suite_dir, base_id, official)
         for suffix, vprep in derived:
             vid = task_id_for(obj.source, obj.object_id, cond, suffix)
             entries.append(write_prepared(vprep, suite_dir, vid, cond, refs[cond], base_task_id=base_id))

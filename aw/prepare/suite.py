@@ -77,6 +77,7 @@ class _Settings:
     variants: VariantPlan | None
     image_size: tuple[int, int]
     manual_size: tuple[int, int]
+    protocol: str = "native"
 
 
 def _build_one(index: int, spec: ObjectSpec, settings: _Settings) -> ObjectResult:
@@ -97,6 +98,7 @@ def _build_one(index: int, spec: ObjectSpec, settings: _Settings) -> ObjectResul
             donor=donor,
             image_size=settings.image_size,
             manual_size=settings.manual_size,
+            protocol=settings.protocol,
         )
     except Exception as exc:
         raise ObjectError(f"object {obj.source}/{obj.object_id}: {type(exc).__name__}: {exc}") from None
@@ -106,12 +108,12 @@ def _build_one(index: int, spec: ObjectSpec, settings: _Settings) -> ObjectResul
 
 
 def prepare_output_dir(out: str | Path, force: bool = False) -> Path:
-    """Create ``out`` for a new suite. An existing suite there (``manifest.json``, ``tasks/`` or
-    ``targets/``) is an error unless ``force``, which removes exactly those three."""
+    """Create ``out`` for a new suite. An existing suite there (``manifest.json``, ``tasks/``,
+    ``targets/`` or ``eval_points/``) is an error unless ``force``, which removes exactly those."""
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(f"{out}: exists and is not a directory")
-    existing = [out / n for n in ("manifest.json", "tasks", "targets") if (out / n).exists()]
+    existing = [out / n for n in ("manifest.json", "tasks", "targets", "eval_points") if (out / n).exists()]
     if existing and not force:
         raise SuiteExistsError(f"{out}: already holds a suite ({', '.join(p.name for p in existing)}); pass --force to replace it")
     for p in existing:
@@ -143,11 +145,13 @@ def build_suite(
     progress: bool = True,
     image_size: tuple[int, int] = IMAGE_SIZE,
     manual_size: tuple[int, int] = MANUAL_SIZE,
+    protocol: str = "native",
 ) -> tuple[SuiteManifest, list[ObjectResult]]:
     """Prepare every object of ``specs`` into the suite ``out`` and write its manifest.
 
     ``variants``: one plan for all objects, or one (or None) per spec. ``jobs``: worker
-    processes (1: in this process). Rendering picks its GL platform before workers start.
+    processes (1: in this process). ``protocol``: ``native`` or ``official`` (see
+    :func:`aw.prepare.prepare_object`). Rendering picks its GL platform before workers start.
     """
     if not specs:
         raise ValueError("no objects to prepare")
@@ -155,7 +159,7 @@ def build_suite(
     plans = list(variants) if isinstance(variants, Sequence) else [variants] * len(specs)
     if len(plans) != len(specs):
         raise ValueError("variants must be one plan or one per spec")
-    settings = [_Settings(str(out), seed, plan, tuple(image_size), tuple(manual_size)) for plan in plans]
+    settings = [_Settings(str(out), seed, plan, tuple(image_size), tuple(manual_size), protocol) for plan in plans]
     jobs = default_jobs() if jobs is None else max(1, int(jobs))
     needs_render = any(c != "none" for s in specs for c in s.conditions)
     if needs_render:

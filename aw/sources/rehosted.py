@@ -2,7 +2,7 @@
 
 One row is one object. Columns (names as published; alternatives in brackets)::
 
-    object_id [id, uid, name]       string (or integer) id of the object
+    object_id [sample_id, id, uid, name]  string (or integer) id of the object
     source [dataset]                optional: partnet, ikea_manual, assemblybench, fantastic_breaks, ...
     category                        optional string
     parts                           list of {part_id, vertices, faces}:
@@ -14,10 +14,17 @@ One row is one object. Columns (names as published; alternatives in brackets)::
     manual_pages                    optional list of {page, step, image}; image is encoded bytes
                                     or {bytes, path} (the Hugging Face image struct)
     up_axis                         optional "y" or "z"
+    poses, steps                    AssemblyBench: ``poses["0"][<last step_id>][part_id]`` is the
+                                    assembled pose [tx, ty, tz, qw, qx, qy, qz] of a part whose
+                                    vertices are local (the official adapter's reading)
 
 A download holds one or more ``*.parquet`` files (or ``*.arrow`` IPC files, file or stream
 format); rows are addressed as ``(file, row index)``. PartNet and IKEA-Manual rows are taken as
 Y-up (their published frames) unless ``up_axis`` says otherwise; other sources as Z-up.
+
+Each object keeps in ``meta["official"]`` what the official preparation protocol needs to
+reproduce the official numbers (:mod:`aw.prepare.official_task`): the sample id, the turn to
+Z up, the polygon faces as published, and the local vertices and poses of posed parts.
 """
 
 from __future__ import annotations
@@ -28,13 +35,16 @@ from typing import Any
 
 import pyarrow as pa
 
+import numpy as np
+import trimesh
+
 from aw.assembly import AssembledObject, SourcePart, y_up_to_z_up
 from aw.formats import FormatError
 from aw.sources.meshdata import mesh_from_arrays, natural_key
 
 __all__ = ["ID_COLUMNS", "SOURCE_ALIASES", "data_files", "read_table", "read_row", "load_row", "catalog", "normalize_source"]
 
-ID_COLUMNS = ("object_id", "id", "uid", "name")
+ID_COLUMNS = ("object_id", "sample_id", "id", "uid", "name")
 SOURCE_COLUMNS = ("source", "dataset")
 SOURCE_ALIASES = {
     "partnet": "partnet", "ikea_manual": "ikea_manual", "ikea": "ikea_manual", "ikeamanual": "ikea_manual",
@@ -167,6 +177,10 @@ def load_row(path: str | Path, row: int, source: str | None = None, up_axis: str
     up = rec.get("up_axis") or up_axis or ("y" if src in Y_UP_SOURCES else "z")
     if up not in ("y", "z"):
         raise FormatError(path, f"{where}.up_axis: expected 'y' or 'z', got {up!r}")
+    posed = _final_poses(rec, path, where)
+    official: dict[str, Any] = {"sample_id": object_id, "faces": {}, "local": {}, "poses": {}}
+    if up == "y":
+        official["source_to_z_up"] = Y_TO_Z_UP.tolist()
     parts = []
     for k, p in enumerate(parts_raw):
         field = f"{where}.parts[{k}]"
@@ -175,8 +189,16 @@ def load_row(path: str | Path, row: int, source: str | None = None, up_axis: str
         pid = p.get("part_id")
         if pid is None or str(pid) == "":
             raise FormatError(path, f"{field}.part_id: missing")
+        pid = str(pid)
         mesh = mesh_from_arrays(p.get("vertices"), p.get("faces"), path, field, polygons=True)
-        parts.append(SourcePart(str(pid), y_up_to_z_up(mesh) if up == "y" else mesh))
+        if any(len(f) != 3 for f in p["faces"]):
+            official["faces"][pid] = [[int(i) for i in f] for f in p["faces"]]
+        if posed is not None:
+            if pid not in posed:
+                raise FormatError(path, f"{field}: no assembled pose for part {pid!r} in poses")
+            official["local"][pid], official["poses"][pid] = np.asarray(mesh.vertices), posed[pid]
+            mesh = _posed(mesh, posed[pid])
+        parts.append(SourcePart(pid, y_up_to_z_up(mesh) if up == "y" else mesh))
     ids = [p.name for p in parts]
     dup = sorted({i for i in ids if ids.count(i) > 1})
     if dup:
@@ -201,7 +223,7 @@ def load_row(path: str | Path, row: int, source: str | None = None, up_axis: str
         equivalence = groups or None
 
     references: dict[str, list[Any]] = {}
-    meta: dict[str, Any] = {"file": str(path), "row": row, "up_axis": up}
+    meta: dict[str, Any] = {"file": str(path), "row": row, "up_axis": up, "official": official}
     pages = rec.get("manual_pages") or []
     if pages:
         found = []
@@ -226,6 +248,30 @@ def load_row(path: str | Path, row: int, source: str | None = None, up_axis: str
         equivalence=equivalence,
         meta=meta,
     )
+
+
+Y_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # (x, y, z) -> (x, -z, y)
+
+
+def _final_poses(rec: dict[str, Any], path: Path, where: str) -> dict[str, list[float]] | None:
+    """AssemblyBench's assembled poses: view ``"0"`` at the last step, or None without ``poses``."""
+    views = rec.get("poses")
+    if not views:
+        return None
+    steps = rec.get("steps") or []
+    try:
+        last = str(max(int(s["step_id"]) for s in steps))
+        chosen = views["0"][last]
+        return {str(k): [float(x) for x in v] for k, v in chosen.items() if v is not None and len(v) == 7}
+    except (KeyError, TypeError, ValueError):
+        raise FormatError(path, f"{where}.poses: expected view \"0\" with a 7-number pose per part at the last step of steps") from None
+
+
+def _posed(mesh: trimesh.Trimesh, pose: list[float]) -> trimesh.Trimesh:
+    """``mesh`` moved by ``pose`` ``[tx, ty, tz, qw, qx, qy, qz]``."""
+    from aw.pose import apply_pose
+
+    return trimesh.Trimesh(apply_pose(np.asarray(pose), np.asarray(mesh.vertices)), np.asarray(mesh.faces), process=False)
 
 
 def catalog(path: str | Path, source: str | None = None):

@@ -107,7 +107,7 @@ def datasets(tmp_path):
 def _args(root, out, *extra):
     return ["compose", "--out", str(out), "--partnet", str(root / "pn"), "--ikea-manual", str(root / "ik"),
             "--assemblybench", str(root / "ab"), "--fantastic-breaks", str(root / "fb"), "--per-source", "2",
-            "--jobs", "1", "--no-progress", *extra]
+            "--jobs", "1", "--no-progress", "--protocol", "native", *extra]
 
 
 def test_compose_cli_builds_the_benchmark(datasets, tmp_path, capsys):
@@ -167,7 +167,8 @@ def test_compose_cli_rehosted_rows_join_their_source(tmp_path):
                                                      rehosted_row("c2", "partnet", "Table", 7, pages=2),
                                                      rehosted_row("m1", "fantastic_breaks", "Mug", 2, pages=0)])
     out = tmp_path / "suite"
-    assert main(["compose", "--out", str(out), "--rehosted", str(tmp_path / "dl"), "--per-source", "5", "--jobs", "1", "--no-progress"]) == 0
+    assert main(["compose", "--out", str(out), "--rehosted", str(tmp_path / "dl"), "--per-source", "5", "--jobs", "1", "--no-progress",
+                 "--protocol", "native"]) == 0
     tasks = read_manifest(out).tasks
     assert sorted((t.source, t.object_id, t.condition) for t in tasks) == [
         ("fantastic_breaks", "m1", "none"), ("partnet", "c1", "image"), ("partnet", "c1", "none"),
