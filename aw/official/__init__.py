@@ -1,32 +1,17 @@
-"""Compatibility with the official AssemblyWorldBench release.
+"""Reading and writing the official AssemblyWorld benchmark's artefacts.
 
-* :mod:`aw.official.package`: an official package's per-sample evaluation inputs (1000 points
-  per part in the baked initial geometry, target poses, scale divisor, equivalence groups).
-* :mod:`aw.official.archive` / :mod:`aw.official.episode`: 3DWebAgent episode archives
-  (``final.episode.zip``), checked member by member before use, states restored to part poses
-  with MuJoCo.
-* :mod:`aw.official.convert`: both turned into this project's suite + runs layout for
-  ``aw-score`` (``suite_geometry`` gives the official-points geometry of a converted task).
+* :mod:`aw.official.archive`: episode archives (``*.episode.zip``), checked member by member
+  (names, sizes, hash inventory, records) and written in the same layout;
+* :mod:`aw.official.episode`: their worlds (MJCF or MJB) and states restored with MuJoCo 3.12.0;
+* :mod:`aw.official.world`: setup archives made from part meshes, and new states;
+* :mod:`aw.official.evaluation_cache`: the per-sample ``evaluation.json`` (points, target poses,
+  scale divisor, equivalence groups);
+* :mod:`aw.official.package`: the benchmark package (``benchmark.json``, block ``config.json``,
+  reference pages);
+* :mod:`aw.official.convert` / :mod:`aw.official.export`: official artefacts to this project's
+  suite and runs, and recorded runs back to official episode archives;
+* :mod:`aw.official.ids`: sample ids and their folder names; :mod:`aw.official.errors`: the
+  named errors.
+
+The formats are described in ``docs/formats.md``.
 """
-
-from aw.official.archive import ArchiveContents, read_archive
-from aw.official.convert import convert, convert_package, suite_eval_inputs, suite_geometry, write_episode_run
-from aw.official.episode import Episode, read_episode, restore_poses
-from aw.official.package import EvalInputs, OfficialPackage, read_eval_inputs, write_eval_inputs
-
-__all__ = [
-    "ArchiveContents",
-    "Episode",
-    "EvalInputs",
-    "OfficialPackage",
-    "convert",
-    "convert_package",
-    "read_archive",
-    "read_episode",
-    "read_eval_inputs",
-    "restore_poses",
-    "suite_eval_inputs",
-    "suite_geometry",
-    "write_episode_run",
-    "write_eval_inputs",
-]

@@ -1,234 +1,232 @@
-"""3DWebAgent episode archives: recorded states restored to part poses with MuJoCo.
+"""Official episodes restored with MuJoCo: the world, part bodies and the poses of each state.
 
-An archive (checked by :func:`aw.official.archive.read_archive` first) holds::
+The benchmark's worlds give part ``part_ids[k]`` (part ids sorted) the body ``part-%04d`` of
+``k + 1`` with one free joint, and the catalogue entry ``{"id": "part-000k", "name": "Part
+<part id>", "type": "rigid", "collisionEnabled": false}`` (assembly-world-bench ``poses.py``;
+assembly-world-agent ``episodes.py``). A state is a MuJoCo ``mj_getState`` vector of the
+manifest's ``stateSpec``; restoring one is ``mj_setState`` then ``mj_forward``, after which a
+part's pose ``[x, y, z, qw, qx, qy, qz]`` is its body's world position and orientation: the
+transform of the part's points in ``evaluation.json`` (its body frame) into the scene.
 
-    manifest.json     files + sha256, and the episode record:
-                        sample_id | task_id, system, started_at (optional),
-                        state: {"layout": "qpos" (default) | "mjstate", "spec": <mjtState bits>,
-                                "width": <floats per row>},
-                        bodies: {part id: body name} (default: the body named like the part)
-    frames.jsonl      one line per recorded state: {"frame": i, "t": seconds, "call": seq | null}
-    frames.bin        the states: little-endian float64 rows, one per line of frames.jsonl
-    calls.jsonl       tool calls: {"seq", "t", "tool" | "name", "args" | "arguments", "ok", "error"}
-    events.jsonl      episode events: {"t", "type" | "event": "start" | "end" | ..., "reason"}
-    world/model.xml   the MJCF scene (one body with a free joint per part); other world/ files
-                      are its assets
-
-A part's pose in a frame is its body's world pose after forward kinematics
-(``xpos``, ``xquat`` (w, x, y, z)): the same ``[x, y, z, qw, qx, qy, qz]`` that maps the baked
-initial geometry into the scene, as in this project's trajectories.
+A final archive is scored only as a continuation of its sample's initial archive: same
+catalogue, identity, producer, state layout and world (:func:`check_continuation`).
 """
 
 from __future__ import annotations
 
-import json
-from dataclasses import dataclass, field
+import tempfile
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from xml.etree import ElementTree as ET
 
 import numpy as np
 
-from aw.formats import FormatError
-from aw.official.archive import ArchiveContents, read_archive
+from aw.official.archive import ENGINE, MJB_MODEL, EpisodeArchive, Frame, read_archive
+from aw.official.errors import EngineVersionError, EpisodeMismatchError, WorldModelError
 
-__all__ = ["Frame", "Call", "Episode", "read_episode", "restore_poses"]
+__all__ = [
+    "PartEpisode", "body_name", "expected_objects", "catalogue_part_ids", "require_engine", "load_model",
+    "compare_compiled_models", "check_continuation", "state_poses", "read_part_episode",
+]
+
+_COMPILED_COUNTS = ("nbody", "njnt", "ngeom", "nmesh", "nq", "nv", "nu", "na", "neq", "ntendon", "nplugin", "nflex",
+                    "nskin", "ntex")
+# Immutable geometry and structure of a compiled world (physics options may differ between runs).
+_COMPILED_ARRAYS = ("names", "name_bodyadr", "body_parentid", "body_jntadr", "body_jntnum", "body_geomadr",
+                    "body_geomnum", "body_pos", "body_quat", "body_ipos", "body_iquat", "body_mass", "body_inertia",
+                    "jnt_type", "jnt_bodyid", "jnt_qposadr", "jnt_dofadr", "jnt_pos", "jnt_axis", "jnt_limited",
+                    "jnt_range", "qpos0", "dof_damping", "geom_type", "geom_bodyid", "geom_dataid", "geom_pos",
+                    "geom_quat", "geom_size", "geom_rgba", "geom_friction", "geom_condim", "mesh_vertadr",
+                    "mesh_vertnum", "mesh_faceadr", "mesh_facenum", "mesh_vert", "mesh_face", "mesh_pos", "mesh_quat",
+                    "mesh_normal", "mesh_facenormal")
+_POSITION_TOLERANCE = 2e-7  # compiled float32 geometry of the same MJB may differ in the last bits
+_NORMAL_TOLERANCE = 1e-5  # recomputed shading normals are more sensitive near degenerate faces
+
+
+def body_name(k: int) -> str:
+    """The body (and catalogue id) of the ``k``-th part, ``k`` counted from 0."""
+    return f"part-{k + 1:04d}"
+
+
+def expected_objects(part_ids: list[str]) -> list[dict]:
+    """The object catalogue of a benchmark episode whose parts are ``part_ids`` (sorted)."""
+    return [{"id": body_name(k), "name": f"Part {pid}", "type": "rigid", "collisionEnabled": False}
+            for k, pid in enumerate(part_ids)]
+
+
+def catalogue_part_ids(ep: EpisodeArchive) -> list[str]:
+    """The part ids an archive's catalogue names, when it follows the benchmark rule."""
+    objects = ep.manifest["objects"]
+    ids = [o["name"][len("Part "):] for o in objects if o["name"].startswith("Part ")]
+    if len(ids) != len(objects) or ids != sorted(set(ids)) or objects != expected_objects(ids):
+        raise EpisodeMismatchError(ep.path, "manifest.json: objects do not follow the benchmark catalogue "
+                                   "(part-0001, part-0002, ... named 'Part <part id>' in part id order)")
+    return ids
+
+
+def require_engine() -> None:
+    import mujoco
+
+    if mujoco.__version__ != ENGINE:
+        raise EngineVersionError("mujoco", f"official worlds and states need MuJoCo {ENGINE}; {mujoco.__version__} is installed")
+
+
+def load_model(ep: EpisodeArchive):
+    """The compiled world of an archive: MJCF ``world/model.xml`` with the other ``world/``
+    members as its assets, or the binary ``world/model.mjb``."""
+    import mujoco
+
+    require_engine()
+    if ep.is_mjb:
+        with tempfile.TemporaryDirectory(prefix="aw-mjb-") as folder:
+            target = Path(folder) / "model.mjb"
+            target.write_bytes(ep.files["world/" + MJB_MODEL["path"]])
+            try:
+                return mujoco.MjModel.from_binary_path(str(target))
+            except Exception as exc:
+                raise WorldModelError(ep.path, f"world/model.mjb: MuJoCo cannot load it ({exc})") from None
+    xml = ep.files["world/model.xml"]
+    try:
+        meshes = ET.fromstring(xml).findall("./asset/mesh")
+    except ET.ParseError as exc:
+        raise WorldModelError(ep.path, f"world/model.xml: not XML ({exc})") from None
+    assets = ep.world_files()
+    absent = sorted({m.attrib["file"] for m in meshes if "file" in m.attrib} - set(assets))
+    if absent:
+        raise WorldModelError(ep.path, f"world/model.xml: mesh files missing from world/: {absent}")
+    try:
+        return mujoco.MjModel.from_xml_string(xml.decode("utf-8"), {k: v for k, v in assets.items() if k != "model.xml"})
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise WorldModelError(ep.path, f"world/model.xml: MuJoCo cannot compile it ({exc})") from None
+
+
+def compare_compiled_models(actual, expected, where: Path) -> None:
+    """Raise unless two compiled worlds have the same structure and geometry."""
+    for name in _COMPILED_COUNTS:
+        if getattr(actual, name) != getattr(expected, name):
+            raise EpisodeMismatchError(where, f"world/model.mjb: compiled {name} differs from the initial episode's")
+    for name in _COMPILED_ARRAYS:
+        a, b = getattr(actual, name), getattr(expected, name)
+        if isinstance(a, bytes):
+            same = a == b
+        else:
+            a, b = np.asarray(a), np.asarray(b)
+            tol = _NORMAL_TOLERANCE if name == "mesh_normal" else _POSITION_TOLERANCE
+            same = a.shape == b.shape and (np.allclose(a, b, atol=tol, rtol=0) if np.issubdtype(a.dtype, np.floating)
+                                           else np.array_equal(a, b))
+        if not same:
+            raise EpisodeMismatchError(where, f"world/model.mjb: compiled {name} differs from the initial episode's")
+
+
+def check_continuation(final: EpisodeArchive, initial: EpisodeArchive, part_ids: list[str]):
+    """Check that ``final`` continues ``initial`` for the parts ``part_ids`` (sorted, distinct),
+    as the official scorer does before it restores anything; returns the compiled world."""
+    if part_ids != sorted(set(part_ids)):
+        raise EpisodeMismatchError(final.path, "part ids must be sorted and distinct")
+    want = expected_objects(part_ids)
+    if initial.manifest["objects"] != want:
+        raise EpisodeMismatchError(initial.path, "manifest.json: object catalogue differs from the evaluation's parts")
+    if final.manifest["objects"] != want:
+        raise EpisodeMismatchError(final.path, "manifest.json: object catalogue differs from the evaluation's parts")
+    for key in ("id", "producer", "contract", "engine", "stateSpec", "stateSize"):
+        if final.manifest[key] != initial.manifest[key]:
+            raise EpisodeMismatchError(final.path, f"manifest.json: {key} differs from the initial episode's")
+    if final.manifest.get("model") != initial.manifest.get("model"):
+        raise EpisodeMismatchError(final.path, "manifest.json: model declaration differs from the initial episode's")
+    world, reference = final.world_files(), initial.world_files()
+    if final.is_mjb:
+        if set(world) != set(reference):
+            raise EpisodeMismatchError(final.path, "world/: members differ from the initial episode's")
+        model = load_model(final)
+        compare_compiled_models(model, load_model(initial), final.path)
+        return model
+    if world != reference:
+        raise EpisodeMismatchError(final.path, "world/: files differ from the initial episode's")
+    return load_model(final)
+
+
+def _bodies(model, names: list[str], where: Path) -> list[int]:
+    import mujoco
+
+    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, n) for n in names]
+    missing = [n for n, b in zip(names, ids) if b <= 0]
+    if missing:
+        raise WorldModelError(where, f"the world has no bodies {missing}")
+    return ids
+
+
+def state_poses(model, ep: EpisodeArchive, frames: list[Frame], names: list[str]) -> np.ndarray:
+    """``(F, P, 7)`` world poses ``[x, y, z, qw, qx, qy, qz]`` of the bodies ``names`` in each
+    frame. A top-level body on one free joint reports its joint coordinates as stored (so a
+    pose written back reproduces the state exactly); any other body its forward kinematics."""
+    import mujoco
+
+    spec, size = ep.manifest["stateSpec"], ep.manifest["stateSize"]
+    if mujoco.mj_stateSize(model, spec) != size:
+        raise EpisodeMismatchError(ep.path, f"manifest.json: stateSize {size} differs from the world's state size "
+                                   f"{mujoco.mj_stateSize(model, spec)} for stateSpec {spec}")
+    bodies = _bodies(model, names, ep.path)
+    free = [_free_qpos_address(model, b) for b in bodies]
+    data = mujoco.MjData(model)
+    out = np.empty((len(frames), len(bodies), 7))
+    for f, frame in enumerate(frames):
+        mujoco.mj_setState(model, data, frame.integration, spec)
+        mujoco.mj_forward(model, data)
+        for p, (b, adr) in enumerate(zip(bodies, free)):
+            if adr is None:
+                out[f, p, :3], out[f, p, 3:] = data.xpos[b], data.xquat[b]
+            else:
+                out[f, p] = data.qpos[adr:adr + 7]
+    return out
+
+
+def _free_qpos_address(model, body: int) -> int | None:
+    import mujoco
+
+    if model.body_parentid[body] != 0 or model.body_jntnum[body] != 1:
+        return None
+    joint = model.body_jntadr[body]
+    return int(model.jnt_qposadr[joint]) if model.jnt_type[joint] == mujoco.mjtJoint.mjJNT_FREE else None
 
 
 @dataclass
-class Frame:
-    index: int
-    t: float
-    call: int | None
+class PartEpisode:
+    """An archive restored for its parts.
 
+    ``poses`` is ``(S + 1, P, 7)``: state index 0 (initial) .. S, parts in ``part_ids`` order.
+    """
 
-@dataclass
-class Call:
-    seq: int
-    t: float
-    tool: str
-    args: dict[str, Any]
-    ok: bool
-    error: str | None = None
-
-
-@dataclass
-class Episode:
-    """A read episode: ``poses (F, P, 7)`` per frame for ``part_ids``, plus calls and events."""
-
-    path: Path
-    sample_id: str
-    system: str
-    started_at: str
+    archive: EpisodeArchive
     part_ids: list[str]
-    frames: list[Frame]
     poses: np.ndarray
-    calls: list[Call] = field(default_factory=list)
-    events: list[dict[str, Any]] = field(default_factory=list)
-    manifest: dict[str, Any] = field(default_factory=dict)
+    model: object
 
-    def end_event(self) -> dict[str, Any] | None:
-        ends = [e for e in self.events if (e.get("type") or e.get("event")) == "end"]
-        return ends[-1] if ends else None
+    @property
+    def path(self) -> Path:
+        return self.archive.path
+
+    @property
+    def final_index(self) -> int:
+        return self.archive.final_state().index
 
     def final_poses(self) -> np.ndarray:
-        """``(P, 7)``: the last recorded state."""
-        return self.poses[-1]
+        """``(P, 7)`` poses of the state the official scorer restores."""
+        return self.poses[self.final_index]
 
 
-def _jsonl(contents: ArchiveContents, name: str) -> list[dict[str, Any]]:
-    out = []
-    for i, line in enumerate(contents.text(name).splitlines(), start=1):
-        if not line.strip():
-            continue
-        try:
-            rec = json.loads(line)
-        except ValueError as exc:
-            raise FormatError(contents.path, f"{name}: line {i}: not valid JSON ({exc})") from None
-        if not isinstance(rec, dict):
-            raise FormatError(contents.path, f"{name}: line {i}: expected a JSON object")
-        out.append(rec)
-    return out
-
-
-def _number(value: Any, where: Path, field_name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise FormatError(where, f"{field_name}: expected a finite number, got {value!r}")
-    return float(value)
-
-
-def _model(contents: ArchiveContents):
-    import mujoco
-
-    xml = contents.text("world/model.xml")
-    assets = {name[len("world/"):]: data for name, data in contents.files.items() if name.startswith("world/") and name != "world/model.xml"}
-    try:
-        return mujoco.MjModel.from_xml_string(xml, assets)
-    except ValueError as exc:
-        raise FormatError(contents.path, f"world/model.xml: MuJoCo cannot load it ({exc})") from None
-
-
-def restore_poses(model, rows: np.ndarray, bodies: list[str], layout: str = "qpos", spec: int | None = None,
-                  where: str | Path = "<model>") -> np.ndarray:
-    """World poses ``(F, len(bodies), 7)`` of the named bodies for each state row ``(F, W)``."""
-    import mujoco
-
-    ids = []
-    for name in bodies:
-        bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
-        if bid < 0:
-            raise FormatError(where, f"world/model.xml: no body named {name!r}")
-        ids.append(bid)
-    data = mujoco.MjData(model)
-    out = np.empty((len(rows), len(ids), 7))
-    for f, row in enumerate(rows):
-        if layout == "qpos":
-            data.qpos[:] = row
-        else:
-            mujoco.mj_setState(model, data, row, spec)
-        mujoco.mj_kinematics(model, data)
-        out[f, :, :3] = data.xpos[ids]
-        out[f, :, 3:] = data.xquat[ids]
-    return out
-
-
-def read_episode(path: str | Path, part_ids: list[str] | None = None) -> Episode:
-    """Verify and read an episode archive, restoring the poses of ``part_ids`` (default: the
-    manifest's ``bodies`` keys, else every body with a free joint, in name order)."""
-    import mujoco
-
-    contents = read_archive(path)
-    path = contents.path
-    man = contents.manifest
-    sample_id = man.get("sample_id", man.get("task_id"))
-    if not isinstance(sample_id, str) or not sample_id:
-        raise FormatError(path, "manifest.json: sample_id (or task_id): missing")
-    model = _model(contents)
-
-    state = man.get("state") or {}
-    if not isinstance(state, dict):
-        raise FormatError(path, "manifest.json: state: expected an object")
-    layout = state.get("layout", "qpos")
-    spec = None
-    if layout == "qpos":
-        width = model.nq
-    elif layout == "mjstate":
-        spec = state.get("spec")
-        if isinstance(spec, bool) or not isinstance(spec, int) or spec <= 0:
-            raise FormatError(path, "manifest.json: state.spec: an mjtState bit mask is needed for layout 'mjstate'")
-        width = mujoco.mj_stateSize(model, spec)
+def read_part_episode(path: str | Path | EpisodeArchive, initial: str | Path | EpisodeArchive | None = None,
+                      part_ids: list[str] | None = None) -> PartEpisode:
+    """Read (or take) an archive and restore every state's part poses. With ``initial``, the
+    archive must continue it (:func:`check_continuation`); ``part_ids`` default to the
+    catalogue's."""
+    ep = path if isinstance(path, EpisodeArchive) else read_archive(path)
+    ids = list(part_ids) if part_ids is not None else catalogue_part_ids(ep)
+    if initial is not None:
+        init = initial if isinstance(initial, EpisodeArchive) else read_archive(initial)
+        model = check_continuation(ep, init, ids)
     else:
-        raise FormatError(path, f"manifest.json: state.layout: expected 'qpos' or 'mjstate', got {layout!r}")
-    if "width" in state and state["width"] != width:
-        raise FormatError(path, f"manifest.json: state.width is {state['width']} but the model's {layout} has {width} values")
-
-    raw = contents.files["frames.bin"]
-    if len(raw) % (8 * width):
-        raise FormatError(path, f"frames.bin: {len(raw)} bytes is not a whole number of {width}-float64 rows")
-    rows = np.frombuffer(raw, dtype="<f8").reshape(-1, width)
-    if not np.isfinite(rows).all():
-        bad = int(np.argmax(~np.isfinite(rows).all(axis=1)))
-        raise FormatError(path, f"frames.bin: non-finite values in row {bad}")
-    frame_recs = _jsonl(contents, "frames.jsonl")
-    if len(frame_recs) != len(rows):
-        raise FormatError(path, f"frames.jsonl has {len(frame_recs)} lines but frames.bin has {len(rows)} rows")
-    if not frame_recs:
-        raise FormatError(path, "frames.jsonl: no frames (the initial state is needed)")
-    frames = []
-    for k, rec in enumerate(frame_recs):
-        idx = rec.get("frame", rec.get("index", k))
-        if idx != k:
-            raise FormatError(path, f"frames.jsonl: line {k + 1}: frame index {idx!r}, expected {k}")
-        call = rec.get("call", rec.get("call_seq"))
-        if call is not None and (isinstance(call, bool) or not isinstance(call, int)):
-            raise FormatError(path, f"frames.jsonl: line {k + 1}: call: expected an integer or null")
-        frames.append(Frame(k, _number(rec.get("t", 0.0), path, f"frames.jsonl: line {k + 1}: t"), call))
-
-    bodies_map = man.get("bodies")
-    if part_ids is None:
-        if isinstance(bodies_map, dict) and bodies_map:
-            part_ids = sorted(bodies_map)
-        else:
-            free = sorted(
-                mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, int(model.jnt_bodyid[j]))
-                for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE
-            )
-            part_ids = [b for b in free if b]
-    if not part_ids:
-        raise FormatError(path, "world/model.xml: no part bodies (no free joints and no manifest bodies)")
-    bodies = [bodies_map.get(p, p) if isinstance(bodies_map, dict) else p for p in part_ids]
-    poses = restore_poses(model, rows, bodies, layout, spec, path)
-
-    calls = []
-    for k, rec in enumerate(_jsonl(contents, "calls.jsonl")):
-        seq = rec.get("seq", rec.get("index", k + 1))
-        if isinstance(seq, bool) or not isinstance(seq, int):
-            raise FormatError(path, f"calls.jsonl: line {k + 1}: seq: expected an integer")
-        tool = rec.get("tool", rec.get("name"))
-        if not isinstance(tool, str) or not tool:
-            raise FormatError(path, f"calls.jsonl: line {k + 1}: tool: missing")
-        args = rec.get("args", rec.get("arguments")) or {}
-        if not isinstance(args, dict):
-            raise FormatError(path, f"calls.jsonl: line {k + 1}: args: expected an object")
-        err = rec.get("error")
-        calls.append(Call(seq, _number(rec.get("t", 0.0), path, f"calls.jsonl: line {k + 1}: t"), tool, args,
-                          bool(rec.get("ok", err is None)), None if err is None else str(err)))
-    seqs = [c.seq for c in calls]
-    if seqs != sorted(set(seqs)):
-        raise FormatError(path, "calls.jsonl: seq values must be unique and increasing")
-    known = set(seqs)
-    for fr in frames:
-        if fr.call is not None and calls and fr.call not in known:
-            raise FormatError(path, f"frames.jsonl: frame {fr.index} names call {fr.call}, which calls.jsonl lacks")
-    events = _jsonl(contents, "events.jsonl")
-    return Episode(
-        path=path,
-        sample_id=sample_id,
-        system=str(man.get("system", "")),
-        started_at=str(man.get("started_at", "")),
-        part_ids=list(part_ids),
-        frames=frames,
-        poses=poses,
-        calls=calls,
-        events=events,
-        manifest=man,
-    )
+        if ep.manifest["objects"] != expected_objects(ids):
+            raise EpisodeMismatchError(ep.path, "manifest.json: object catalogue differs from the given parts")
+        model = load_model(ep)
+    poses = state_poses(model, ep, [ep.initial, *ep.states], [body_name(k) for k in range(len(ids))])
+    return PartEpisode(ep, ids, poses, model)

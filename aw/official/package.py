@@ -1,248 +1,265 @@
-"""The official AssemblyWorldBench package: per-sample evaluation inputs.
+"""The official benchmark package (a local copy or Hugging Face snapshot of
+``AssemblyWorld/AssemblyWorldBench``), read as assembly-world-bench ``data.py`` reads it::
 
-Layout (see docs/datasets.md for the assumptions)::
+    PKG/benchmark.json                 version 1, evaluation protocol, five blocks, sources
+    PKG/<block.prompt_file>            the block's task text (SHA-256 in prompt_sha256)
+    PKG/<data>/<repo name>/<config_id>/config.json                identity + samples
+    PKG/<data>/<repo name>/<config_id>/<sample.episode>           initial episode archive
+    PKG/<data>/<repo name>/<config_id>/cache/<slug>/evaluation.json
+    PKG/<data>/<repo name>/<config_id>/cache/<slug>/reference/<mode>/pages.json (+ page images)
 
-    PKG/manifest.json        {"samples": [{"sample_id", "source", "condition", "object_id",
-                              "category", "n_parts", "weight", "eval"}...]} (or a bare list);
-                              "eval" defaults to eval/<sample_id>.npz
-    PKG/eval/<sample_id>.npz (or .json with the same keys)
-        part_ids            (P,)          part ids, sorted
-        points              (P, 1000, 3)  evaluator points per part, in the baked initial geometry
-        target_poses        (P, 7)        [tx, ty, tz, qw, qx, qy, qz] per part
-        scale_divisor       ()            evaluation scale divisor (baked units)
-        equivalence_groups  (P,) int group label per part, or a JSON text / list of id lists
-
-Scoring a state: target points of part i = apply(target_poses[i], points[i]) / divisor,
-predicted points = apply(pose_i, points[i]) / divisor, exactly as for this project's suites.
+``<data>``, ``<repo name>`` (the last component of the block's ``repo_id``) and ``<config_id>``
+come from the block. A sample is named by the pair (block, sample id): the two PartNet blocks
+hold the same ids. :class:`OfficialPackage` also offers what rescoring an official run needs
+(``evaluation_inputs``, ``final_state``, ``check_run``, ``check_attempt``).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
-import zipfile
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from aw.formats import FormatError
+from aw.official.archive import EpisodeArchive, read_archive
+from aw.official.episode import read_part_episode
+from aw.official.errors import PackageError
+from aw.official.evaluation_cache import (CACHE_FILE, EVALUATION_PROTOCOL, SIMILARITY_POLICY, SIMILARITY_THRESHOLD,
+                                          EvaluationInputs, read_evaluation)
+from aw.official.ids import sample_slug
 
-__all__ = ["N_POINTS", "EvalInputs", "Sample", "OfficialPackage", "read_eval_inputs", "write_eval_inputs"]
+__all__ = ["REPO", "REVISION", "BLOCKS", "BENCHMARK_EVALUATION", "REFERENCE_CONDITIONS", "Sample", "OfficialPackage",
+           "file_sha256"]
 
-N_POINTS = 1000
-_ALIASES = {
-    "points": ("points", "part_points", "clouds", "part_pcs"),
-    "target_poses": ("target_poses", "targets", "gt_poses"),
-    "scale_divisor": ("scale_divisor", "divisor", "scale"),
-    "equivalence_groups": ("equivalence_groups", "groups", "group_ids", "equivalence"),
-}
-
-
-@dataclass
-class EvalInputs:
-    """One sample's evaluation inputs (all checked)."""
-
-    sample_id: str
-    part_ids: list[str]
-    points: np.ndarray  # (P, 1000, 3)
-    target_poses: np.ndarray  # (P, 7) as published (the evaluator normalizes quaternions)
-    divisor: float
-    groups: list[list[str]]  # equivalence groups (every part in exactly one group), sorted
-
-    @property
-    def n_parts(self) -> int:
-        return len(self.part_ids)
-
-    def group_labels(self) -> np.ndarray:
-        """``(P,)`` int: the index of each part's group."""
-        lab = np.empty(self.n_parts, dtype=np.int64)
-        index = {p: i for i, p in enumerate(self.part_ids)}
-        for g, members in enumerate(self.groups):
-            for m in members:
-                lab[index[m]] = g
-        return lab
-
-    def centroids(self) -> np.ndarray:
-        """``(P, 3)`` centroids of the official points (baked frame): they are area-weighted
-        surface samples, so their mean stands in for the surface centroid of a mesh."""
-        return self.points.mean(axis=1)
-
-    def size_ratio(self) -> float:
-        """Largest over smallest part PCA-box diagonal, measured on the official points."""
-        from aw.prepare.geometry import part_size_ratio
-
-        return part_size_ratio(list(self.points))
-
-    def task_geometry(self):
-        """The evaluator's geometry (``aw_eval.TaskGeometry.from_points``) of this sample."""
-        from aw_eval import TaskGeometry
-
-        return TaskGeometry.from_points(self.part_ids, self.points, self.target_poses, self.divisor, self.groups)
+REPO = "AssemblyWorld/AssemblyWorldBench"
+REVISION = "f351f0f6e9f8a314ec7593e847d07a45b776481e"  # the pinned dataset revision (data.py)
+BLOCKS = ("partnet-none", "partnet-final-image", "ikea-manualbook", "assemblybench-manualbook", "fantastic-breaks-none")
+BENCHMARK_EVALUATION = {"protocol": EVALUATION_PROTOCOL, "similarity_policy": SIMILARITY_POLICY,
+                        "similarity_threshold": SIMILARITY_THRESHOLD}
+EXPECTED_SAMPLES = 100
+# A block's reference_mode as this project's task condition.
+REFERENCE_CONDITIONS = {"none": "none", "final-image": "image", "manualbook": "manual"}
+_HF_SNAPSHOT = re.compile(r"[0-9a-f]{40}")
 
 
-def _get(data: dict[str, Any], key: str, where: Path) -> Any:
-    for name in _ALIASES.get(key, (key,)):
-        if name in data:
-            return data[name]
-    raise FormatError(where, f"{key}: missing (keys: {sorted(data)})")
-
-
-def _groups(raw: Any, part_ids: list[str], where: Path) -> list[list[str]]:
-    arr = np.asarray(raw) if not isinstance(raw, (str, list)) else None
-    if isinstance(raw, (str, bytes)) or (arr is not None and arr.dtype.kind in "US" and arr.ndim == 0):
-        try:
-            raw = json.loads(str(raw if arr is None else arr.item()))
-        except ValueError:
-            raise FormatError(where, "equivalence_groups: not valid JSON text") from None
-        arr = None
-    if arr is not None and arr.dtype.kind in "iu":
-        if arr.shape != (len(part_ids),):
-            raise FormatError(where, f"equivalence_groups: expected one label per part ({len(part_ids)}), got shape {arr.shape}")
-        by: dict[int, list[str]] = {}
-        for p, g in zip(part_ids, arr.tolist()):
-            by.setdefault(int(g), []).append(p)
-        groups = list(by.values())
-    else:
-        if arr is not None:
-            raw = arr.tolist()
-        if not isinstance(raw, list) or not all(isinstance(g, list) for g in raw):
-            raise FormatError(where, "equivalence_groups: expected group labels (P,) or a list of part-id lists")
-        groups = [[str(x) for x in g] for g in raw]
-        seen = [p for g in groups for p in g]
-        unknown = sorted(set(seen) - set(part_ids))
-        if unknown:
-            raise FormatError(where, f"equivalence_groups: unknown part ids {unknown}")
-        dup = sorted({p for p in seen if seen.count(p) > 1})
-        if dup:
-            raise FormatError(where, f"equivalence_groups: parts in several groups {dup}")
-        groups += [[p] for p in part_ids if p not in set(seen)]  # unlisted parts are singletons
-    return sorted((sorted(g) for g in groups if g), key=lambda g: g[0])
-
-
-def _load_raw(path: Path) -> dict[str, Any]:
-    if not path.is_file():
-        raise FormatError(path, "evaluation inputs not found")
-    if path.suffix == ".json":
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (ValueError, UnicodeDecodeError) as exc:
-            raise FormatError(path, f"not valid JSON ({exc})") from None
-        if not isinstance(data, dict):
-            raise FormatError(path, "expected a JSON object")
-        return data
-    try:
-        with np.load(path, allow_pickle=False) as npz:
-            return {k: npz[k] for k in npz.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise FormatError(path, f"cannot be read as .npz ({type(exc).__name__}: {exc})") from None
-
-
-def read_eval_inputs(path: str | Path, sample_id: str = "") -> EvalInputs:
-    """Read and check one sample's evaluation inputs (``.npz`` or ``.json``)."""
-    path = Path(path)
-    data = _load_raw(path)
-    ids_raw = np.asarray(_get(data, "part_ids", path))
-    if ids_raw.ndim != 1 or len(ids_raw) == 0:
-        raise FormatError(path, f"part_ids: expected a non-empty list, got shape {ids_raw.shape}")
-    part_ids = [str(x) for x in ids_raw.tolist()]
-    if part_ids != sorted(set(part_ids)):
-        raise FormatError(path, "part_ids: must be unique and sorted")
-    n = len(part_ids)
-    raw_points = _get(data, "points", path)
-    try:
-        points = np.asarray(raw_points, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise FormatError(path, "points: not numeric") from None
-    if points.shape != (n, N_POINTS, 3):
-        raise FormatError(path, f"points: expected shape ({n}, {N_POINTS}, 3), got {points.shape}")
-    if not np.isfinite(points).all():
-        raise FormatError(path, "points: non-finite values")
-    raw_targets = _get(data, "target_poses", path)
-    try:
-        targets = np.asarray(raw_targets, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise FormatError(path, "target_poses: not numeric") from None
-    if targets.shape != (n, 7):
-        raise FormatError(path, f"target_poses: expected shape ({n}, 7) [tx, ty, tz, qw, qx, qy, qz], got {targets.shape}")
-    if not np.isfinite(targets).all():
-        raise FormatError(path, "target_poses: non-finite values")
-    qn = np.linalg.norm(targets[:, 3:], axis=1)
-    if np.any(qn < 1e-9):
-        raise FormatError(path, f"target_poses: zero quaternion for part {part_ids[int(np.argmin(qn))]}")
-    div = np.asarray(_get(data, "scale_divisor", path))
-    if div.size != 1 or not np.issubdtype(div.dtype, np.number) or not np.isfinite(div).all() or float(div.reshape(())) <= 0:
-        raise FormatError(path, f"scale_divisor: expected one positive number, got {div.tolist()!r}")
-    try:
-        raw_groups = _get(data, "equivalence_groups", path)
-    except FormatError:
-        raw_groups = [[p] for p in part_ids]
-    groups = _groups(raw_groups, part_ids, path)
-    return EvalInputs(sample_id or path.stem, part_ids, points, targets, float(div.reshape(())), groups)
-
-
-def write_eval_inputs(path: str | Path, inputs: EvalInputs) -> None:
-    """Write ``inputs`` as an ``.npz`` in the package layout (group labels per part)."""
-    np.savez(
-        Path(path),
-        part_ids=np.asarray(inputs.part_ids),
-        points=np.asarray(inputs.points, dtype=np.float64),
-        target_poses=np.asarray(inputs.target_poses, dtype=np.float64),
-        scale_divisor=np.float64(inputs.divisor),
-        equivalence_groups=inputs.group_labels(),
-    )
+def file_sha256(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
 
 
 @dataclass
 class Sample:
+    """One (block, sample id) of the package and its files."""
+
+    block: str
     sample_id: str
-    source: str
-    condition: str
-    object_id: str
-    category: str
-    n_parts: int
-    weight: float
-    eval_path: Path
+    expected: dict[str, Any]  # config.json sample entry: episode, episode_id, sha256, parts
+    initial_path: Path
+    evaluation_path: Path
+    reference: dict[str, Any] | None  # pages.json, or None for reference_mode none
+    pages: list[Path]
+
+    @property
+    def slug(self) -> str:
+        return sample_slug(self.sample_id)
+
+    @property
+    def parts(self) -> int:
+        return int(self.expected["parts"])
 
 
 class OfficialPackage:
-    """An official benchmark package: its samples and their evaluation inputs."""
+    """A benchmark package; with ``strict`` (default) exactly the five frozen blocks and 100
+    samples, as the official loader demands, else any of the blocks in their order."""
 
-    def __init__(self, root: str | Path):
-        self.root = Path(root)
-        path = self.root / "manifest.json"
+    def __init__(self, root: str | Path, *, strict: bool = True):
+        self.root = Path(root).resolve()
+        path = self.root / "benchmark.json"
         if not path.is_file():
-            raise FormatError(path, "package manifest not found")
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (ValueError, UnicodeDecodeError) as exc:
-            raise FormatError(path, f"not valid JSON ({exc})") from None
-        recs = data.get("samples") if isinstance(data, dict) else data
-        if not isinstance(recs, list) or not recs:
-            raise FormatError(path, "samples: expected a non-empty list")
-        self.samples: dict[str, Sample] = {}
-        for k, rec in enumerate(recs):
-            if not isinstance(rec, dict) or not isinstance(rec.get("sample_id"), str) or not rec["sample_id"]:
-                raise FormatError(path, f"samples[{k}].sample_id: missing")
-            sid = rec["sample_id"]
-            if sid in self.samples:
-                raise FormatError(path, f"samples[{k}].sample_id: {sid!r} appears twice")
-            rel = rec.get("eval") or f"eval/{sid}.npz"
-            if Path(rel).is_absolute() or ".." in Path(rel).parts:
-                raise FormatError(path, f"samples[{k}].eval: must be a path inside the package")
-            cond = rec.get("condition", "none")
-            if cond not in ("none", "image", "manual"):
-                raise FormatError(path, f"samples[{k}].condition: expected none, image or manual, got {cond!r}")
-            self.samples[sid] = Sample(
-                sid, str(rec.get("source", "official")), cond, str(rec.get("object_id", sid)), str(rec.get("category", "")),
-                int(rec.get("n_parts", 0) or 0), float(rec.get("weight", 1.0)), self.root / rel,
-            )
+            raise PackageError(path, "benchmark.json not found (is this an official benchmark package?)")
+        self.benchmark = self._json("benchmark.json")
+        b = self.benchmark
+        if not isinstance(b, dict) or b.get("version") != 1 or b.get("evaluation") != BENCHMARK_EVALUATION:
+            raise PackageError(path, f"expected version 1 and evaluation {BENCHMARK_EVALUATION}")
+        if not isinstance(b.get("blocks"), list) or not all(isinstance(x, dict) and isinstance(x.get("name"), str) for x in b["blocks"]):
+            raise PackageError(path, "blocks: expected a list of block objects with a name")
+        names = tuple(x["name"] for x in b["blocks"])
+        order_ok = names == BLOCKS if strict else (names and names == tuple(n for n in BLOCKS if n in names))
+        if not order_ok:
+            raise PackageError(path, f"blocks {list(names)}: expected {'exactly' if strict else 'some of'} {list(BLOCKS)} in that order")
+        if strict and sum(len(x.get("samples", {})) for x in b["blocks"]) != EXPECTED_SAMPLES:
+            raise PackageError(path, f"expected {EXPECTED_SAMPLES} samples over the five blocks")
+        need = ("source", "repo_id", "revision", "config_id", "data", "samples", "reference_mode", "prompt_file", "prompt_sha256")
+        for block in b["blocks"]:
+            missing = [k for k in need if k not in block]
+            if missing:
+                raise PackageError(path, f"block {block['name']!r}: missing {missing}")
+            if block["reference_mode"] not in REFERENCE_CONDITIONS or not isinstance(block["samples"], dict):
+                raise PackageError(path, f"block {block['name']!r}: reference_mode {block['reference_mode']!r} or samples malformed")
+            if block["source"] not in b.get("sources", []):
+                raise PackageError(path, f"block {block['name']!r}: source {block['source']!r} is not one of sources")
+        self.blocks: dict[str, dict[str, Any]] = {x["name"]: x for x in b["blocks"]}
+        self._configs: dict[str, tuple[str, dict[str, Any], str]] = {}
+        self._samples: dict[tuple[str, str], Sample] = {}
+        self._inputs: dict[tuple[str, str], EvaluationInputs] = {}
+        self._initials: dict[tuple[str, str], EpisodeArchive] = {}
 
-    def eval_inputs(self, sample_id: str) -> EvalInputs:
-        if sample_id not in self.samples:
-            raise KeyError(f"sample {sample_id!r} is not in {self.root / 'manifest.json'}")
-        s = self.samples[sample_id]
-        inputs = read_eval_inputs(s.eval_path, sample_id)
-        if s.n_parts and s.n_parts != inputs.n_parts:
-            raise FormatError(s.eval_path, f"part_ids: {inputs.n_parts} parts, the package manifest says {s.n_parts}")
-        return inputs
+    # --- files --------------------------------------------------------------------------------
+
+    def path(self, relative: str) -> Path:
+        """``relative`` inside the package; links may lead only into the package (or into a
+        Hugging Face cache's blob store when the package is a snapshot)."""
+        rel = Path(relative)
+        if rel.is_absolute() or ".." in rel.parts:
+            raise PackageError(self.root / "benchmark.json", f"path {relative!r} escapes the package")
+        path = self.root / rel
+        allowed = [self.root]
+        repo = self.root.parent.parent
+        if self.root.parent.name == "snapshots" and _HF_SNAPSHOT.fullmatch(self.root.name) and repo.name.startswith("datasets--"):
+            allowed += [(repo / "blobs").resolve(), (repo.parent / "blobs").resolve()]
+        if not any(path.resolve().is_relative_to(a) for a in allowed):
+            raise PackageError(path, "links outside the package")
+        if not path.is_file():
+            raise PackageError(path, "package file not found")
+        return path
+
+    def _json(self, relative: str) -> Any:
+        path = self.path(relative)
+        try:
+            return json.loads(path.read_text(encoding="utf-8"))
+        except (ValueError, UnicodeDecodeError) as exc:
+            raise PackageError(path, f"not valid JSON ({exc})") from None
+
+    # --- blocks and samples -------------------------------------------------------------------
+
+    def configuration(self, block: str) -> tuple[str, dict[str, Any], str]:
+        """``(config folder, config.json, task text)`` of a block, checked against benchmark.json."""
+        if block not in self.blocks:
+            raise PackageError(self.root / "benchmark.json", f"unknown block {block!r} (blocks: {list(self.blocks)})")
+        if block not in self._configs:
+            b = self.blocks[block]
+            folder = f"{b['data']}/{b['repo_id'].split('/')[-1]}/{b['config_id']}"
+            cfg = self._json(f"{folder}/config.json")
+            where = self.root / folder / "config.json"
+            identity = cfg.get("identity") if isinstance(cfg, dict) else None
+            samples = cfg.get("samples") if isinstance(cfg, dict) else None
+            if not isinstance(identity, dict) or not isinstance(samples, dict):
+                raise PackageError(where, "expected identity and samples objects")
+            if cfg.get("config_id") != b["config_id"] or identity.get("dataset") != b["repo_id"] or identity.get("revision") != b["revision"]:
+                raise PackageError(where, f"config_id / identity differ from block {block!r} in benchmark.json")
+            if set(samples) != set(b["samples"]):
+                raise PackageError(where, f"samples differ from block {block!r} in benchmark.json")
+            for sid, entry in samples.items():
+                if not isinstance(entry, dict) or any(entry.get(k) != b["samples"][sid].get(k) for k in ("sha256", "parts", "episode_id")):
+                    raise PackageError(where, f"sample {sid!r}: sha256, parts or episode_id differ from benchmark.json")
+            task_path = self.path(b["prompt_file"])
+            task = task_path.read_bytes()
+            if hashlib.sha256(task).hexdigest() != b["prompt_sha256"]:
+                raise PackageError(task_path, f"task text differs from block {block!r} prompt_sha256")
+            self._configs[block] = (folder, cfg, task.decode("utf-8"))
+        return self._configs[block]
+
+    def sample_ids(self, block: str) -> list[str]:
+        """The block's sample ids in config.json order."""
+        return list(self.configuration(block)[1]["samples"])
+
+    def samples(self) -> list[tuple[str, str]]:
+        """Every (block, sample id), blocks in benchmark order."""
+        return [(block, sid) for block in self.blocks for sid in self.sample_ids(block)]
+
+    def task_text(self, block: str) -> str:
+        return self.configuration(block)[2]
+
+    def sample(self, block: str, sample_id: str) -> Sample:
+        """A sample's files; its initial archive's digest and reference pages are checked."""
+        key = (block, sample_id)
+        if key in self._samples:
+            return self._samples[key]
+        folder, cfg, _ = self.configuration(block)
+        if sample_id not in cfg["samples"]:
+            raise PackageError(self.root / folder / "config.json", f"block {block!r} has no sample {sample_id!r}")
+        expected = cfg["samples"][sample_id]
+        slug = sample_slug(sample_id, str(self.root / folder / "config.json"))
+        initial = self.path(f"{folder}/{expected['episode']}")
+        if file_sha256(initial) != expected["sha256"]:
+            raise PackageError(initial, f"initial episode's SHA-256 differs from config.json ({block}/{sample_id})")
+        b = self.blocks[block]
+        reference, pages = None, []
+        if b["reference_mode"] != "none":
+            refdir = f"{folder}/cache/{slug}/reference/{b['reference_mode']}"
+            reference = self._json(f"{refdir}/pages.json")
+            where = self.root / refdir / "pages.json"
+            if not isinstance(reference, dict) or reference.get("dataset") != b["repo_id"] or reference.get("revision") != b["revision"] \
+                    or reference.get("reference_mode") != b["reference_mode"] or not reference.get("pages"):
+                raise PackageError(where, "dataset, revision or reference_mode differ from the block, or no pages")
+            for index, page in enumerate(reference["pages"], start=1):
+                image = self.path(f"{refdir}/{page['file']}")
+                if page.get("page") != index or file_sha256(image) != page.get("source_sha256"):
+                    raise PackageError(where, f"page {index}: out of order or its SHA-256 differs")
+                pages.append(image)
+        sample = Sample(block, sample_id, expected, initial, self.root / folder / "cache" / slug / CACHE_FILE, reference, pages)
+        self._samples[key] = sample
+        return sample
+
+    def evaluation_inputs(self, block: str, sample_id: str) -> EvaluationInputs:
+        """The sample's checked ``evaluation.json``."""
+        key = (block, sample_id)
+        if key not in self._inputs:
+            s = self.sample(block, sample_id)
+            self.path(str(s.evaluation_path.relative_to(self.root)))
+            _, cfg, _ = self.configuration(block)
+            self._inputs[key] = read_evaluation(s.evaluation_path, sample_id=sample_id, identity=cfg["identity"],
+                                                initial_sha256=s.expected["sha256"], parts=s.parts)
+        return self._inputs[key]
+
+    def initial_archive(self, block: str, sample_id: str) -> EpisodeArchive:
+        key = (block, sample_id)
+        if key not in self._initials:
+            s = self.sample(block, sample_id)
+            arc = read_archive(s.initial_path)
+            if arc.manifest["id"] != s.expected["episode_id"]:
+                raise PackageError(s.initial_path, f"manifest id {arc.manifest['id']!r} differs from config.json episode_id")
+            self._initials[key] = arc
+        return self._initials[key]
+
+    def final_state(self, block: str, sample_id: str, archive: str | Path) -> tuple[np.ndarray, int]:
+        """``(poses (P, 7) in part_ids order, state index)`` of a final archive's last state,
+        checked as a continuation of the sample's initial archive."""
+        inputs = self.evaluation_inputs(block, sample_id)
+        ep = read_part_episode(archive, self.initial_archive(block, sample_id), inputs.part_ids)
+        return ep.final_poses(), ep.final_index
+
+    # --- run logs -----------------------------------------------------------------------------
+
+    def check_run(self, run) -> None:
+        """A run's ``run.json`` (``aw.official.runlog.RunLog``) must use this package's task texts,
+        reference modes and samples."""
+        where = Path(run.path) / "run.json"
+        for block, ids in run.selection.items():
+            if block not in self.blocks:
+                raise PackageError(where, f"selection names block {block!r}, which the package lacks")
+            if (run.meta.get("tasks") or {}).get(block) != self.task_text(block):
+                raise PackageError(where, f"tasks[{block!r}] differs from the package's task text")
+            if (run.meta.get("reference_modes") or {}).get(block) != self.blocks[block]["reference_mode"]:
+                raise PackageError(where, f"reference_modes[{block!r}] differs from the package's")
+            unknown = sorted(set(ids) - set(self.blocks[block]["samples"]))
+            if unknown:
+                raise PackageError(where, f"block {block!r}: samples {unknown} are not in the package")
+
+    def check_attempt(self, attempt) -> None:
+        """A sample's ``input.json`` (``aw.official.runlog.SampleAttempt``) must name this
+        package's sample: id, block, identity, initial digest, episode id and part count."""
+        where = Path(attempt.directory) / "input.json"
+        inputs = attempt.inputs
+        _, cfg, _ = self.configuration(attempt.block)
+        expected = cfg["samples"].get(attempt.sample_id)
+        if expected is None or inputs.get("sample_id") != attempt.sample_id or inputs.get("block") != attempt.block \
+                or inputs.get("identity") != cfg["identity"] or any(inputs.get(k) != expected.get(k) for k in ("sha256", "episode_id", "parts")):
+            raise PackageError(where, "the run's input identity differs from the package's sample")

@@ -17,8 +17,9 @@ import numpy as np
 
 from aw.formats import FormatError, read_targets, read_task
 from aw.meshes import load_task_meshes
-from aw.official import suite_eval_inputs
+from aw.official.eval_points import suite_eval_inputs
 from aw.prepare.geometry import part_size_ratio
+from aw_eval import TaskGeometry
 from aw_eval.study import evaluator
 from aw_eval.study.decreases import pa_decreases
 from aw_eval.study.episode import RunUnreadable, read_episode
@@ -145,7 +146,7 @@ def _load_official(job: TaskJob, inputs, t0: float):
     """The same for a task converted from an official package (``aw.official``): its geometry is
     the package's own evaluation points; there is no task directory."""
     read_targets(job.targets_path)
-    geom = inputs.task_geometry()
+    geom = TaskGeometry.from_points(inputs.part_ids, inputs.points, inputs.target_poses, inputs.divisor, inputs.groups)
     facts = TaskFacts(job.task_id, int(geom.n_parts), float(inputs.size_ratio()), float(geom.divisor),
                       list(geom.part_ids), time.perf_counter() - t0)
     return geom, list(inputs.part_ids), inputs.centroids(), facts
