@@ -1,34 +1,48 @@
-"""Source-level fracture protocol (Fantastic Breaks / Breaking Bad comparisons, Appendix A.3).
+"""The fracture protocol (Fantastic Breaks / Breaking Bad comparisons, Appendix A.3) as the
+official benchmark evaluates it (``assembly_world_agent/evaluation/garf.py`` of
+AssemblyWorld/assembly-world-agent), number for number.
 
-- 5000 area-weighted surface samples across parts: part ``i`` gets ``max(20, floor(5000 A_i /
-  sum A))``, and the remainder (positive or negative) goes to the largest allocation (first on
-  ties); part ``i`` samples with :func:`aw_eval.sampling.part_seed` ``(seed, i)``.
-- Scale: every coordinate is divided by ``max(1, e_max)``, ``e_max`` the largest axis-aligned
-  extent of any part in its target (source) placement.
-- One shared transform puts the anchor (the part with the most samples, first on ties) exactly
-  at its target; part identities stay fixed and the anchor is included in every average.
-- RE = mean over parts of ``sqrt(|dphi|^2 / 3)``, ``dphi`` the per-component intrinsic-XYZ Euler
-  differences in degrees, each wrapped to ``min(d, 360 - d)``; TE likewise on the differences of
-  sampled centroids. PA: fraction of parts with part CD (pred part vs its own target part)
-  strictly below 0.01. CD: for each part, the mean squared distance of its predicted samples to
-  the nearest sample of the whole target assembly plus the mean squared distance of its target
-  samples to the nearest sample of the whole predicted assembly; then the mean over parts.
+- Samples: 5000 area-weighted surface points in all; part ``i`` (parts in sorted id order) gets
+  ``20 + floor(4960 * A_i / sum A)`` (``4960 = 5000 - 20 P`` for ``P`` parts), and whatever is
+  left goes to the part with the most (first on ties). ``A_i``: half the summed cross-product
+  norms of the part's sampling triangles. Part ``i`` draws from the stream
+  ``(42, dataset, sample id, part id, "garf-evaluation")``
+  (:func:`aw.prepare.official_protocol.stream`), with the official surface sampler.
+- Scale: coordinates are divided by ``max(1, e) * s``: ``e`` the largest axis-aligned extent of
+  any part's *source* mesh (source units, before any pose), ``s`` the task's scale (the norm of
+  the first column of the source -> task matrix) (:func:`fracture_divisor`).
+- Each part's samples are centred on their own mean; a part's pose then moves that centre.
+- Anchor: the part with the most samples (first on ties). One shared transform puts the anchor's
+  predicted pose exactly on its target; part identities stay fixed and the anchor counts in
+  every average.
+- RE: per part, the root mean square of the three intrinsic-XYZ Euler angle differences in
+  degrees (SciPy's ``as_euler("XYZ")``), each ``|d|`` taken as ``min(|d|, 360 - |d|)``. TE: per
+  part, the root mean square of the three centre differences. PA: fraction of parts whose own
+  squared Chamfer distance is below 0.01 (strictly). CD: per part, the mean squared distance of
+  its predicted points to the whole target assembly plus that of its target points to the whole
+  predicted assembly. Every figure is then the mean over parts.
 
 Display multipliers (x100 TE, x1000 CD) belong to reports, not here.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
 from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
-from aw.pose import apply_pose, as_finite, euler_xyz_from_matrix, quat_to_matrix
-from aw_eval.sampling import part_seed, surface_samples
+from aw.prepare.official_protocol import fracture_divisor, rotation_of, sample_surface, stream, triangulate
 
-__all__ = ["FractureMetrics", "allocate_samples", "fracture_metrics", "fracture_metrics_from_samples", "wrapped_euler_error"]
+__all__ = ["FractureMetrics", "SEED", "allocate_samples", "fracture_divisor", "fracture_metrics",
+           "fracture_metrics_from_samples", "wrapped_euler_error"]
+
+SEED = 42
+TOTAL = 5000
+MINIMUM = 20
+PA_THRESHOLD = 0.01
 
 
 @dataclass
@@ -42,94 +56,93 @@ class FractureMetrics:
     part_cd: np.ndarray  # (P,) CD of each part with its own target part
     shape_cd: np.ndarray  # (P,) global-neighbour CD terms per part
     anchor: int
-    scale: float
+    scale: float  # the divisor
     counts: np.ndarray  # (P,) samples per part
 
 
-def allocate_samples(areas, total: int = 5000, minimum: int = 20) -> np.ndarray:
-    """Samples per part ``(P,)`` by area with at least ``minimum`` each; remainder to the largest."""
-    a = as_finite(areas, None, "areas").reshape(-1)
-    if a.size == 0 or np.any(a < 0) or a.sum() <= 0:
-        raise ValueError("areas must be non-negative with a positive sum")
-    if minimum * a.size > total:
-        raise ValueError(f"{a.size} parts need at least {minimum * a.size} samples, more than total={total}")
-    n = np.maximum(minimum, np.floor(total * a / a.sum()).astype(np.int64))
-    n[int(np.argmax(n))] += total - int(n.sum())
-    if n.min() < minimum:
-        raise ValueError("cannot honour the per-part minimum with this total")
-    return n
+def allocate_samples(areas, total: int = TOTAL, minimum: int = MINIMUM) -> np.ndarray:
+    """Samples per part ``(P,)``: ``minimum`` each plus the area share of the rest (truncated);
+    the remainder to the part with the most."""
+    a = np.asarray(areas, dtype=float).reshape(-1)
+    if a.size == 0 or not np.isfinite(a).all() or (a <= 0).any() or total < minimum * a.size:
+        raise ValueError(f"need positive finite areas and total >= {minimum} per part, got {a.size} parts for {total}")
+    counts = minimum + ((total - minimum * a.size) * a / a.sum()).astype(int)
+    counts[np.argmax(counts)] += total - counts.sum()
+    return counts
 
 
 def wrapped_euler_error(r_pred: np.ndarray, r_target: np.ndarray) -> np.ndarray:
-    """Per-part ``sqrt(|dphi|^2 / 3)`` in degrees for rotations ``(P, 3, 3)``, components wrapped."""
-    e_p = np.degrees(euler_xyz_from_matrix(r_pred))
-    e_t = np.degrees(euler_xyz_from_matrix(r_target))
-    d = np.abs(e_p - e_t) % 360.0
-    d = np.minimum(d, 360.0 - d)
-    return np.sqrt(np.sum(d * d, axis=-1) / 3.0)
+    """Per-part RMS of the wrapped intrinsic-XYZ Euler differences (degrees), rotations ``(P, 3, 3)``."""
+    out = []
+    for rp, rt in zip(np.reshape(r_pred, (-1, 3, 3)), np.reshape(r_target, (-1, 3, 3))):
+        d = np.abs(Rotation.from_matrix(rp).as_euler("XYZ", degrees=True) - Rotation.from_matrix(rt).as_euler("XYZ", degrees=True))
+        d = np.minimum(d, 360 - d)
+        out.append(np.sqrt(np.mean(d ** 2)))
+    return np.array(out)
 
 
-def _nn_sq(query: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    _, idx = cKDTree(ref).query(query)
-    return np.sum((query - ref[idx]) ** 2, axis=1)
+def _chamfer(a: np.ndarray, b: np.ndarray) -> float:
+    ab = cKDTree(b).query(a)[0]
+    ba = cKDTree(a).query(b)[0]
+    return float(np.mean(ab * ab) + np.mean(ba * ba))
 
 
-def fracture_metrics_from_samples(samples, pred_poses, target_poses, scale: float = 1.0, pa_threshold: float = 0.01) -> FractureMetrics:
-    """Fracture metrics from per-part samples (list of ``(n_i, 3)`` in the part's own frame),
-    ``pred_poses (P, 7)`` and ``target_poses (P, 7)``; coordinates are divided by ``scale``."""
-    samples = [as_finite(s, (3,), "samples") for s in samples]
+def fracture_metrics_from_samples(samples, pred_poses, target_poses, scale: float = 1.0,
+                                  pa_threshold: float = PA_THRESHOLD) -> FractureMetrics:
+    """Fracture metrics from per-part samples (``(n_i, 3)`` each, in the frame the poses act on),
+    ``pred_poses (P, 7)`` and ``target_poses (P, 7)`` ``[tx, ty, tz, qw, qx, qy, qz]``;
+    coordinates are divided by ``scale`` (the divisor)."""
+    samples = [np.asarray(s, dtype=np.float64) for s in samples]
+    pred_poses = np.asarray(pred_poses, dtype=np.float64).reshape(-1, 7)
+    target_poses = np.asarray(target_poses, dtype=np.float64).reshape(-1, 7)
     p = len(samples)
-    pred_poses = as_finite(pred_poses, (7,), "pred_poses").reshape(-1, 7)
-    target_poses = as_finite(target_poses, (7,), "target_poses").reshape(-1, 7)
-    if p < 1 or pred_poses.shape[0] != p or target_poses.shape[0] != p or any(len(s) < 1 for s in samples):
-        raise ValueError("need one non-empty sample set and one pred/target pose per part")
+    if p < 1 or len(pred_poses) != p or len(target_poses) != p or any(s.ndim != 2 or s.shape[1:] != (3,) or len(s) < 1 for s in samples):
+        raise ValueError("need one non-empty (n, 3) sample set and one pred/target pose per part")
+    if not all(np.isfinite(x).all() for x in (*samples, pred_poses, target_poses)):
+        raise ValueError("samples and poses must be finite")
     if not (np.isfinite(scale) and scale > 0):
         raise ValueError("scale must be positive")
+    points, predicted, target = [], [], []
+    for s, pp, tp in zip(samples, pred_poses, target_poses):
+        centre = s.mean(0)
+        points.append((s - centre) / scale)
+        r = rotation_of(pp[3:])
+        predicted.append((r, (r @ centre + pp[:3]) / scale))
+        target.append((rotation_of(tp[3:]), (centre @ rotation_of(tp[3:]).T + tp[:3]) / scale))
     counts = np.array([len(s) for s in samples])
     anchor = int(np.argmax(counts))
-    r_p = quat_to_matrix(pred_poses[:, 3:])
-    r_t = quat_to_matrix(target_poses[:, 3:])
-    # The shared transform g = target_anchor o pred_anchor^-1 (exact on the anchor).
-    r_g = r_t[anchor] @ r_p[anchor].T
-    t_g = target_poses[anchor, :3] - r_g @ pred_poses[anchor, :3]
-    r_aligned = r_g @ r_p
-    pred_pts = [(apply_pose(pred_poses[i], samples[i]) @ r_g.T + t_g) / scale for i in range(p)]
-    tgt_pts = [apply_pose(target_poses[i], samples[i]) / scale for i in range(p)]
-
-    part_re = wrapped_euler_error(r_aligned, r_t)
-    dc = np.stack([a.mean(axis=0) - b.mean(axis=0) for a, b in zip(pred_pts, tgt_pts)])
-    part_te = np.sqrt(np.sum(dc * dc, axis=1) / 3.0)
-    part_cd = np.array([_nn_sq(a, b).mean() + _nn_sq(b, a).mean() for a, b in zip(pred_pts, tgt_pts)])
-    all_pred = np.concatenate(pred_pts)
-    all_tgt = np.concatenate(tgt_pts)
-    fwd = _nn_sq(all_pred, all_tgt)
-    bwd = _nn_sq(all_tgt, all_pred)
-    bounds = np.concatenate([[0], np.cumsum(counts)])
-    shape_cd = np.array([fwd[bounds[i]:bounds[i + 1]].mean() + bwd[bounds[i]:bounds[i + 1]].mean() for i in range(p)])
+    ra, ta = predicted[anchor]
+    rg, tg = target[anchor]
+    turn = rg @ ra.T
+    shift = tg - turn @ ta
+    aligned = [(turn @ r, turn @ t + shift) for r, t in predicted]
+    pred = [q @ r.T + t for q, (r, t) in zip(points, aligned)]
+    gt = [q @ r.T + t for q, (r, t) in zip(points, target)]
+    pred_tree, gt_tree = cKDTree(np.concatenate(pred)), cKDTree(np.concatenate(gt))
+    part_re = wrapped_euler_error(np.stack([r for r, _ in aligned]), np.stack([r for r, _ in target]))
+    part_te = np.array([np.sqrt(np.mean((a[1] - b[1]) ** 2)) for a, b in zip(aligned, target)])
+    part_cd = np.array([_chamfer(a, b) for a, b in zip(pred, gt)])
+    shape_cd = np.array([np.mean(gt_tree.query(a)[0] ** 2) + np.mean(pred_tree.query(b)[0] ** 2) for a, b in zip(pred, gt)])
     return FractureMetrics(
-        re=float(part_re.mean()),
-        te=float(part_te.mean()),
-        pa=float(np.mean(part_cd < pa_threshold)),
-        cd=float(shape_cd.mean()),
-        part_re=part_re,
-        part_te=part_te,
-        part_cd=part_cd,
-        shape_cd=shape_cd,
-        anchor=anchor,
-        scale=float(scale),
-        counts=counts,
+        re=float(np.mean(part_re)), te=float(np.mean(part_te)), pa=float(np.mean((part_cd < pa_threshold).astype(float))),
+        cd=float(np.mean(shape_cd)), part_re=part_re, part_te=part_te, part_cd=part_cd, shape_cd=shape_cd,
+        anchor=anchor, scale=float(scale), counts=counts,
     )
 
 
-def fracture_metrics(meshes: list[trimesh.Trimesh], pred_poses, target_poses, total: int = 5000, minimum: int = 20,
-                     seed: int = 0, pa_threshold: float = 0.01) -> FractureMetrics:
-    """The fracture protocol for part ``meshes`` (in the frame the poses act on)."""
-    if not meshes:
-        raise ValueError("need at least one part mesh")
-    target_poses = as_finite(target_poses, (7,), "target_poses").reshape(-1, 7)
-    if len(target_poses) != len(meshes):
-        raise ValueError(f"{len(meshes)} meshes but {len(target_poses)} target poses")
-    counts = allocate_samples([m.area for m in meshes], total, minimum)
-    samples = [surface_samples(m, int(c), part_seed(seed, i)) for i, (m, c) in enumerate(zip(meshes, counts))]
-    e_max = max(float(np.ptp(apply_pose(t, np.asarray(m.vertices)), axis=0).max()) for m, t in zip(meshes, target_poses))
-    return fracture_metrics_from_samples(samples, pred_poses, target_poses, max(1.0, e_max), pa_threshold)
+def fracture_metrics(meshes: Sequence[tuple[np.ndarray, Sequence[Sequence[int]]]], part_ids: Sequence[str], pred_poses,
+                     target_poses, dataset: str, sample_id: str, divisor: float, seed: int = SEED,
+                     pa_threshold: float = PA_THRESHOLD) -> FractureMetrics:
+    """The fracture protocol for the task's part meshes ``(vertices (n_i, 3), faces)`` (the frame the
+    poses act on), in ``part_ids`` order (sorted, as the official orders them); ``divisor`` from
+    :func:`fracture_divisor`."""
+    if not meshes or len(meshes) != len(part_ids):
+        raise ValueError(f"need one mesh per part id, got {len(meshes)} meshes for {len(part_ids)} ids")
+    areas = []
+    for v, f in meshes:
+        xyz = np.asarray(v, dtype=np.float64)[triangulate(np.asarray(v, dtype=np.float64), f)]
+        areas.append(np.linalg.norm(np.cross(xyz[:, 1] - xyz[:, 0], xyz[:, 2] - xyz[:, 0]), axis=1).sum() / 2)
+    counts = allocate_samples(areas)
+    samples = [sample_surface(np.asarray(v, dtype=np.float64), f, int(n), stream(seed, dataset, sample_id, pid, "garf-evaluation"))
+               for (v, f), pid, n in zip(meshes, part_ids, counts)]
+    return fracture_metrics_from_samples(samples, pred_poses, target_poses, divisor, pa_threshold)

@@ -46,6 +46,7 @@ __all__ = [
     "farthest_point_sample",
     "place_parts",
     "evaluation_scale",
+    "fracture_divisor",
     "prepare_official",
 ]
 
@@ -92,6 +93,9 @@ class OfficialPrepared:
     divisor: float
     groups: list[list[str]]
     scale: float
+    fracture_divisor: float
+    dataset: str
+    sample_id: str
 
 
 def stream(seed: int, *identity: str) -> np.random.Generator:
@@ -296,6 +300,14 @@ def evaluation_scale(vertices: Sequence[np.ndarray]) -> float:
     return divisor
 
 
+def fracture_divisor(source_vertices: Sequence[np.ndarray], source_to_task: np.ndarray) -> float:
+    """The fracture protocol's divisor (``evaluation/garf.py``): ``max(1, largest per-part
+    axis-aligned extent of the source meshes (n_i, 3))`` times the norm of the first column of
+    the ``(4, 4)`` source -> task matrix (the task's scale)."""
+    extent = max(1.0, *(float(np.ptp(np.asarray(v, dtype=np.float64), axis=0).max()) for v in source_vertices))
+    return extent * float(np.linalg.norm(np.asarray(source_to_task)[:3, 0]))
+
+
 # ------------------------------------------------------------------ the protocol
 
 
@@ -361,5 +373,6 @@ def prepare_official(sample: OfficialSample, seed: int = 0, gap: float = MIN_GAP
     points = np.stack([clouds[pid] for pid in order])
     verts = [baked[pid] for pid in order]
     found = geometry_groups(order, points, verts, divisor) if groups else [[pid] for pid in order]
-    return OfficialPrepared(order, verts, [faces[pid] for pid in order], points,
-                            np.stack([targets[pid] for pid in order]), divisor, found, scale)
+    return OfficialPrepared(order, verts, [faces[pid] for pid in order], points, np.stack([targets[pid] for pid in order]),
+                            divisor, found, scale, fracture_divisor([p.vertices for p in parts], to_task),
+                            sample.dataset, sample.sample_id)

@@ -82,12 +82,16 @@ def write_eval_points(suite_dir: str | Path, task_id: str, done: OfficialPrepare
     """``SUITE/eval_points/<task_id>.npz``: the official evaluation inputs of a task.
 
     Keys (those :func:`aw.official.suite_eval_inputs` reads): ``part_ids (P,)``, ``points (P, 1000,
-    3)``, ``target_poses (P, 7)``, ``scale_divisor ()``, ``equivalence_groups (P,)`` group labels.
+    3)``, ``target_poses (P, 7)``, ``scale_divisor ()``, ``equivalence_groups (P,)`` group labels;
+    for the fracture protocol (:func:`aw_eval.fracture.fracture_metrics`) also ``dataset``,
+    ``sample_id`` (the names of its random streams) and ``fracture_divisor ()``.
     """
     path = Path(suite_dir) / "eval_points" / f"{task_id}.npz"
     path.parent.mkdir(parents=True, exist_ok=True)
     label = {pid: g for g, members in enumerate(done.groups) for pid in members}
     np.savez(path, part_ids=np.asarray(done.part_ids), points=np.asarray(done.points, dtype=np.float64),
              target_poses=np.asarray(done.targets, dtype=np.float64), scale_divisor=np.float64(done.divisor),
-             equivalence_groups=np.asarray([label[pid] for pid in done.part_ids], dtype=np.int64))
+             equivalence_groups=np.asarray([label[pid] for pid in done.part_ids], dtype=np.int64),
+             dataset=np.asarray(done.dataset), sample_id=np.asarray(done.sample_id),
+             fracture_divisor=np.float64(done.fracture_divisor))
     return path

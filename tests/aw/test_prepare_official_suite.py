@@ -43,6 +43,9 @@ def test_official_suite_holds_the_official_numbers_of_the_published_row(row_file
     assert np.array_equal(got.target_poses, expected.targets)
     assert got.divisor == expected.divisor
     assert sorted(got.groups) == sorted(expected.groups)
+    with np.load(tmp_path / "suite" / "eval_points" / f"{tid}.npz") as raw:  # the fracture protocol's inputs
+        assert (str(raw["dataset"]), str(raw["sample_id"])) == ("AssemblyWorld/partnet-manualpa", "chair_9")
+        assert float(raw["fracture_divisor"]) == expected.fracture_divisor > 0
     task = read_task(tmp_path / "suite" / "tasks" / tid)
     assert [p.id for p in task.parts] == ["0", "1"]
     targets = read_targets(tmp_path / "suite" / "targets" / f"{tid}.json")

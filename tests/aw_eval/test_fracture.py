@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
+
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
 from aw.pose import compose_poses, matrix_from_euler_xyz, matrix_to_quat
-from aw_eval.fracture import allocate_samples, fracture_metrics, fracture_metrics_from_samples, wrapped_euler_error
+from aw_eval.fracture import allocate_samples, fracture_divisor, fracture_metrics, fracture_metrics_from_samples, wrapped_euler_error
 
 
 def _pose(pos, euler_deg=(0.0, 0.0, 0.0)):
@@ -104,22 +109,101 @@ def test_shape_cd_uses_global_neighbours(parts):
 
 
 def test_allocation_minimum_and_remainder():
+    # 20 each, then the area share of 5000 - 60 = 4940 (truncated), remainder to the largest
     n = allocate_samples([1.0, 1.0, 0.001])
-    assert n.tolist() == [2482, 2498, 20] and n.sum() == 5000
+    assert n.tolist() == [2490, 2488, 22] and n.sum() == 5000
     n = allocate_samples([3.0, 1.0])
-    assert n.tolist() == [3750, 1250]
+    assert n.tolist() == [3740, 1260]
     with pytest.raises(ValueError):
         allocate_samples([1.0] * 300)
+    with pytest.raises(ValueError):
+        allocate_samples([1.0, 0.0])
+
+
+def _box(size, centre=(0, 0, 0)):
+    m = trimesh.creation.box(extents=size)
+    return np.asarray(m.vertices) + np.asarray(centre, float), [tuple(f) for f in np.asarray(m.faces).tolist()]
 
 
 def test_fracture_metrics_from_meshes_scale_and_determinism():
-    a = trimesh.creation.box(extents=[2.0, 0.5, 0.5])  # e_max = 2 -> scale 2
-    b = trimesh.creation.box(extents=[0.5, 0.5, 0.5])
+    a, b = _box([2.0, 0.5, 0.5]), _box([0.5, 0.5, 0.5])
     targets = np.stack([_pose([0, 0, 0]), _pose([1.25, 0, 0])])
     pred = targets.copy()
     pred[1] = _pose([1.25, 0.2, 0])
-    m1 = fracture_metrics([a, b], pred, targets)
-    m2 = fracture_metrics([a, b], pred, targets)
-    assert m1.scale == 2.0 and m1.counts.sum() == 5000 and m1.anchor == 0
+    divisor = fracture_divisor([a[0], b[0]], np.eye(4))  # largest source extent 2, task scale 1
+    m1 = fracture_metrics([a, b], ["a", "b"], pred, targets, "d", "s", divisor)
+    m2 = fracture_metrics([a, b], ["a", "b"], pred, targets, "d", "s", divisor)
+    assert divisor == 2.0 and m1.scale == 2.0 and m1.counts.sum() == 5000 and m1.anchor == 0
     assert m1.te == m2.te and m1.cd == m2.cd
-    assert m1.part_te[1] == pytest.approx(np.sqrt(0.1**2 / 3), rel=1e-9)  # 0.2 / scale 2
+    assert m1.part_te[1] == pytest.approx(np.sqrt(0.1**2 / 3), rel=1e-9)  # 0.2 / divisor 2
+    assert fracture_divisor([a[0] / 4, b[0] / 4], np.diag([0.5, 0.5, 0.5, 1.0])) == 0.5  # extent below 1 counts as 1
+
+
+# ---------------------------------------------------------------- the official procedure, written out
+
+
+def _stream(seed, *names):
+    digest = hashlib.sha256(json.dumps([seed, *names], separators=(",", ":")).encode()).digest()
+    return np.random.Generator(np.random.PCG64(int.from_bytes(digest[:16], "little")))
+
+
+def _quat_matrix(q):
+    return Rotation.from_quat([q[1], q[2], q[3], q[0]]).as_matrix()
+
+
+def _by_hand(meshes, ids, pred, target, dataset, sample_id, divisor):
+    areas = []
+    for v, f in meshes:
+        xyz = v[np.array(f)]
+        total = np.linalg.norm(np.cross(xyz[:, 1] - xyz[:, 0], xyz[:, 2] - xyz[:, 0]), axis=1).sum() / 2
+        areas.append(total)
+    share = 5000 - 20 * len(meshes)
+    counts = [20 + int(share * a / sum(areas)) for a in areas]
+    counts[int(np.argmax(counts))] += 5000 - sum(counts)
+    pts, pp, tp = [], [], []
+    for (v, f), pid, n, qp, qt in zip(meshes, ids, counts, pred, target):
+        rng = _stream(42, dataset, sample_id, pid, "garf-evaluation")
+        xyz = v[np.array(f)]
+        area = np.linalg.norm(np.cross(xyz[:, 1] - xyz[:, 0], xyz[:, 2] - xyz[:, 0]), axis=1)
+        tri = rng.choice(len(xyz), size=n, p=area / area.sum())
+        u = rng.random((n, 2))
+        r = np.sqrt(u[:, 0])
+        w = np.column_stack((1 - r, r * (1 - u[:, 1]), r * u[:, 1]))
+        cloud = np.einsum("ni,nij->nj", w, xyz[tri])
+        c = cloud.mean(0)
+        pts.append((cloud - c) / divisor)
+        pp.append((_quat_matrix(qp[3:]), (_quat_matrix(qp[3:]) @ c + qp[:3]) / divisor))
+        tp.append((_quat_matrix(qt[3:]), (c @ _quat_matrix(qt[3:]).T + qt[:3]) / divisor))
+    k = int(np.argmax(counts))
+    g = tp[k][0] @ pp[k][0].T
+    h = tp[k][1] - g @ pp[k][1]
+    al = [(g @ r, g @ t + h) for r, t in pp]
+    P = [x @ r.T + t for x, (r, t) in zip(pts, al)]
+    T = [x @ r.T + t for x, (r, t) in zip(pts, tp)]
+    allp, allt = np.concatenate(P), np.concatenate(T)
+    rows = []
+    for x, y, (ra, ta), (rt, tt) in zip(P, T, al, tp):
+        d = np.abs(Rotation.from_matrix(ra).as_euler("XYZ", degrees=True) - Rotation.from_matrix(rt).as_euler("XYZ", degrees=True))
+        d = np.minimum(d, 360 - d)
+        xy, yx = cKDTree(y).query(x)[0], cKDTree(x).query(y)[0]
+        cd = float(np.mean(xy * xy) + np.mean(yx * yx))
+        rows.append((np.sqrt(np.mean(d ** 2)), np.sqrt(np.mean((ta - tt) ** 2)), float(cd < 0.01),
+                     np.mean(cKDTree(allt).query(x)[0] ** 2) + np.mean(cKDTree(allp).query(y)[0] ** 2)))
+    return counts, [float(np.mean([row[k] for row in rows])) for k in range(4)]
+
+
+def test_fracture_metrics_equal_the_official_procedure_number_for_number():
+    rng = np.random.default_rng(5)
+    big = _box([0.9, 0.5, 0.3], (0, 0, 0.15))
+    mid = _box([0.4, 0.5, 0.2], (0.65, 0, 0.1))
+    small = _box([0.2, 0.2, 0.1], (0, 0.4, 0.35))
+    meshes, ids = [big, mid, small], ["f0", "f1", "f2"]
+    target = np.stack([_pose([0.1, 0, 0], (10, 20, 30)), _pose([0, 0.2, 0], (-5, 0, 90)), _pose([0, 0, 0.3], (170, -30, 5))])
+    pred = np.stack([_pose(rng.normal(size=3), rng.uniform(-180, 180, 3)) for _ in range(3)])
+    pred[2] = target[2] + [0.001, 0, 0, 0, 0, 0, 0]
+    divisor = fracture_divisor([v for v, _ in meshes], np.diag([1.7, 1.7, 1.7, 1.0]))
+    got = fracture_metrics(meshes, ids, pred, target, "AssemblyWorld/fantastic-breaks", "mug_3", divisor)
+    counts, (re, te, pa, cd) = _by_hand(meshes, ids, pred, target, "AssemblyWorld/fantastic-breaks", "mug_3", divisor)
+    assert got.counts.tolist() == counts and sum(counts) == 5000 and got.anchor == 0
+    assert (got.re, got.te, got.pa, got.cd) == (re, te, pa, cd)
+    assert 0 < got.pa < 1
