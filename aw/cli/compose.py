@@ -1,5 +1,6 @@
 """``aw-prepare compose`` (the paper's benchmark from the datasets a user holds) and
-``aw-prepare official`` (an official package + episode archives -> scoring suite + runs).
+``aw-prepare official`` (an official package + episode archives -> scoring suite + runs) and
+``aw-prepare official-export`` (a recorded run -> an official episode archive).
 
 Registered in :data:`aw.cli.prepare.REGISTRARS`.
 """
@@ -10,7 +11,7 @@ import argparse
 import json
 from pathlib import Path
 
-__all__ = ["register_compose", "register_official", "catalogs_from_args"]
+__all__ = ["register_compose", "register_official", "register_official_export", "catalogs_from_args"]
 
 
 def register_compose(sub) -> None:
@@ -110,7 +111,7 @@ def register_official(sub) -> None:
 
 def _cmd_official(args: argparse.Namespace) -> int:
     from aw.cli.prepare import CliError
-    from aw.official import convert, convert_package
+    from aw.official.convert import convert, convert_package
 
     try:
         if args.episodes is None:
@@ -123,4 +124,43 @@ def _cmd_official(args: argparse.Namespace) -> int:
     except FileExistsError as exc:
         raise CliError(str(exc)) from None
     print(f"wrote {len(manifest.tasks)} tasks to {args.out}" + (f" and {len(runs)} runs to {args.runs}" if runs else ""))
+    return 0
+
+
+def register_official_export(sub) -> None:
+    p = sub.add_parser(
+        "official-export", help="write a recorded run as an official episode archive (final.episode.zip)",
+        description="Export RUN_DIR (trajectory.jsonl, final.json) as a 3DWebAgent episode archive continuing the task's "
+        "initial archive: SUITE/official/<task>.episode.zip for tasks converted from the official package, else one made "
+        "from SUITE/tasks/<task>/ meshes; or the archive given with --initial.")
+    p.add_argument("run", metavar="RUN_DIR", help="a run folder written by aw-serve / aw-run")
+    p.add_argument("--out", required=True, metavar="FILE", help="archive to write (e.g. final.episode.zip)")
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--suite", metavar="SUITE", help="the suite the run was recorded on")
+    where.add_argument("--initial", metavar="ARCHIVE", help="the initial (setup) episode archive the run started from")
+    p.set_defaults(func=_cmd_official_export)
+
+
+def _cmd_official_export(args: argparse.Namespace) -> int:
+    from aw.cli.prepare import CliError
+    from aw.formats import read_trajectory
+    from aw.formats.suite import suite_paths
+    from aw.official.convert import initial_archive_path
+    from aw.official.export import export_run, export_task_run
+
+    if Path(args.out).exists():
+        raise CliError(f"{args.out}: already exists")
+    if args.initial:
+        ep = export_run(args.run, args.initial, args.out)
+    else:
+        task_id = read_trajectory(Path(args.run) / "trajectory.jsonl").header.task_id
+        initial = initial_archive_path(args.suite, task_id)
+        task_dir = suite_paths(args.suite, task_id)[0]
+        if initial.is_file():
+            ep = export_run(args.run, initial, args.out)
+        elif task_dir.is_dir():
+            ep = export_task_run(args.run, task_dir, args.out)
+        else:
+            raise CliError(f"{args.suite}: neither {initial} nor {task_dir} exists for task {task_id!r}")
+    print(f"wrote {args.out}: {len(ep.calls)} calls, {len(ep.states)} states, final state {ep.final_state().index}")
     return 0

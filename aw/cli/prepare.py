@@ -165,9 +165,10 @@ def _cmd_folder(args: argparse.Namespace) -> int:
     return run_suite(args, specs, sources, name=f"folder-{Path(args.src).resolve().name}", generator="aw.sources.folder")
 
 
-from aw.cli.compose import register_compose, register_official  # noqa: E402  (dataset sources, official import)
+from aw.cli.compose import register_compose, register_official, register_official_export  # noqa: E402  (dataset sources, official import)
 
-REGISTRARS: list[Callable] = [register_synthetic, register_folder, register_compose, register_official]
+REGISTRARS: list[Callable] = [register_synthetic, register_folder, register_compose, register_official,
+                               register_official_export]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -15,3 +15,7 @@
 
 The formats are described in ``docs/formats.md``.
 """
+
+from aw.official.eval_points import suite_eval_inputs
+
+__all__ = ["suite_eval_inputs"]
