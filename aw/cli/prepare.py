@@ -180,10 +180,18 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _warn_in_one_line(message, category, filename, lineno, file=None, line=None) -> None:
+    print(f"aw-prepare: warning: {message}", file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    import warnings
+
     args = build_parser().parse_args(argv)
     try:
-        return args.func(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _warn_in_one_line
+            return args.func(args)
     except (CliError, FormatError, SuiteExistsError, NotADirectoryError, ObjectError) as exc:
         print(f"aw-prepare: error: {exc}", file=sys.stderr)
         return 1

@@ -9,11 +9,14 @@ Layout::
         ...                       reference images named in meta.json
 
 Part names are the file stems. Parts may also live in a ``parts/`` subfolder (then only that
-folder is read). Every error names the offending file.
+folder is read). Every error names the offending file. Keys of ``meta.json`` that
+:class:`ObjectMeta` does not know are ignored; :func:`scan_folder` warns once per file, naming
+them (:class:`UnknownMetaKeys`).
 """
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Literal
 
@@ -22,10 +25,10 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from aw.assembly import AssembledObject, SourcePart, y_up_to_z_up
 from aw.formats import FormatError
-from aw.formats.io import read_model
+from aw.formats.io import load_json, read_model
 from aw.meshes import load_mesh
 
-__all__ = ["MESH_SUFFIXES", "ObjectMeta", "FolderObject", "load_object", "scan_folder"]
+__all__ = ["MESH_SUFFIXES", "ObjectMeta", "FolderObject", "UnknownMetaKeys", "load_object", "scan_folder", "unknown_keys"]
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
 Condition = Literal["none", "image", "manual"]
@@ -41,7 +44,7 @@ class ObjectMeta(BaseModel):
     to the object folder. ``up_axis: "y"`` turns Y-up meshes Z-up with (x, y, z) -> (x, -z, y).
     """
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="ignore")  # real folders carry metadata of their own
 
     object_id: str | None = Field(default=None, min_length=1, max_length=100)
     source: str | None = Field(default=None, min_length=1, max_length=64)
@@ -67,6 +70,19 @@ class FolderObject(BaseModel):
     path: str
     object_id: str
     conditions: list[str]
+
+
+class UnknownMetaKeys(UserWarning):
+    """A ``meta.json`` has keys :class:`ObjectMeta` does not know (they are ignored)."""
+
+
+def unknown_keys(obj_dir: str | Path) -> list[str]:
+    """The keys of ``obj_dir/meta.json`` that :class:`ObjectMeta` ignores, sorted."""
+    path = Path(obj_dir) / "meta.json"
+    if not path.exists():
+        return []
+    raw = load_json(path)
+    return sorted(set(raw) - set(ObjectMeta.model_fields)) if isinstance(raw, dict) else []
 
 
 def _part_files(obj_dir: Path) -> list[Path]:
@@ -158,6 +174,9 @@ def scan_folder(src: str | Path) -> list[FolderObject]:
     found = []
     for d in dirs:
         meta = read_meta(d)
+        ignored = unknown_keys(d)
+        if ignored:
+            warnings.warn(f"{d / 'meta.json'}: unknown keys {ignored} are ignored", UnknownMetaKeys, stacklevel=2)
         found.append(FolderObject(path=str(d), object_id=meta.object_id or d.name, conditions=_conditions(meta)))
     ids = [f.object_id for f in found]
     dup = sorted({i for i in ids if ids.count(i) > 1})

@@ -131,6 +131,14 @@ def test_folder_errors_name_the_file(tmp_path, capsys):
     assert "source folder not found" in capsys.readouterr().err
 
 
+def test_folder_warns_of_unknown_meta_keys_in_one_line(tmp_path, capsys):
+    src = _folder(tmp_path / "src")
+    (src / "lamp" / "meta.json").write_text(json.dumps({"source": "partnet", "scanner": "xyz"}))
+    assert main(["folder", str(src), "--out", str(tmp_path / "o"), "--jobs", "1", "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "aw-prepare: warning: " in err and "lamp/meta.json: unknown keys ['scanner'] are ignored" in err
+
+
 def test_entry_point_runs(tmp_path):
     out = tmp_path / "ep"
     proc = subprocess.run(

@@ -114,8 +114,8 @@ def test_malformed_meta(tmp_path):
     (d / "meta.json").write_text("{not json")
     _expect("meta.json", "not valid JSON", load_object, d)
 
-    d = make_chair(tmp_path, "typo", meta={"categroy": "chair"})
-    _expect("meta.json", "categroy", load_object, d)
+    d = make_chair(tmp_path, "wrongtype", meta={"category": ["chair"]})
+    _expect("meta.json", "category", load_object, d)
 
     make_chair(tmp_path / "c", "badcond", meta={"conditions": ["video"]})
     _expect("meta.json", "conditions", scan_folder, tmp_path / "c")
@@ -136,3 +136,13 @@ def test_malformed_meta(tmp_path):
     make_chair(root, "one", meta={"object_id": "same"})
     make_chair(root, "two", meta={"object_id": "same"})
     _expect("twins", "same", scan_folder, root)
+
+
+def test_unknown_meta_keys_warn_by_name_and_are_ignored(tmp_path):
+    root = tmp_path / "extra"
+    make_chair(root, "x", meta={"category": "chair", "categroy": "typo", "license": "CC-BY", "source": "partnet"})
+    with pytest.warns(UserWarning, match=r"x/meta.json: unknown keys \['categroy', 'license'\] are ignored"):
+        found = scan_folder(root)
+    assert [f.object_id for f in found] == ["x"]
+    obj = load_object(found[0].path)
+    assert (obj.category, obj.source, obj.n_parts) == ("chair", "partnet", 6)
