@@ -196,6 +196,22 @@ def archive_sample(archive: Path, pkg: OfficialPackage) -> tuple[str, str]:
     return block, sid
 
 
+def _official_result(archive: Path) -> dict:
+    """What the runner's ``result.json`` beside a run log's archive says of the attempt (kept for
+    information: the official scorer scores every saved archive, whatever the execution's end)."""
+    path = archive.parent / "result.json"
+    if archive.name != "final.episode.zip" or not path.is_file():
+        return {}
+    try:
+        result = orjson.loads(path.read_bytes())
+    except orjson.JSONDecodeError as exc:
+        raise FormatError(path, f"not valid JSON ({exc})") from None
+    if not isinstance(result, dict):
+        raise FormatError(path, "expected a JSON object")
+    execution = result.get("execution") if isinstance(result.get("execution"), dict) else {}
+    return {"official_status": result.get("status"), "official_execution": execution.get("status")}
+
+
 def convert(package: str | Path, episodes: str | Path | Iterable[str | Path], suite_out: str | Path, runs_out: str | Path,
             system: str | None = None, force: bool = False) -> tuple[SuiteManifest, list[Path]]:
     """Convert a package and its episode archives. An archive's system is ``system``, else the
@@ -210,6 +226,7 @@ def convert(package: str | Path, episodes: str | Path | Iterable[str | Path], su
         ep = read_part_episode(arc, pkg.initial_archive(block, sid), inputs.part_ids)
         parts = arc.resolve().parts
         run_name = parts[parts.index("blocks") - 1] if "blocks" in parts[:-1] else None
+        extra = {"block": block, "sample_id": sid, **_official_result(arc)}
         runs.append(write_episode_run(ep, runs_out, system or run_name or "official", task_id_for_sample(block, sid),
-                                      force=force, extra={"block": block, "sample_id": sid}))
+                                      force=force, extra=extra))
     return manifest, runs

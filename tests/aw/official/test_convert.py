@@ -28,6 +28,8 @@ def converted(tmp_path_factory):
                      final=FINAL if block == "partnet-none" else FINAL[::-1].copy())
     write_active(pkg.initial_archive("ikea-manualbook", "Chair/reidar"),
                  logs / "ikea-manualbook" / "samples" / "Chair--reidar" / "final.episode.zip")
+    (logs / "partnet-final-image" / "samples" / "21905" / "result.json").write_text(
+        '{"status": "failed", "execution": {"status": "timeout"}, "archive": {"status": "saved"}}')
     manifest, runs = convert(pkg.root, root / "logs", root / "suite", root / "runs")
     return root, pkg, manifest, runs
 
@@ -63,6 +65,7 @@ def test_runs_of_the_archives(converted):
     assert read_final(run / "final.json").reason == "finished"
     info = read_run_info(run / "run.json")
     assert info.ended == "finished" and info.extra["state_index"] == 3 and info.extra["sample_id"] == "21905"
+    assert info.extra["official_status"] == "failed" and info.extra["official_execution"] == "timeout"
 
 
 def test_round_trip_keeps_states(converted, tmp_path):
