@@ -231,13 +231,19 @@ def load_row(path: str | Path, row: int, source: str | None = None, up_axis: str
             field = f"{where}.manual_pages[{k}]"
             if not isinstance(pg, dict):
                 raise FormatError(path, f"{field}: expected a struct with page, step, image")
-            page = _int(pg.get("page"), path, f"{field}.page")
-            step = _int(pg.get("step"), path, f"{field}.step") if pg.get("step") is not None else None
+            if pg.get("kind", "diagram") != "diagram" or str(pg.get("view_id", 0)) != "0":
+                continue  # AssemblyBench: one ordinary diagram of view 0 per step
+            # Without a page number the published order stands (the official rows: IKEA pages
+            # carry manual_id/page_index, AssemblyBench pages step_id).
+            page = _int(pg["page"], path, f"{field}.page") if "page" in pg else k
+            raw_step = pg.get("step", pg.get("step_id"))
+            step = _int(raw_step, path, f"{field}.step") if raw_step is not None else None
             found.append((page, -1 if step is None else step, _image(pg.get("image"), path, f"{field}.image")))
         found.sort(key=lambda t: (t[0], t[1]))
-        references["manual"] = [im for _, _, im in found]
-        references["image"] = [found[-1][2]]  # the final page shows the finished object
-        meta["manual_pages"] = [{"page": p, "step": s if s >= 0 else None} for p, s, _ in found]
+        if found:
+            references["manual"] = [im for _, _, im in found]
+            references["image"] = [found[-1][2]]  # the final page shows the finished object
+            meta["manual_pages"] = [{"page": p, "step": s if s >= 0 else None} for p, s, _ in found]
     return AssembledObject(
         object_id=object_id,
         source=src,
@@ -274,13 +280,34 @@ def _posed(mesh: trimesh.Trimesh, pose: list[float]) -> trimesh.Trimesh:
     return trimesh.Trimesh(apply_pose(np.asarray(pose), np.asarray(mesh.vertices)), np.asarray(mesh.faces), process=False)
 
 
+# The official re-hosted repositories (assembly_world_agent/adapters/*.py, REPO_ID): a download
+# whose path names one of them holds that source's rows (the rows themselves name no source).
+REPOSITORIES = {
+    "partnet-manualpa": "partnet", "ikea-manual": "ikea_manual", "assemblybench": "assemblybench",
+    "fantastic-breaks": "fantastic_breaks", "breaking-bad-volume-constrained": "breaking_bad",
+}
+
+
+def source_of_download(path: str | Path) -> str | None:
+    """The source a download's path names by its official repository: a folder ``ikea-manual``
+    or a Hugging Face cache entry ``datasets--AssemblyWorld--ikea-manual``."""
+    for part in reversed(Path(path).resolve().parts):
+        name = part.lower().replace("_", "-")
+        for repo, src in REPOSITORIES.items():
+            if name == repo or name.endswith("--" + repo):  # a folder, or a Hugging Face cache entry
+                return src
+    return None
+
+
 def catalog(path: str | Path, source: str | None = None):
     """Every row of a download as :class:`aw.sources.compose.CatalogEntry` records, grouped by
     nothing: callers split them by ``entry.source``. Only the small columns are read (plus
-    ``parts`` when a file has no ``parts_ct``)."""
+    ``parts`` when a file has no ``parts_ct``). A row's source: ``source``, else its source
+    column, else the official repository its path names (:func:`source_of_download`)."""
     from aw.sources.compose import CatalogEntry
 
     out = []
+    source = source or None
     for f in data_files(path):
         small = read_table(f, [*ID_COLUMNS, *SOURCE_COLUMNS, "category", "parts_ct"])
         names = small.column_names
@@ -294,7 +321,8 @@ def catalog(path: str | Path, source: str | None = None):
         cats = small.column("category").to_pylist() if "category" in names else [""] * small.num_rows
         for row, (oid, n, s, c) in enumerate(zip(small.column(id_col).to_pylist(), counts, srcs, cats)):
             n = _int(n, f, f"row {row}.parts_ct")
-            src = normalize_source(source or s or "rehosted")
-            args = (str(f), row) + ((source,) if source else ())
+            named = source or s or source_of_download(f)
+            src = normalize_source(named or "rehosted")
+            args = (str(f), row) + ((src,) if named else ())
             out.append(CatalogEntry(src, str(oid), str(c or "").lower(), n, "aw.sources.rehosted:load_row", args))
     return out

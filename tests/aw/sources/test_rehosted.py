@@ -9,7 +9,7 @@ from aw.formats import FormatError
 from aw.sources import rehosted
 from aw.sources.meshdata import triangulate_polygons
 
-from dataset_fixtures import box, chair_boxes, rehosted_row, write_rehosted
+from dataset_fixtures import box, chair_boxes, png_bytes, quad_box, rehosted_row, write_rehosted
 from roundtrip import oracle_roundtrip
 
 
@@ -107,3 +107,42 @@ def test_bad_files(tmp_path):
 def test_roundtrip_oracle(download, tmp_path):
     obj = rehosted.load_row(download / "data" / "partnet-00000-of-00002.parquet", 0)
     oracle_roundtrip(obj, tmp_path / "suite", ("none", "image"))
+
+
+def _official_assemblybench_row():
+    """A row in the official AssemblyBench schema: local part meshes, view/step poses, diagrams."""
+    v, f = quad_box((0.2, 0.1, 0.05), (0, 0, 0))
+    turn = [0.9238795325112867, 0.0, 0.0, 0.3826834323650898]  # 45 degrees about Z
+    pages = [{"kind": "diagram", "view_id": v_id, "step_id": step, "image": {"bytes": png_bytes((step, int(v_id), 9)), "path": None}}
+             for step in (1, 2) for v_id in ("0", "1")] + [{"kind": "photo", "view_id": "0", "step_id": 2,
+                                                            "image": {"bytes": png_bytes((1, 1, 1)), "path": None}}]
+    return {
+        "object_id": "gearbox_7", "parts_ct": 2, "steps": [{"step_id": 1}, {"step_id": 2}],
+        "parts": [{"part_id": "a", "vertices": v, "faces": f}, {"part_id": "b", "vertices": v, "faces": f}],
+        "poses": {"0": {"1": {"a": [0, 0, 0, 1, 0, 0, 0], "b": None},
+                        "2": {"a": [0, 0, 0, 1, 0, 0, 0], "b": [0.3, 0.0, 0.0, *turn]}},
+                  "1": {"2": {"a": [9, 9, 9, 1, 0, 0, 0], "b": [9, 9, 9, 1, 0, 0, 0]}}},
+        "manual_pages": pages,
+    }
+
+
+def test_official_rows_source_from_path_poses_and_diagrams(tmp_path):
+    from aw.prepare.official_task import official_sample
+
+    path = write_rehosted(tmp_path / "datasets--AssemblyWorld--assemblybench" / "data" / "test.parquet",
+                          [_official_assemblybench_row()])
+    (entry,) = rehosted.catalog(tmp_path / "datasets--AssemblyWorld--assemblybench")
+    assert (entry.source, entry.object_id) == ("assemblybench", "gearbox_7")
+    obj = rehosted.load_row(*entry.args)
+    a, b = (np.asarray(p.mesh.vertices) for p in obj.parts)
+    assert np.allclose(b.mean(0), a.mean(0) + [0.3, 0, 0])  # the final step of view 0 assembles the parts
+    assert np.allclose(np.ptp(b, axis=0)[:2], [0.15 * np.sqrt(2)] * 2)  # turned 45 degrees
+    # the view-0 diagrams, one per step, in step order
+    assert [im.getpixel((0, 0))[:2] for im in obj.references["manual"]] == [(1, 0), (2, 0)]
+    official = official_sample(obj)
+    assert official.dataset == "AssemblyWorld/assemblybench" and official.sample_id == "gearbox_7"
+    part_b = official.parts[1]
+    assert np.array_equal(part_b.vertices, np.asarray(_official_assemblybench_row()["parts"][1]["vertices"], dtype=float))
+    assert np.allclose(part_b.pose, [0.3, 0, 0, 0.9238795325112867, 0, 0, 0.3826834323650898])
+    assert rehosted.source_of_download(tmp_path / "ikea-manual" / "x.parquet") == "ikea_manual"
+    assert rehosted.source_of_download(tmp_path / "elsewhere" / "x.parquet") is None
