@@ -13,22 +13,21 @@ Public API (see ``docs/evaluator.md`` for a worked example):
 - :func:`fracture_metrics` – the source-level fracture protocol (RE, TE, PA, CD).
 
 :mod:`aw_eval.reference` is the plain NumPy/SciPy statement of the same protocol.
+
+Layout, top-down: :mod:`aw_eval.scoring` (score a checkpoint) -> :mod:`aw_eval.starts`,
+:mod:`aw_eval.registration`, :mod:`aw_eval.matching`, :mod:`aw_eval.metrics` (the protocol's
+steps), over :mod:`aw_eval.geometry` and :mod:`aw_eval.sampling` (a task's clouds) and
+:mod:`aw_eval.settings` (its numbers); the speed machinery lives beneath, in :mod:`aw_eval.kernels`.
 """
 
 from aw_eval.chamfer import chamfer
-from aw_eval.engine import (
-    MODES,
-    PartDiagnostics,
-    part_diagnostics,
-    register,
-    register_checkpoint,
-    score,
-    score_batch,
-)
 from aw_eval.equivalence import equivalence_groups
 from aw_eval.fracture import FractureMetrics, fracture_metrics
 from aw_eval.geometry import TaskGeometry, default_cache_dir, load_task_geometry
-from aw_eval.results import BatchScores, Registration, ScoreResult, rescore_thresholds
+from aw_eval.metrics import rescore_thresholds
+from aw_eval.registration import MODES, register, register_checkpoint
+from aw_eval.results import BatchScores, Registration, ScoreResult
+from aw_eval.scoring import PartDiagnostics, part_diagnostics, score, score_batch
 from aw_eval.settings import PROTOCOL_VERSION, ProtocolSettings
 
 __version__ = f"0.1.0+protocol{PROTOCOL_VERSION}"

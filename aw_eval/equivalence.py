@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from aw.pose import cube_rotations, pca_frame
-from aw_eval.kernels.icp import ICPProblem, build_tree, graph_for
+from aw_eval.kernels import ICPProblem, build_tree, graph_for
 from aw_eval.settings import ProtocolSettings
 
 __all__ = ["equivalence_groups", "pair_cd", "cd_lower_bound", "shape_bounds"]
@@ -36,7 +36,7 @@ def pair_cd(q_i: np.ndarray, q_j: np.ndarray, settings: ProtocolSettings, tree_i
 
     ``decide=True`` answers only "is it <= equiv_cd?": it returns the first objective at or
     below ``equiv_cd`` as soon as any start reaches one (the answer cannot change afterwards).
-    ``graph_i, graph_j``: Delaunay graphs of the trees' points (:func:`aw_eval.kernels.icp.graph_for`),
+    ``graph_i, graph_j``: Delaunay graphs of the trees' points (:func:`aw_eval.kernels.graph_for`),
     which speed the neighbour search up without changing it.
     """
     prob = ICPProblem(q_i, q_j, tree_t=tree_j, tree_p=tree_i, graph_t=graph_j, graph_p=graph_i)

@@ -25,7 +25,7 @@ from aw.formats import FormatError
 from aw.pose import apply_pose, as_finite, pca_frame, quat_to_matrix
 from aw_eval.settings import PROTOCOL_VERSION, ProtocolSettings
 
-__all__ = ["TaskGeometry", "load_task_geometry", "part_divisor", "default_cache_dir", "normalize_groups"]
+__all__ = ["TaskGeometry", "Checkpoint", "load_task_geometry", "part_divisor", "default_cache_dir", "normalize_groups"]
 
 
 def default_cache_dir() -> Path:
@@ -149,24 +149,6 @@ class TaskGeometry:
             self._derived["target_parts"] = apply_pose(self.target_poses, self.clouds) / self.divisor
         return self._derived["target_parts"]
 
-    def pred_parts(self, poses: np.ndarray) -> np.ndarray:
-        """``(P, n, 3)`` normalized predicted points for ``poses (P, 7)``."""
-        poses = self.check_poses(poses)
-        return apply_pose(poses, self.clouds, self.rotations(poses)) / self.divisor  # rotations reused by the scoring
-
-    def rotations(self, poses: np.ndarray) -> np.ndarray:
-        """``(..., 3, 3)`` rotation matrices of validated ``poses (..., 7)``
-        (:func:`aw.pose.quat_to_matrix`). The last poses' are kept: scoring one checkpoint asks
-        for them several times."""
-        key = (poses.shape, poses[..., 3:].tobytes())
-        last = self._derived.get("rotations")
-        if last is None or last[0] != key:
-            rot = quat_to_matrix(poses[..., 3:])
-            rot.flags.writeable = False  # shared by the callers
-            last = (key, rot)
-            self._derived["rotations"] = last
-        return last[1]
-
     def target_rotations(self) -> np.ndarray:
         """``(P, 3, 3)`` rotation matrices of the target poses (cached)."""
         if "target_rotations" not in self._derived:
@@ -174,6 +156,36 @@ class TaskGeometry:
             rot.flags.writeable = False
             self._derived["target_rotations"] = rot
         return self._derived["target_rotations"]
+
+    def target_frame(self) -> tuple[np.ndarray, np.ndarray]:
+        """The start frame of the joined normalized target (:func:`aw_eval.starts.start_frame`, cached)."""
+        if "target_frame" not in self._derived:
+            from aw_eval.starts import start_frame
+
+            self._derived["target_frame"] = start_frame(self.index().target)
+        return self._derived["target_frame"]
+
+    def index(self):
+        """The task's search structures (:class:`aw_eval.kernels.TaskIndex`), built once per process."""
+        if "index" not in self._derived:
+            from aw_eval.kernels import TaskIndex
+
+            self._derived["index"] = TaskIndex(self.target_parts(), self.clouds)
+        return self._derived["index"]
+
+    def checkpoint(self, poses) -> "Checkpoint":
+        """One checkpoint ``poses (P, 7)`` checked, with its rotations and clouds computed once."""
+        poses = self.check_poses(poses)
+        if poses.ndim != 2:
+            raise ValueError(f"one checkpoint has poses (P, 7), got {poses.shape}")
+        rotations = quat_to_matrix(poses[:, 3:])
+        rotations.flags.writeable = False
+        parts = apply_pose(poses, self.clouds, rotations) / self.divisor
+        return Checkpoint(poses, rotations, parts, np.ascontiguousarray(parts.reshape(-1, 3)))
+
+    def pred_parts(self, poses) -> np.ndarray:
+        """``(P, n, 3)`` normalized predicted points for ``poses (P, 7)``."""
+        return self.checkpoint(poses).parts
 
     def check_poses(self, poses) -> np.ndarray:
         """Validated ``(P, 7)`` or ``(N, P, 7)`` float64 poses (quaternions must be non-zero)."""
@@ -256,6 +268,18 @@ class TaskGeometry:
             groups = [tuple(np.flatnonzero(labels == g).tolist()) for g in np.unique(labels)]
             return cls(tuple(meta["part_ids"]), z["clouds"], z["target_poses"], float(z["divisor"]), groups,
                        ProtocolSettings(**meta["settings"]), key=meta["key"], **extra)
+
+
+@dataclass(frozen=True)
+class Checkpoint:
+    """One checkpoint of a task, in the forms scoring uses (made by :meth:`TaskGeometry.checkpoint`):
+    ``poses (P, 7)``, their ``rotations (P, 3, 3)``, the predicted clouds ``parts (P, n, 3)``
+    (normalized: baked clouds moved by the poses, over the divisor) and ``points (P n, 3)`` joined."""
+
+    poses: np.ndarray
+    rotations: np.ndarray
+    parts: np.ndarray
+    points: np.ndarray
 
 
 def _file_digest(path: Path) -> str:

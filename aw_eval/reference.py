@@ -3,7 +3,7 @@
 This module is the readable statement of Appendix A.3 (with the project's documented choices,
 see ``docs/evaluator.md``). It is slow on purpose: one checkpoint at a time, one start at a
 time, a fresh KD-tree of the moved prediction in every ICP iteration. The fast paths in
-:mod:`aw_eval.engine` are tested against it.
+:mod:`aw_eval.scoring` are tested against it.
 
 Arrays: a cloud is ``(n, 3)`` float64; part clouds are ``(P, n, 3)``; poses are wire-form
 ``(P, 7)`` = ``[x, y, z, qw, qx, qy, qz]``.

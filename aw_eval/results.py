@@ -1,16 +1,14 @@
-"""Result types of the evaluator and the metric rules shared by every scoring path."""
+"""Result types of the evaluator: a registration, one checkpoint's scores, a batch's."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
-__all__ = ["N_PCA_STARTS", "Registration", "ScoreResult", "BatchScores", "match_within_groups", "rescore_thresholds", "start_label"]
+from aw_eval.starts import N_PCA_STARTS
 
-# The 24 proper PCA starts come first in the start list, then one same-ID start per part.
-N_PCA_STARTS = 24
+__all__ = ["Registration", "ScoreResult", "BatchScores", "start_label"]
 
 
 def start_label(start_index: int) -> tuple[str, int]:
@@ -124,33 +122,3 @@ class BatchScores:
             n_unique=n_unique,
             stats=dict(stats or {}),
         )
-
-
-def match_within_groups(cost: np.ndarray, groups) -> tuple[np.ndarray, np.ndarray]:
-    """Hungarian assignment inside each group (``scipy.optimize.linear_sum_assignment``) on raw,
-    unclipped costs ``cost (P, P)`` (pred i, target j). Returns ``(assignment (P,), errors (P,))``."""
-    p = cost.shape[0]
-    assign = np.arange(p)
-    for g in groups:
-        g = np.asarray(g, dtype=np.int64)
-        if g.size == 1:
-            continue
-        rows, cols = linear_sum_assignment(cost[np.ix_(g, g)])
-        assign[g[rows]] = g[cols]
-    return assign, cost[np.arange(p), assign]
-
-
-def rescore_thresholds(part_errors, thresholds) -> tuple[np.ndarray, np.ndarray]:
-    """PA and SR at other thresholds with registration and matching held fixed.
-
-    ``part_errors (..., P)``, ``thresholds (T,)`` -> ``(pa (..., T), sr (..., T))``; a part is
-    correct when its error is ``<= threshold`` (inclusive, as the protocol).
-    """
-    e = np.asarray(part_errors, dtype=np.float64)
-    thr = np.atleast_1d(np.asarray(thresholds, dtype=np.float64))
-    if e.ndim < 1 or e.shape[-1] < 1:
-        raise ValueError("part_errors must have shape (..., P) with P >= 1")
-    if thr.ndim != 1 or not np.all(np.isfinite(thr)):
-        raise ValueError("thresholds must be a 1-D array of finite numbers")
-    ok = e[..., None, :] <= thr[:, None]
-    return ok.mean(axis=-1), ok.all(axis=-1)

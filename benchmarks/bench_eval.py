@@ -162,7 +162,7 @@ def bench_agreement(parts: list[int], n: int, fps: int, seed: int = 0, workers: 
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor
 
-        from aw_eval.kernels.icp import compile_kernels
+        from aw_eval.kernels import compile_kernels
 
         compile_kernels()  # fill numba's on-disk cache once, before the workers load it
 

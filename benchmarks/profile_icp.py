@@ -26,29 +26,29 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import aw_eval  # noqa: E402
-from aw_eval.engine import _part_structures, prediction_problem, starts_for, task_context  # noqa: E402
 from aw_eval.fixtures import make_points_geometry, trajectory_checkpoints  # noqa: E402
-from aw_eval.kernels.icp import ICPProblem, build_tree, compile_kernels, graph_for  # noqa: E402
+from aw_eval.kernels import ICPProblem, build_tree, compile_kernels, graph_for  # noqa: E402
+from aw_eval.registration import checkpoint_starts  # noqa: E402
 
 
 def profile(p: int, checkpoint: int, repeat: int, search: str) -> dict:
     st = aw_eval.ProtocolSettings(n_fps=1000, n_surface=4096)
     geom, obj = make_points_geometry(p, 1000, seed=p, settings=st)
     poses = trajectory_checkpoints(obj, checkpoint + 1, seed=1000 + p)[checkpoint]
-    ctx = task_context(geom)
-    pred_parts = geom.pred_parts(poses)
-    pred = np.ascontiguousarray(pred_parts.reshape(-1, 3))
-    r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor)
-    _part_structures(geom, ctx)  # per task, not timed
-    _ = ctx.graph_t
+    index = geom.index()
+    ck = geom.checkpoint(poses)
+    pred = ck.points
+    r0, t0 = checkpoint_starts(geom, ck)
+    index.part_bounds()  # per task, not timed
+    _ = index.graph_t
     t = time.perf_counter()
     if search == "parts":
-        prob = prediction_problem(geom, ctx, poses, pred_parts)
+        prob = index.assembly_problem(ck.poses, ck.rotations, ck.parts, geom.divisor)
     else:
         tree_p = build_tree(pred)
         graph_p = graph_for(tree_p) if search == "graph" else None
-        prob = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p,
-                          graph_t=ctx.graph_t if search == "graph" else None, graph_p=graph_p)
+        prob = ICPProblem(pred, index.target, tree_t=index.tree_t, tree_p=tree_p,
+                          graph_t=index.graph_t if search == "graph" else None, graph_p=graph_p)
     t_build = time.perf_counter() - t
     best = np.inf
     for _ in range(repeat):
@@ -56,14 +56,14 @@ def profile(p: int, checkpoint: int, repeat: int, search: str) -> dict:
         res = [prob.run(r0[k], t0[k], st.max_iters, st.tol) for k in range(len(r0))]
         best = min(best, time.perf_counter() - t)
     iters = sum(r.iterations for r in res)
-    evals = (iters + len(r0)) * (len(pred) + len(ctx.target))
+    evals = (iters + len(r0)) * (len(pred) + len(index.target))
     # the cost outside the searches: 200 more iterations from the best state, where nearly every
     # neighbour is certified (tol = -inf never stops the loop)
     win = min(res, key=lambda r: r.objective)
     t = time.perf_counter()
     still = prob.run(win.rotation, win.translation, 200, -np.inf)
     t_still = time.perf_counter() - t
-    still_evals = (still.iterations + 1) * (len(pred) + len(ctx.target))
+    still_evals = (still.iterations + 1) * (len(pred) + len(index.target))
     return {"parts": p, "search": search, "starts": len(r0), "icp_s": best, "per_checkpoint_build_s": t_build,
             "iterations": iters, "query_evaluations": evals, "searches": sum(r.searched for r in res),
             "ns_per_query_evaluation": 1e9 * best / evals, "objectives": np.array([r.objective for r in res]),

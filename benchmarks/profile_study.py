@@ -8,7 +8,7 @@ is misplaced (so its checkpoints sit near the part-error threshold), then, in on
    one at a time (``score``: every refinement starts cold): seconds, refinements and their
    ICP iterations, and whether PA/SR agree;
 2. ``exact`` on each run's final state, with and without the switch to the prediction's own
-   Delaunay graph where parts touch (``engine.CONTACT_WALKS``), alternating, best of
+   Delaunay graph where parts touch (``aw_eval.registration.CONTACT_WALKS``), alternating, best of
    ``--repeat``: seconds, the first start's part walks per backward search, and the largest
    relative SCD difference.
 
@@ -29,8 +29,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import aw_eval  # noqa: E402
-from aw_eval import engine, fast  # noqa: E402
-from aw_eval.kernels.icp import ICPProblem  # noqa: E402
+from aw_eval import registration  # noqa: E402
+from aw_eval.kernels import ICPProblem  # noqa: E402
 
 
 class _CountRefinements:
@@ -72,21 +72,23 @@ def profile_fast(geom, poses: np.ndarray) -> dict:
 
 
 def profile_exact(geom, poses: np.ndarray, repeat: int) -> dict:
-    ctx = engine.task_context(geom)
-    pred_parts = geom.pred_parts(poses)
-    pred = np.ascontiguousarray(pred_parts.reshape(-1, 3))
-    r0, t0 = engine.starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor,
-                               engine.checkpoint_rotations(geom, poses))
+    index = geom.index()
+    ck = geom.checkpoint(poses)
+    r0, t0 = registration.checkpoint_starts(geom, ck)
     st = geom.settings
-    first = engine.prediction_problem(geom, ctx, poses, pred_parts).run(r0[0], t0[0], st.max_iters, st.tol)
+
+    def prediction_problem():
+        return index.assembly_problem(ck.poses, ck.rotations, ck.parts, geom.divisor)
+
+    first = prediction_problem().run(r0[0], t0[0], st.max_iters, st.tol)
     best = {"parts' walks": np.inf, "own graph where parts touch": np.inf}
     regs = {}
     for _ in range(repeat):
         for name in best:
             t = time.perf_counter()
-            prob = engine.prediction_problem(geom, ctx, poses, pred_parts)
-            hook = engine._own_graph_where_parts_touch(ctx, pred_parts) if name.startswith("own") else None
-            regs[name] = engine.register_points(prob, r0, t0, st.max_iters, st.tol, hook)
+            prob = prediction_problem()
+            hook = registration._own_graph_where_parts_touch(index, ck.parts) if name.startswith("own") else None
+            regs[name] = registration.register_points(prob, r0, t0, st.max_iters, st.tol, hook)
             best[name] = min(best[name], time.perf_counter() - t)
     a, b = regs.values()
     return {"seconds": best, "first_start_walks_per_search": first.part_walks / max(first.part_searches, 1),

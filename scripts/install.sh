@@ -35,6 +35,6 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   touch "$stamp"
 fi
 # numba caches compiled kernels beside their modules; compile them once here, not in every process
-.venv/bin/python -c "from aw_eval.kernels.icp import compile_kernels; compile_kernels()" || {
+.venv/bin/python -c "from aw_eval.kernels import compile_kernels; compile_kernels()" || {
   echo "[install] ERROR: compiling the evaluator's kernels (numba) failed; see the message above" >&2; exit 1; }
 echo "[install] ready: $(.venv/bin/python --version), .venv/bin/aw-*"

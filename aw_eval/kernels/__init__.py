@@ -1,4 +1,24 @@
-"""The evaluator's speed machinery: compiled nearest-neighbour search (KD-trees, Delaunay walks,
-walks in a posed assembly's parts) and ICP from many starts (the certified kernel and ``fast``'s
-coarse-to-fine pruning). The protocol modules of :mod:`aw_eval` call these; nothing here decides
-what is scored."""
+"""The evaluator's speed machinery, beneath the protocol modules of :mod:`aw_eval`.
+
+The protocol asks two things of it, and only through the names exported here:
+
+- **nearest neighbours** in fixed clouds: :class:`TaskIndex` (a task's search structures, built
+  once: its :meth:`~TaskIndex.part_cd` is the exact part-to-part Chamfer distance), and
+  :func:`build_tree` / :func:`graph_for` for clouds of one's own;
+- **ICP from many starts**: :class:`ICPProblem` (the protocol's ICP rule from one start, with
+  exact certified neighbours; :meth:`TaskIndex.assembly_problem` builds one for a checkpoint)
+  and :func:`coarse_to_fine` (``fast`` mode's pruning of starts).
+
+Inside: compiled KD-trees (``kdtree``), Delaunay walks with Voronoi certificates
+(``delaunay``), walks through a posed assembly's parts (``partwalk``), the fused ICP kernel
+(``icp``) and the coarse stage (``fast``). Nothing here decides what is scored: every result is
+the protocol's (``fast`` excepted, whose agreement is measured).
+"""
+
+from aw_eval.kernels.compile import compile_kernels
+from aw_eval.kernels.fast import FastSettings, coarse_to_fine, fast_settings, same_basin
+from aw_eval.kernels.icp import ICPProblem, ICPResult, build_tree, graph_for
+from aw_eval.kernels.index import TaskIndex, mean_squared_norm
+
+__all__ = ["FastSettings", "fast_settings", "ICPProblem", "ICPResult", "TaskIndex", "build_tree", "coarse_to_fine",
+           "compile_kernels", "graph_for", "mean_squared_norm", "same_basin"]

@@ -13,14 +13,16 @@ rule as ``exact``, but
    iterations (same tolerance); its best objective is the SCD.
 
 Near-identical starts (same-ID starts of parts already placed consistently) are run once.
+Steps 1-3 are :func:`coarse_to_fine`; the protocol side (:mod:`aw_eval.registration` and
+:mod:`aw_eval.scoring`) applies steps 4 and 5 with the settings of :data:`FAST`.
 
 4. **escalation**: when a decision is close to its threshold (a part error within a factor
    ``margin`` of ``threshold``, or SCD within ``margin`` of ``sra_threshold``), the result is
    refined further at full resolution with the protocol's full iteration budget (certified
    exact neighbours) from the fast transform, and the better objective is kept. Far from the
    thresholds the small registration differences cannot flip a decision. Along a trajectory
-   (:func:`aw_eval.engine.score_batch`) the refinement starts from the previous checkpoint's
-   refined transform instead when both lie in the same basin (see :func:`escalate`);
+   (:func:`aw_eval.score_batch`) the refinement starts from the previous checkpoint's
+   refined transform instead when both lie in the same basin (:func:`same_basin`);
 5. **exact fallback** (opt-in, ``exact_margin > 1``; off by default): when a decision is still
    within a factor ``exact_margin`` of its threshold, the checkpoint is registered as ``exact``
    does (every start at full resolution): such knife-edge decisions turn on the last digits of
@@ -40,10 +42,10 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from aw_eval.kernels.icp import ICPProblem, build_tree, graph_for, kabsch_pairs
-from aw_eval.results import Registration
+from aw_eval.kernels.icp import ICPProblem, ICPResult, kabsch_pairs
+from aw_eval.kernels.index import TaskIndex
 
-__all__ = ["FastSettings", "register_fast", "coarse_icp", "escalate", "near_threshold", "same_basin"]
+__all__ = ["FastSettings", "FAST", "fast_settings", "coarse_to_fine", "coarse_icp", "same_basin"]
 
 
 @dataclass(frozen=True)
@@ -64,6 +66,11 @@ class FastSettings:
 
 
 FAST = FastSettings()
+
+
+def fast_settings() -> FastSettings:
+    """The settings ``fast`` mode runs with (:data:`FAST`, read at call time)."""
+    return FAST
 
 
 @njit(cache=True)
@@ -175,78 +182,34 @@ def _distinct(order, r, t, keep: int, deg: float, dt: float) -> list[int]:
     return chosen
 
 
-def register_fast(geom, ctx, poses: np.ndarray, pred_parts: np.ndarray, fast: FastSettings | None = None) -> Registration:
-    """Coarse-to-fine registration of one checkpoint (see the module docstring; no escalation)."""
-    from aw_eval.engine import checkpoint_rotations, prediction_problem, starts_for
-
+def coarse_to_fine(index: TaskIndex, pred_parts: np.ndarray, full: ICPProblem, r0: np.ndarray, t0: np.ndarray,
+                   max_iters: int, tol: float, fast: FastSettings | None = None) -> tuple[ICPResult, int]:
+    """Coarse-to-fine ICP of one checkpoint from the starts ``r0 (S, 3, 3)``, ``t0 (S, 3)`` (steps
+    1-3 of the module docstring; no escalation): ``pred_parts (P, n, 3)`` normalized, ``full``
+    its full-resolution problem, ``max_iters``/``tol`` the protocol's ICP budget and tolerance.
+    Returns the full-resolution result and the index of the start it came from."""
     fast = fast or FAST
-    st = geom.settings
-    pred = np.ascontiguousarray(pred_parts.reshape(-1, 3))
-    r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor, checkpoint_rotations(geom, poses))
     uniq = _dedupe_starts(r0, t0, fast.same_start_tol)
-    c_obj, c_r, c_t = coarse_icp(pred_parts, ctx.target_parts, r0[uniq], t0[uniq], fast.coarse,
-                                 min(fast.coarse_iters, st.max_iters), st.tol)
+    c_obj, c_r, c_t = coarse_icp(pred_parts, index.target_parts, r0[uniq], t0[uniq], fast.coarse,
+                                 min(fast.coarse_iters, max_iters), tol)
     order = np.lexsort((uniq, c_obj))  # by objective, ties to the earlier start
     chosen = _distinct(order, c_r, c_t, fast.keep, fast.distinct_deg, fast.distinct_t)
 
     n = pred_parts.shape[1]
     mm = min(fast.medium, n)
     if mm < n:
-        mp = np.ascontiguousarray(pred_parts[:, :mm].reshape(-1, 3))
-        mt = _medium_target(geom, ctx, mm)
-        prob = ICPProblem(mp, mt[0], tree_t=mt[1], graph_t=mt[2])
-        med = [prob.run(c_r[k], c_t[k], min(fast.medium_iters, st.max_iters), st.tol) for k in chosen]
+        prob = index.medium_problem(pred_parts, mm)
+        med = [prob.run(c_r[k], c_t[k], min(fast.medium_iters, max_iters), tol) for k in chosen]
         objs = np.array([m.objective for m in med])
         best_k = min(range(len(chosen)), key=lambda i: (objs[i], uniq[chosen[i]]))
         r_s, t_s = med[best_k].rotation, med[best_k].translation
     else:
         best_k = 0
         r_s, t_s = c_r[chosen[0]], c_t[chosen[0]]
-    full = prediction_problem(geom, ctx, poses, pred_parts).run(r_s, t_s, min(fast.full_iters, st.max_iters), st.tol)
-    return Registration(full.objective, full.rotation, full.translation, int(uniq[chosen[best_k]]), None)
+    return full.run(r_s, t_s, min(fast.full_iters, max_iters), tol), int(uniq[chosen[best_k]])
 
 
-def _medium_target(geom, ctx, mm: int):
-    key = ("medium_target", mm)
-    if key not in geom._derived:
-        pts = np.ascontiguousarray(ctx.target_parts[:, :mm].reshape(-1, 3))
-        tree = build_tree(pts)
-        geom._derived[key] = (pts, tree, graph_for(tree))
-    return geom._derived[key]
-
-
-def near_threshold(result, settings, margin: float) -> bool:
-    """True when a PA/SR or SR^a decision of ``result`` is within a factor ``margin`` of its threshold."""
-    e = np.asarray(result.part_errors)
-    thr, sra = settings.threshold, settings.sra_threshold
-    near_part = np.any((e >= thr / margin) & (e <= thr * margin))
-    near_scd = sra / margin <= result.scd <= sra * margin
-    return bool(near_part or near_scd)
-
-
-def same_basin(a: Registration, b: Registration, max_deg: float, max_t: float) -> bool:
-    """True when two registrations' rotations are within ``max_deg`` degrees and their
-    translations within ``max_t`` (normalized units) of each other."""
-    return _within(a.rotation, a.translation, b.rotation, b.translation, np.cos(np.radians(max_deg)), max_t)
-
-
-def escalate(geom, ctx, poses: np.ndarray, pred_parts: np.ndarray, reg: Registration,
-             warm: Registration | None = None) -> Registration:
-    """Refine ``reg`` at full resolution with the protocol's iteration budget; keep the better.
-
-    ``warm``: the refined registration of the previous checkpoint of the same trajectory. When
-    it is within ``FAST.warm_deg`` degrees and ``FAST.warm_t`` of ``reg`` (the same basin: the
-    refinement of ``reg`` slides about that far) the refinement starts there instead: one edit
-    earlier the same basin's ICP had already converged, so far fewer iterations remain (on
-    near-threshold trajectory checkpoints of 8-part box tasks, 3-20 instead of 22-42). Elsewhere
-    ``warm`` is ignored and the refinement starts at ``reg``.
-    """
-    from aw_eval.engine import prediction_problem
-
-    st = geom.settings
-    near = warm is not None and same_basin(warm, reg, FAST.warm_deg, FAST.warm_t)
-    start = warm if near else reg
-    res = prediction_problem(geom, ctx, poses, pred_parts).run(start.rotation, start.translation, st.max_iters, st.tol)
-    if res.objective < reg.scd:
-        return Registration(res.objective, res.rotation, res.translation, reg.start_index, None)
-    return reg
+def same_basin(ra: np.ndarray, ta: np.ndarray, rb: np.ndarray, tb: np.ndarray, max_deg: float, max_t: float) -> bool:
+    """True when two transforms' rotations ``(3, 3)`` are within ``max_deg`` degrees and their
+    translations ``(3,)`` within ``max_t`` (normalized units) of each other."""
+    return _within(ra, ta, rb, tb, np.cos(np.radians(max_deg)), max_t)

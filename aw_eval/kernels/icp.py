@@ -37,8 +37,7 @@ from aw_eval.kernels.delaunay import DelaunayGraph, build_graph, no_graph, to_se
 from aw_eval.kernels.kdtree import STACK, KDTree, build_tree, nearest2
 from aw_eval.kernels.partwalk import PartClouds, build_part_clouds, no_part_clouds, part_maps, parts_pass
 
-__all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "build_tree", "graph_for", "kabsch_pairs", "nearest_positions",
-           "compile_kernels"]
+__all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "build_tree", "graph_for", "kabsch_pairs", "nearest_positions"]
 
 # Safety margin of the certificate in normalized units (coordinates are O(1); rounding is ~1e-16).
 _MARGIN = 1e-10
@@ -344,33 +343,3 @@ def _no_tree() -> KDTree:
 def graph_for(tree: KDTree) -> DelaunayGraph | None:
     """Delaunay graph of a tree's points in tree order (``None`` where Qhull cannot build one)."""
     return build_graph(tree.points)
-
-
-_COMPILED = False
-
-
-def compile_kernels() -> None:
-    """Compile (or load from numba's on-disk cache) every kernel of the evaluator on tiny inputs,
-    so that scoring processes start warm. The install step runs it once; later calls in the same
-    process return at once."""
-    global _COMPILED
-    if _COMPILED:
-        return
-    rng = np.random.default_rng(0)
-    a, b = rng.normal(size=(40, 3)), rng.normal(size=(30, 3))
-    ta, tb = build_tree(a), build_tree(b)
-    ta.query(b)
-    CertifiedNN(a, ta).query(b)
-    nearest_positions(ta, graph_for(ta), b)
-    nearest_positions(ta, None, b)
-    ICPProblem(a, b, tree_t=tb, tree_p=ta).run(np.eye(3), np.zeros(3), 3, 1e-9, stop_at=1e-4)
-    ICPProblem(a, b, tree_t=tb, tree_p=ta, graph_t=graph_for(tb), graph_p=graph_for(ta)).run(np.eye(3), np.zeros(3), 3, 1e-9)
-    parts = rng.normal(size=(2, 20, 3))
-    trees = [build_tree(c) for c in parts]
-    clouds = build_part_clouds([(tree, graph_for(tree)) for tree in trees])
-    poses = np.array([[0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], [0.0, 0.2, 0.0, 0.0, 1.0, 0.0, 0.0]])
-    ICPProblem.for_assembly(parts, poses, 1.0, clouds, b, tree_t=tb, graph_t=graph_for(tb)).run(np.eye(3), np.zeros(3), 3, 1e-9)
-    from aw_eval.kernels.fast import coarse_icp  # fast imports this module
-
-    coarse_icp(a.reshape(2, 20, 3), b[:20].reshape(2, 10, 3), np.eye(3)[None], np.zeros((1, 3)), 8, 3, 1e-9)
-    _COMPILED = True

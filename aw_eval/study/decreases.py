@@ -35,7 +35,7 @@ def pa_decreases(geom, poses: np.ndarray, pa: np.ndarray, assignment: np.ndarray
     """Decreases of ``pa (N,)`` for checkpoints ``poses (N, P, 7)`` scored with ``assignment
     (N, P)``, ``reg_rotation (N, 3, 3)``, ``reg_translation (N, 3)`` on ``geom``."""
     from aw_eval import chamfer
-    from aw_eval.results import match_within_groups
+    from aw_eval.matching import match_within_groups
 
     idx = np.flatnonzero(np.diff(pa) < -_EPS)
     n = len(idx)

@@ -43,7 +43,7 @@ def evaluator_version() -> str:
 def prepare_thread() -> None:
     """Per-thread setup before scoring in this thread: loads the compiled kernels (numba's
     on-disk cache) up front, so the first checkpoint's timing is not a compile."""
-    from aw_eval.kernels.icp import compile_kernels
+    from aw_eval.kernels import compile_kernels
 
     compile_kernels()
 

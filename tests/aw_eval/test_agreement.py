@@ -51,21 +51,22 @@ def test_exact_equals_reference(n_parts, n_ck):
 def test_full_resolution_icp_agrees():
     """The paper's numbers (4096 -> 1000 samples, 100 iterations, tol 1e-9) on a 3-part task:
     certified ICP from PCA and same-ID starts equals the reference ICP start by start."""
-    from aw_eval.engine import starts_for, task_context
     from aw_eval.fixtures import make_points_geometry
-    from aw_eval.kernels.icp import ICPProblem
+    from aw_eval.kernels import ICPProblem
+    from aw_eval.registration import checkpoint_starts
 
     geom, obj = make_points_geometry(3, 1000, seed=5, settings=aw_eval.ProtocolSettings())
     poses = random_checkpoints(obj, 1, seed=9, kinds=("small",))[0]
-    ctx = task_context(geom)
-    pred = geom.pred_parts(poses).reshape(-1, 3)
-    r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor)
-    ref_r0 = ref.pca_starts(pred, ctx.target) + ref.part_starts(poses, geom.target_poses, geom.divisor)
-    prob = ICPProblem(pred, ctx.target)
+    target = geom.index().target
+    ck = geom.checkpoint(poses)
+    pred = ck.points
+    r0, t0 = checkpoint_starts(geom, ck)
+    ref_r0 = ref.pca_starts(pred, target) + ref.part_starts(poses, geom.target_poses, geom.divisor)
+    prob = ICPProblem(pred, target)
     for k in (0, 5, 24, 26):
         assert np.array_equal(r0[k], ref_r0[k][0]) and np.array_equal(t0[k], ref_r0[k][1])
         got = prob.run(r0[k], t0[k], 100, 1e-9)
-        want = ref.icp(pred, ctx.target, r0[k], t0[k], 100, 1e-9)
+        want = ref.icp(pred, target, r0[k], t0[k], 100, 1e-9)
         assert abs(got.objective - want[0]) <= 1e-9 * want[0] + 1e-15
         assert np.allclose(got.rotation, want[1], atol=1e-9) and np.allclose(got.translation, want[2], atol=1e-9)
 

@@ -132,3 +132,23 @@ def test_centroids_are_baked_frame_sample_means():
     g = aw_eval.TaskGeometry.from_points(["a", "b"], clouds, np.tile([1.0, 2, 3, 1, 0, 0, 0], (2, 1)), 1.0, groups=[])
     assert np.allclose(g.centroids, clouds.mean(axis=1))
     assert np.allclose(g.target_parts(), apply_pose(g.target_poses, clouds))
+
+
+def test_checkpoint_has_its_rotations_and_clouds_once():
+    """``TaskGeometry.checkpoint``: the poses' rotation matrices (read-only), the normalized
+    predicted clouds built from them and their join, as scoring uses them; one checkpoint only."""
+    import pytest
+
+    from aw.pose import quat_to_matrix
+    from aw_eval.fixtures import make_points_geometry
+
+    geom, _ = make_points_geometry(3, 40, seed=1)
+    rng = np.random.default_rng(2)
+    poses = np.concatenate([rng.normal(size=(3, 3)), rng.normal(size=(3, 4))], axis=1)
+    ck = geom.checkpoint(poses)
+    assert np.array_equal(ck.rotations, quat_to_matrix(poses[:, 3:])) and not ck.rotations.flags.writeable
+    assert np.array_equal(ck.parts, apply_pose(poses, geom.clouds, ck.rotations) / geom.divisor)
+    assert ck.points.flags.c_contiguous and np.array_equal(ck.points, ck.parts.reshape(-1, 3))
+    assert np.array_equal(geom.target_rotations(), quat_to_matrix(geom.target_poses[:, 3:]))
+    with pytest.raises(ValueError, match="one checkpoint"):
+        geom.checkpoint(np.stack([poses, poses]))

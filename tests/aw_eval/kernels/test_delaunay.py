@@ -172,17 +172,18 @@ def test_icp_falls_back_to_trees_without_a_graph():
 
 def test_exact_registration_of_trajectory_checkpoints_is_unchanged_by_graphs():
     """Every start of a few synthetic-trajectory checkpoints, with and without graphs."""
-    from aw_eval.engine import starts_for, task_context
+    from aw_eval.registration import checkpoint_starts
     from aw_eval.settings import ProtocolSettings
 
     geom, obj = make_points_geometry(3, 120, seed=3, settings=ProtocolSettings(n_fps=120, n_surface=1024))
-    ctx = task_context(geom)
+    index = geom.index()
     for poses in trajectory_checkpoints(obj, 12, seed=5)[::4]:
-        pred = np.ascontiguousarray(geom.pred_parts(poses).reshape(-1, 3))
-        r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor)
+        ck = geom.checkpoint(poses)
+        pred = ck.points
+        r0, t0 = checkpoint_starts(geom, ck)
         tree_p = build_tree(pred)
-        plain = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p)
-        walked = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p, graph_t=ctx.graph_t, graph_p=graph_for(tree_p))
+        plain = ICPProblem(pred, index.target, tree_t=index.tree_t, tree_p=tree_p)
+        walked = ICPProblem(pred, index.target, tree_t=index.tree_t, tree_p=tree_p, graph_t=index.graph_t, graph_p=graph_for(tree_p))
         for k in range(len(r0)):
             a, b = plain.run(r0[k], t0[k], 100, 1e-9), walked.run(r0[k], t0[k], 100, 1e-9)
             assert a.objective == b.objective and np.array_equal(a.rotation, b.rotation)

@@ -1,4 +1,4 @@
-"""``fast`` mode's decision safeguards: near-threshold checks and the exact fallback."""
+"""``fast`` mode: its coarse stage, and its decision safeguards (near-threshold checks, escalation, the exact fallback)."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import numpy as np
 import aw_eval
 from aw_eval.kernels import fast
 from aw_eval.fixtures import random_checkpoints
+from aw_eval.registration import escalate, near_threshold, register_fast
 from aw_eval.results import ScoreResult
 from eval_helpers import close, small_task
 
@@ -17,11 +18,11 @@ def _result(errors, scd):
 
 def test_near_threshold_bands():
     st = aw_eval.ProtocolSettings()
-    assert fast.near_threshold(_result([0.0101, 0.5], 0.5), st, 1.02)  # part error just above 0.01
-    assert fast.near_threshold(_result([0.0099, 0.5], 0.5), st, 1.02)  # just below
-    assert not fast.near_threshold(_result([0.0097, 0.5], 0.5), st, 1.02)
-    assert fast.near_threshold(_result([0.5], 0.0203), st, 1.02)  # SCD near the SR^a threshold
-    assert not fast.near_threshold(_result([0.5], 0.021), st, 1.02)
+    assert near_threshold(_result([0.0101, 0.5], 0.5), st, 1.02)  # part error just above 0.01
+    assert near_threshold(_result([0.0099, 0.5], 0.5), st, 1.02)  # just below
+    assert not near_threshold(_result([0.0097, 0.5], 0.5), st, 1.02)
+    assert near_threshold(_result([0.5], 0.0203), st, 1.02)  # SCD near the SR^a threshold
+    assert not near_threshold(_result([0.5], 0.021), st, 1.02)
 
 
 def test_exact_fallback_returns_the_exact_result(monkeypatch):
@@ -127,45 +128,41 @@ def _nudged_trajectory(geom, n: int, seed: int = 0) -> np.ndarray:
 def test_same_basin_bounds_rotation_and_translation():
     from scipy.spatial.transform import Rotation
 
-    from aw_eval.results import Registration
-
     def reg(deg, t):
-        return Registration(0.0, Rotation.from_rotvec([0.0, 0.0, np.radians(deg)]).as_matrix(), np.array([t, 0.0, 0.0]), 0, None)
+        return Rotation.from_rotvec([0.0, 0.0, np.radians(deg)]).as_matrix(), np.array([t, 0.0, 0.0])
 
-    assert fast.same_basin(reg(0, 0), reg(4.9, 0.04), 5.0, 0.05)
-    assert not fast.same_basin(reg(0, 0), reg(5.1, 0.0), 5.0, 0.05)
-    assert not fast.same_basin(reg(0, 0), reg(0.0, 0.051), 5.0, 0.05)
+    assert fast.same_basin(*reg(0, 0), *reg(4.9, 0.04), 5.0, 0.05)
+    assert not fast.same_basin(*reg(0, 0), *reg(5.1, 0.0), 5.0, 0.05)
+    assert not fast.same_basin(*reg(0, 0), *reg(0.0, 0.051), 5.0, 0.05)
 
 
 def test_escalation_starts_from_a_warm_registration_in_the_same_basin():
-    from aw_eval.engine import prediction_problem, task_context
     from aw_eval.results import Registration
 
     geom, obj = small_task(4, n_points=24, seed=3, max_iters=60)
     cks = _nudged_trajectory(geom, 2)
-    ctx = task_context(geom)
-    prev_pp = geom.pred_parts(cks[0])
-    prev = fast.escalate(geom, ctx, cks[0], prev_pp, fast.register_fast(geom, ctx, cks[0], prev_pp))
-    pp = geom.pred_parts(cks[1])
-    reg = fast.register_fast(geom, ctx, cks[1], pp)
-    assert fast.same_basin(prev, reg, fast.FAST.warm_deg, fast.FAST.warm_t)
+    ck0, ck1 = geom.checkpoint(cks[0]), geom.checkpoint(cks[1])
+    prev = escalate(geom, ck0, register_fast(geom, ck0))
+    reg = register_fast(geom, ck1)
+    assert fast.same_basin(prev.rotation, prev.translation, reg.rotation, reg.translation, fast.FAST.warm_deg, fast.FAST.warm_t)
     st = geom.settings
-    from_warm = prediction_problem(geom, ctx, cks[1], pp).run(prev.rotation, prev.translation, st.max_iters, st.tol)
-    got = fast.escalate(geom, ctx, cks[1], pp, reg, warm=prev)
+    full = geom.index().assembly_problem(ck1.poses, ck1.rotations, ck1.parts, geom.divisor)
+    from_warm = full.run(prev.rotation, prev.translation, st.max_iters, st.tol)
+    got = escalate(geom, ck1, reg, warm=prev)
     want = from_warm if from_warm.objective < reg.scd else reg
     assert got.scd == min(from_warm.objective, reg.scd) and np.array_equal(got.rotation, want.rotation)
     # a registration of another basin is ignored: the refinement starts at the fast transform
     far = Registration(prev.scd, prev.rotation @ np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
                        prev.translation, 0, None)
-    alone = fast.escalate(geom, ctx, cks[1], pp, reg)
-    ignored = fast.escalate(geom, ctx, cks[1], pp, reg, warm=far)
+    alone = escalate(geom, ck1, reg)
+    ignored = escalate(geom, ck1, reg, warm=far)
     assert ignored.scd == alone.scd and np.array_equal(ignored.rotation, alone.rotation)
 
 
 def test_fast_batch_is_scored_as_a_trajectory(monkeypatch):
     """``score_batch`` in fast mode passes each row's refined registration to the next row's
     escalation; its first row, and ``score`` on any row, start cold."""
-    from aw_eval.engine import finalize, task_context
+    from aw_eval.metrics import finalize
     from aw_eval.results import Registration
 
     monkeypatch.setattr(fast, "FAST", fast.FastSettings(margin=1e12))  # every row is refined
@@ -174,13 +171,12 @@ def test_fast_batch_is_scored_as_a_trajectory(monkeypatch):
     b = aw_eval.score_batch(geom, cks, mode="fast")
     first = aw_eval.score(geom, cks[0], mode="fast")
     assert b.scd[0] == first.scd and np.array_equal(b.part_errors[0], first.part_errors)
-    ctx = task_context(geom)
     warmed = 0
     for k in range(1, len(cks)):
-        pp = geom.pred_parts(cks[k])
-        reg = fast.register_fast(geom, ctx, cks[k], pp)
+        ck = geom.checkpoint(cks[k])
+        reg = register_fast(geom, ck)
         warm = Registration(b.scd[k - 1], b.reg_rotation[k - 1], b.reg_translation[k - 1], 0, None)
-        want = finalize(geom, ctx, cks[k], pp, fast.escalate(geom, ctx, cks[k], pp, reg, warm=warm), "fast")
+        want = finalize(geom, ck, escalate(geom, ck, reg, warm=warm), "fast")
         assert b.scd[k] == want.scd and np.array_equal(b.part_errors[k], want.part_errors)
         assert b.pa[k] == want.pa and b.sr[k] == want.sr
         cold = aw_eval.score(geom, cks[k], mode="fast")

@@ -7,7 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import aw_eval
-from aw_eval.engine import _part_structures, prediction_problem, starts_for, task_context
+from aw_eval.registration import checkpoint_starts
 from aw_eval.fixtures import make_points_geometry, trajectory_checkpoints
 from aw_eval.kernels.icp import ICPProblem, build_tree, graph_for
 from aw_eval.kernels.partwalk import build_part_clouds, part_maps, parts_pass
@@ -87,16 +87,16 @@ def test_assembly_icp_equals_the_prediction_tree_icp(n_parts):
     """ICP through the parts' clouds visits the same states as through a tree and graph of the
     prediction: same iterations, objectives and transforms up to summation order."""
     geom, obj = make_points_geometry(n_parts, 120, seed=n_parts)
-    ctx = task_context(geom)
-    _part_structures(geom, ctx)
-    assert ctx.part_clouds is not None
+    index = geom.index()
     for poses in trajectory_checkpoints(obj, 4, seed=9):
-        pred_parts = geom.pred_parts(poses)
-        pred = np.ascontiguousarray(pred_parts.reshape(-1, 3))
+        ck = geom.checkpoint(poses)
+        pred = ck.points
         tree_p = build_tree(pred)
-        plain = ICPProblem(pred, ctx.target, tree_t=ctx.tree_t, tree_p=tree_p, graph_t=ctx.graph_t, graph_p=graph_for(tree_p))
-        walked = prediction_problem(geom, ctx, poses, pred_parts)
-        r0, t0 = starts_for(pred, ctx.target_frame, poses, geom.target_poses, geom.divisor)
+        plain = ICPProblem(pred, index.target, tree_t=index.tree_t, tree_p=tree_p, graph_t=index.graph_t,
+                           graph_p=graph_for(tree_p))
+        walked = index.assembly_problem(ck.poses, ck.rotations, ck.parts, geom.divisor)
+        assert index.part_clouds is not None
+        r0, t0 = checkpoint_starts(geom, ck)
         for k in range(0, len(r0), 3):
             x, y = plain.run(r0[k], t0[k], 100, 1e-9), walked.run(r0[k], t0[k], 100, 1e-9)
             assert x.iterations == y.iterations
@@ -110,8 +110,7 @@ def test_exact_scores_do_not_depend_on_the_search():
     geom, obj = make_points_geometry(3, 60, seed=4, settings=aw_eval.ProtocolSettings(n_fps=60, n_surface=400, max_iters=30))
     cks = trajectory_checkpoints(obj, 3, seed=2)
     walked = [aw_eval.score(geom, c, mode="exact") for c in cks]
-    ctx = task_context(geom)
-    ctx.part_clouds = None  # as if a part could not be triangulated
+    geom.index().part_clouds = None  # as if a part could not be triangulated
     plain = [aw_eval.score(geom, c, mode="exact") for c in cks]
     for w, p in zip(walked, plain):
         assert (w.pa, w.sr, w.start_index) == (p.pa, p.sr, p.start_index)

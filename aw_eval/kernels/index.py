@@ -1,0 +1,113 @@
+"""A task's search structures, built once per task and process: the narrow interface through
+which the protocol asks for nearest neighbours and ICP problems.
+
+``TaskIndex`` holds the normalized target (``(P, n, 3)`` parts, ``(P n, 3)`` joined), its KD-tree
+and Delaunay graph, each target part's tree and graph, and every part's cloud in its baked
+frame (which a checkpoint only moves rigidly), joined for walks through a posed assembly
+(:mod:`aw_eval.kernels.partwalk`). Everything beyond the joined target's tree is built on first
+use; nothing here depends on a checkpoint.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aw_eval.kernels.icp import ICPProblem, graph_for, nearest_positions
+from aw_eval.kernels.kdtree import build_tree
+from aw_eval.kernels.partwalk import build_part_clouds
+
+__all__ = ["TaskIndex", "mean_squared_norm"]
+
+_UNBUILT = object()
+
+
+class TaskIndex:
+    """Search structures of one task: ``target_parts (P, n, 3)`` normalized target points and
+    ``clouds (P, n, 3)`` the parts' samples in their baked frames (unnormalized)."""
+
+    def __init__(self, target_parts: np.ndarray, clouds: np.ndarray):
+        self.target_parts = target_parts
+        self.target = np.ascontiguousarray(target_parts.reshape(-1, 3))  # (P n, 3)
+        self.tree_t = build_tree(self.target)
+        self._clouds = clouds
+        self._graph_t = _UNBUILT
+        self._parts_built = False
+        self._medium: dict[int, tuple] = {}
+
+    @property
+    def graph_t(self):
+        """Delaunay graph of the joined target in tree order (``None`` where Qhull cannot)."""
+        if self._graph_t is _UNBUILT:
+            self._graph_t = graph_for(self.tree_t)
+        return self._graph_t
+
+    def _build_parts(self) -> None:
+        if self._parts_built:
+            return
+        tp = self.target_parts
+        self.part_trees = [build_tree(t) for t in tp]
+        self.part_graphs = [graph_for(t) for t in self.part_trees]
+        self.target_boxes = (tp.min(axis=1), tp.max(axis=1))  # ((P, 3), (P, 3))
+        self.target_means = tp.mean(axis=1)  # (P, 3)
+        self.baked = [(tree, graph_for(tree)) for tree in (build_tree(c) for c in self._clouds)]
+        self.part_clouds = build_part_clouds(self.baked)  # None: a part has no graph
+        self._parts_built = True
+
+    def assembly_problem(self, poses: np.ndarray, rotations: np.ndarray, pred_parts: np.ndarray,
+                         divisor: float) -> ICPProblem:
+        """Full-resolution ICP of a checkpoint (``poses (P, 7)``, their ``rotations (P, 3, 3)``,
+        ``pred_parts (P, n, 3)`` normalized) onto the target. The backward search walks the
+        parts' baked clouds: nothing is built per checkpoint. Where a part has no Delaunay graph,
+        the prediction gets its own tree and graph (same results, slower)."""
+        self._build_parts()
+        if self.part_clouds is not None:
+            return ICPProblem.for_assembly(pred_parts, poses, divisor, self.part_clouds, self.target, tree_t=self.tree_t,
+                                           graph_t=self.graph_t, rotations=rotations)
+        return self.own_problem(pred_parts)[0]
+
+    def own_problem(self, pred_parts: np.ndarray) -> tuple[ICPProblem, bool]:
+        """ICP of ``pred_parts (P, n, 3)`` searched through its own KD-tree and Delaunay graph
+        (built here, per checkpoint); the flag says whether Qhull gave a graph."""
+        tree_p = build_tree(pred_parts.reshape(-1, 3))
+        graph_p = graph_for(tree_p)
+        prob = ICPProblem(tree_p.points, self.target, tree_t=self.tree_t, tree_p=tree_p, graph_t=self.graph_t, graph_p=graph_p)
+        return prob, graph_p is not None
+
+    def medium_problem(self, pred_parts: np.ndarray, m: int) -> ICPProblem:
+        """ICP of the first ``m`` samples of every part of ``pred_parts (P, n, 3)`` onto the same
+        prefix of the target's parts (the target side's tree and graph built once per ``m``)."""
+        if m not in self._medium:
+            pts = np.ascontiguousarray(self.target_parts[:, :m].reshape(-1, 3))
+            tree = build_tree(pts)
+            self._medium[m] = (pts, tree, graph_for(tree))
+        pts, tree, graph = self._medium[m]
+        return ICPProblem(np.ascontiguousarray(pred_parts[:, :m].reshape(-1, 3)), pts, tree_t=tree, graph_t=graph)
+
+    def part_cd(self, moved_parts: np.ndarray, to_baked: tuple, i: int, j: int) -> float:
+        """CD(registered pred part ``i``, target part ``j``) with squared distances from normalized
+        coordinates, as the reference computes them. Forward: the target part's tree and graph;
+        backward: the target points mapped into part ``i``'s baked frame by ``to_baked = (A (P, 3,
+        3), b (P, 3))`` (``c = A y + b``), searched in the baked cloud's tree and graph."""
+        self._build_parts()
+        tree_t, tree_b, graph_b = self.part_trees[j], *self.baked[i]
+        # queries in their own trees' order: consecutive queries are neighbours in space, so each
+        # walk starts next to its answer (FPS order would jump across the part)
+        x, y = moved_parts[i][tree_b.index], tree_t.points
+        fwd = nearest_positions(tree_t, self.part_graphs[j], x)
+        a, b = to_baked
+        bwd = nearest_positions(tree_b, graph_b, y @ a[i].T + b[i])  # tree positions of part i = rows of x
+        return mean_squared_norm(x - tree_t.points[fwd]) + mean_squared_norm(y - x[bwd])
+
+    def part_bounds(self) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
+        """``(means (P, 3), (box lows (P, 3), box highs (P, 3)))`` of the target parts."""
+        self._build_parts()
+        return self.target_means, self.target_boxes
+
+
+def mean_squared_norm(d: np.ndarray) -> float:
+    """``mean(sum(d * d, axis=1))`` of ``d (k, 3)``, the same sums in the same order (each row's
+    ``(d0^2 + d1^2) + d2^2``, then NumPy's mean) without the slow short-axis reduction."""
+    s = d[:, 0] * d[:, 0]
+    s += d[:, 1] * d[:, 1]
+    s += d[:, 2] * d[:, 2]
+    return float(np.mean(s))

@@ -1,0 +1,143 @@
+"""Scoring of checkpoints, top-down (Appendix A.3 of the paper):
+
+1. the checkpoint's poses become rotations and normalized clouds, once
+   (:meth:`aw_eval.geometry.TaskGeometry.checkpoint`);
+2. the whole prediction is registered onto the whole target by symmetric ICP from the 24 PCA
+   starts and one same-ID start per part (:mod:`aw_eval.starts`, :mod:`aw_eval.registration`);
+3. registered parts are matched to target parts within equivalence groups (:mod:`aw_eval.matching`);
+4. PA, SR, SCD and SR^a follow (:mod:`aw_eval.metrics`).
+
+Scoring one checkpoint (:func:`score`) is a pure function of ``(geometry, poses, mode)``. A batch
+(:func:`score_batch`) removes duplicate rows; in ``fast`` mode it also reads its rows as a
+trajectory (a near-threshold refinement may start from the previous row's), so a batch is a pure
+function of its rows in order: any worker layout gives identical numbers.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from aw_eval.chamfer import chamfer_pairs
+from aw_eval.geometry import Checkpoint, TaskGeometry
+from aw_eval.kernels import fast_settings
+from aw_eval.metrics import finalize
+from aw_eval.registration import MODES, check_mode, escalate, near_threshold, register_exact, register_fast
+from aw_eval.results import BatchScores, Registration, ScoreResult
+
+__all__ = ["MODES", "score", "score_batch", "part_diagnostics", "PartDiagnostics"]
+
+
+def score(geom: TaskGeometry, poses, mode: str = "exact") -> ScoreResult:
+    """Score one checkpoint ``poses (P, 7)`` (scored parts, in ``geom.part_ids`` order)."""
+    check_mode(mode)
+    poses = geom.check_poses(poses)
+    if poses.ndim != 2:
+        raise ValueError(f"score takes one checkpoint (P, 7); use score_batch for {poses.shape}")
+    return _score_one(geom, geom.checkpoint(poses), mode, None)[0]
+
+
+def _score_one(geom: TaskGeometry, ck: Checkpoint, mode: str, warm: Registration | None) -> tuple[ScoreResult, Registration | None]:
+    """Score checkpoint ``ck``; returns the result and, in ``fast`` mode, the refined registration
+    when the checkpoint was near a threshold (else ``None``): the next checkpoint of a
+    trajectory passes it back as ``warm`` (see :func:`aw_eval.registration.escalate`)."""
+    if mode == "exact":
+        return finalize(geom, ck, register_exact(geom, ck), mode), None
+    fast = fast_settings()
+    reg = register_fast(geom, ck)
+    res = finalize(geom, ck, reg, mode)
+    refined = None
+    if fast.margin > 1 and near_threshold(res, geom.settings, fast.margin):
+        refined = escalate(geom, ck, reg, warm)
+        res = finalize(geom, ck, refined, mode)
+    if fast.exact_margin > 1 and near_threshold(res, geom.settings, fast.exact_margin):
+        # a knife-edge decision: the last digits of the registration decide it, so only the
+        # protocol's own registration (every start at full resolution) gives the protocol's answer
+        res = finalize(geom, ck, register_exact(geom, ck), mode)
+    return res, refined
+
+
+def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None) -> BatchScores:
+    """Score ``poses (N, P, 7)`` in row order (identical rows are scored once, at their first
+    occurrence). ``exact`` rows equal :func:`score`'s. In ``fast`` mode the rows are taken as a
+    trajectory: a row refined near a threshold starts its refinement from the previous row's
+    refined registration when both lie in the same basin (consecutive checkpoints differ by one
+    edit; :func:`aw_eval.registration.escalate`), so a fast row depends on the row before it: the same
+    batch gives the same numbers in any process or worker layout, but splitting a trajectory
+    into other batches may change the last digits of a refined row.
+
+    ``progress``: optional callable ``(done, total)`` called after each unique row.
+    """
+    check_mode(mode)
+    poses = geom.check_poses(poses)
+    if poses.ndim != 3:
+        raise ValueError(f"score_batch takes (N, P, 7) poses, got {poses.shape}")
+    n = poses.shape[0]
+    if n == 0:
+        empty = ScoreResult(0.0, False, 0.0, False, np.zeros(geom.n_parts), np.arange(geom.n_parts), np.eye(3), np.zeros(3), 0)
+        out = BatchScores.stack([empty], mode, 0)
+        return BatchScores(**{k: (v[:0] if isinstance(v, np.ndarray) else v) for k, v in out.__dict__.items()})
+    flat = np.ascontiguousarray(poses.reshape(n, -1))
+    _, first, inverse = np.unique(flat, axis=0, return_index=True, return_inverse=True)
+    t0 = time.perf_counter()
+    results = {}
+    warm = None
+    for done, k in enumerate(sorted(first)):
+        results[k], warm = _score_one(geom, geom.checkpoint(poses[k]), mode, warm)
+        if progress is not None:
+            progress(done + 1, len(first))
+    by_unique = [results[k] for k in first]
+    rows = [by_unique[u] for u in np.asarray(inverse).reshape(-1)]
+    return BatchScores.stack(rows, mode, len(first), {"seconds": time.perf_counter() - t0})
+
+
+@dataclass
+class PartDiagnostics:
+    """Per-part diagnostics of Appendix C.2 under the saved registration and matching (``(P,)``):
+
+    - ``offset``: distance between the centroids of registered pred part ``i`` and of its matched
+      target part (normalized units: the largest part's PCA box diagonal is 1);
+    - ``centred_cd``: CD of the two clouds after moving each to zero mean (orientation and shape
+      error without translation);
+    - ``never_moved``: the pose equals the identity initial pose.
+    """
+
+    offset: np.ndarray
+    centred_cd: np.ndarray
+    never_moved: np.ndarray
+    part_errors: np.ndarray
+    assignment: np.ndarray
+
+    @property
+    def moved(self) -> np.ndarray:
+        return ~self.never_moved
+
+
+def _row(result, row: int | None) -> ScoreResult:
+    if isinstance(result, BatchScores):
+        if row is None:
+            if len(result) != 1:
+                raise ValueError("part_diagnostics on a BatchScores needs the row index")
+            row = 0
+        return result.row(int(row))
+    return result
+
+
+def part_diagnostics(geom: TaskGeometry, poses, result, row: int | None = None, atol: float = 1e-9) -> PartDiagnostics:
+    """Diagnostics of one checkpoint ``poses (P, 7)`` scored as ``result`` (a :class:`ScoreResult`,
+    or a :class:`BatchScores` with ``row``)."""
+    res = _row(result, row)
+    poses = geom.check_poses(poses)
+    if poses.ndim != 2:
+        raise ValueError(f"part_diagnostics takes one checkpoint (P, 7), got {poses.shape}")
+    moved = geom.checkpoint(poses).parts @ res.reg_rotation.T + res.reg_translation
+    matched = geom.target_parts()[res.assignment]
+    mc, tc = moved.mean(axis=1), matched.mean(axis=1)
+    offset = np.linalg.norm(mc - tc, axis=1)
+    centred = chamfer_pairs(moved - mc[:, None, :], matched - tc[:, None, :])
+    q = poses[:, 3:] / np.linalg.norm(poses[:, 3:], axis=1, keepdims=True)
+    never = (np.abs(poses[:, :3]).max(axis=1) <= atol) & (np.abs(np.abs(q[:, 0]) - 1.0) <= atol)
+    return PartDiagnostics(offset, centred, never, np.asarray(res.part_errors), np.asarray(res.assignment))
+
