@@ -50,15 +50,34 @@ def test_export_a_native_run(tmp_path, capsys):
     ep.call("set_object_pose", {"id": "p02", "position": [0.1, 0.2, 0.3], "quaternion": [0, 0, 1, 0]})
     ep.call("get_scene", {})
     ep.call("translate_objects", {"ids": ["p01"], "delta": [0, 0, 0.25]})
+    ep.call("get_object", {"id": "p02"})
+    ep.call("group_objects", {"ids": ["p01", "p02"]})
+    ep.call("list_objects", {})
+    ep.call("get_state", {})
+    try:
+        ep.call("set_object_pose", {"id": "nope", "position": [0, 0, 0]})
+    except Exception:
+        pass
     ep.close("finished")
     out = tmp_path / "native.episode.zip"
     assert main(["official-export", str(tmp_path / "run"), "--suite", str(tmp_path / "suite"), "--out", str(out)]) == 0
     arc = read_archive(out)
-    assert [c["name"] for c in arc.calls] == ["start_episode", "set_object_pose", "get_scene", "translate_objects"]
-    assert [c["state_index"] for c in arc.calls] == [0, 1, 1, 2] and arc.lifecycle == "active"
+    assert [c["name"] for c in arc.calls] == ["start_episode", "set_object_pose", "get_scene", "translate_objects",
+                                              "get_object", "group_objects", "list_objects", "get_state", "set_object_pose"]
+    assert [c["state_index"] for c in arc.calls] == [0, 1, 1, 2, 2, 3, 3, 3, 3] and arc.lifecycle == "active"
+    by_name = {c["name"]: c for c in arc.calls[:-1]}
+    assert arc.calls[1]["arguments"]["id"] == "part-0002" and arc.calls[3]["arguments"]["ids"] == ["part-0001"]
+    assert by_name["start_episode"]["result"] == {"status": "active"}
+    assert by_name["group_objects"]["result"] == {"status": "completed", "physics": "disabled", "index": 3}
+    assert by_name["get_scene"]["result"]["up"] == "Z" and by_name["list_objects"]["result"]["objects"] == arc.manifest["objects"]
+    state = by_name["get_state"]["result"]
+    assert state["index"] == 3 and [o["id"] for o in state["objects"]] == ["part-0001", "part-0002"]
+    assert by_name["get_object"]["result"]["id"] == "part-0002" and by_name["get_object"]["result"]["mass"] == 1.0
+    assert arc.calls[-1]["status"] == "error" and "result" not in arc.calls[-1]
     assert arc.manifest["objects"][1] == {"id": "part-0002", "name": "Part p02", "type": "rigid", "collisionEnabled": False}
     final = read_final(tmp_path / "run" / "final.json").poses
     restored = read_part_episode(out)
     np.testing.assert_allclose(restored.final_poses(), [final[p] for p in ids], atol=1e-12)
+    np.testing.assert_allclose([o["position"] + o["quaternion"] for o in state["objects"]], restored.final_poses(), atol=1e-12)
     header = read_trajectory(tmp_path / "run" / "trajectory.jsonl").header
     np.testing.assert_allclose(restored.poses[0], [header.initial_poses[p] for p in ids], atol=1e-12)
