@@ -5,8 +5,10 @@
              [--bootstrap 10000] [--permutations 100000] [--no-plots] [--no-progress]
 
 Runs are ``RUNS_DIR/<system>/<task_id>/`` (``trajectory.jsonl``, ``final.json``, optional
-``run.json``). Scores are cached under ``OUT_DIR/cache``; a second call recomputes only what
-changed. See ``docs/scoring.md``.
+``run.json``). When SUITE_DIR is an official benchmark package (``benchmark.json``), RUNS_DIR is
+an official run log, a ``logs/`` folder or a folder of episode archives, and the official
+``metrics.jsonl``/``summary.json`` are written (:mod:`aw_eval.official_runs`). Scores are
+cached under ``OUT_DIR/cache``; a second call recomputes only what changed. See ``docs/scoring.md``.
 """
 
 from __future__ import annotations
@@ -35,8 +37,10 @@ def _positive(name: str):
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="aw-score", description="Rescore AssemblyWorld runs of any number of systems: "
                                 "every checkpoint, every final state, the paper's statistics, analyses and plots.")
-    p.add_argument("suite_dir", metavar="SUITE_DIR", help="suite directory (manifest.json, tasks/, targets/)")
-    p.add_argument("runs_dir", metavar="RUNS_DIR", help="runs directory: RUNS_DIR/<system>/<task_id>/")
+    p.add_argument("suite_dir", metavar="SUITE_DIR", help="suite directory (manifest.json, tasks/, targets/), "
+                   "or an official benchmark package (benchmark.json)")
+    p.add_argument("runs_dir", metavar="RUNS_DIR", help="runs directory: RUNS_DIR/<system>/<task_id>/; with a package, "
+                   "an official run log (run.json), a logs/ folder of runs or a folder of *.episode.zip")
     p.add_argument("--out", required=True, metavar="OUT_DIR", help="output directory (also holds the cache)")
     p.add_argument("--final-only", action="store_true", help="score final states only (no checkpoints)")
     p.add_argument("--final", choices=("exact", "fast"), default="exact",
@@ -67,6 +71,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from pathlib import Path
+
+    from aw_eval import official_runs
+
+    if official_runs.is_official_package(args.suite_dir):  # an official package and its run logs
+        return official_runs.main(args.suite_dir, args.runs_dir, args.out, args.jobs)
 
     from aw_eval.report import AnalysisSettings, write_outputs
     from aw_eval.study import ScoreSettings, StudyError, score_study

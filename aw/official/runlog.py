@@ -23,7 +23,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import re
 import tempfile
 import uuid
 from collections.abc import Iterable, Mapping, Sequence
@@ -33,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from aw.formats import FormatError
+from aw.official.ids import sample_slug
 
 __all__ = ["RUN_KIND", "RUN_FILE", "FINAL_ARCHIVE", "RunLog", "SampleAttempt", "sample_slug", "new_run_id", "utc_now",
            "read_run", "is_run_dir", "find_runs", "read_attempts", "select_attempts", "count_tool_calls",
@@ -41,16 +41,6 @@ __all__ = ["RUN_KIND", "RUN_FILE", "FINAL_ARCHIVE", "RunLog", "SampleAttempt", "
 RUN_KIND = "assembly-world-bench"
 RUN_FILE = "run.json"
 FINAL_ARCHIVE = "final.episode.zip"
-_SID_PART = re.compile(r"[A-Za-z0-9_.-]+")
-
-
-def sample_slug(sample_id: str) -> str:
-    """The folder name of a sample id: ``/`` becomes ``--``. Ids whose components are not
-    ``[A-Za-z0-9_.-]+`` (or are ``.``/``..``) are refused, as the official runner refuses them."""
-    if not isinstance(sample_id, str) or not sample_id or any(
-            not _SID_PART.fullmatch(part) or part in (".", "..") for part in sample_id.split("/")):
-        raise ValueError(f"unsafe sample id {sample_id!r}: components must match [A-Za-z0-9_.-]+")
-    return sample_id.replace("/", "--")
 
 
 def utc_now() -> str:
@@ -131,10 +121,7 @@ def read_run(path: str | Path) -> RunLog:
         raise FormatError(file, "selection: expected an object of block -> list of sample ids")
     for ids in selection.values():
         for sid in ids:
-            try:
-                sample_slug(sid)
-            except ValueError as exc:
-                raise FormatError(file, f"selection: {exc}") from None
+            sample_slug(sid, f"{file}: selection")
     src = meta.get("source_run")
     if src is not None and not isinstance(src, str):
         raise FormatError(file, "source_run: expected a path or null")

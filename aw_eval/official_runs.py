@@ -1,0 +1,237 @@
+"""Rescore official benchmark runs with this project's evaluator (``exact`` mode) and write the
+official evaluation outputs.
+
+``aw-score PACKAGE RUNS --out OUT`` with ``PACKAGE`` an official benchmark package (it has
+``benchmark.json``) lands here. ``RUNS`` is a run folder (``run.json``), a ``logs/`` folder of
+runs, or a folder of ``*.episode.zip`` archives. Runs are grouped into systems by the agent,
+model and effort in their ``run.json`` options; each system's chains are merged as the
+official evaluation merges them (:func:`aw.official.runlog.select_attempts`) and every counted
+attempt's final state is scored against the package's evaluation inputs. For each system
+``OUT/official/<system>/`` gets ``metrics.jsonl`` and ``summary.json`` in the official form
+(:mod:`aw.official.evaluation_output`), so they can be set beside the official ``summary.json``
+of the same run.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import sys
+from collections.abc import Callable, Iterable, Mapping
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from aw.formats import FormatError
+from aw.official.evaluation_output import error_row, row_base, scored_row, sort_rows, summarize, write_evaluation
+from aw.official.evaluation_cache import EvaluationInputs
+from aw.official.package import OfficialPackage
+from aw.official.runlog import RunLog, SampleAttempt, is_run_dir, read_run, select_attempts
+
+__all__ = ["is_official_package", "system_name", "systems_of_runs", "archive_attempts",
+           "score_state", "score_attempt", "evaluate_system", "evaluate", "main"]
+
+SCD_SCALE = 1000.0  # the official SCD is 1000 x the aligned squared Chamfer (geometry.py)
+
+
+def is_official_package(path: str | Path) -> bool:
+    return (Path(path) / "benchmark.json").is_file()
+
+
+# --- systems -----------------------------------------------------------------------------------
+
+
+def system_name(run: RunLog) -> str:
+    """``<agent>-<model>[-<effort>]`` from a run's options (file-safe), else the run id."""
+    opts = run.options
+    parts = [str(opts[k]) for k in ("agent", "model", "effort") if opts.get(k)]
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", "-".join(parts)).strip("._")
+    return name or run.run_id
+
+
+def systems_of_runs(runs: Iterable[Path]) -> dict[str, list[Path]]:
+    """Run folders grouped by the system of their chain's first run (a resume keeps the options
+    of the run it continues)."""
+    out: dict[str, list[Path]] = {}
+    for path in runs:
+        run = read_run(path)
+        root, seen = run, {run.path}
+        while root.source_run is not None and root.source_run not in seen and is_run_dir(root.source_run):
+            seen.add(root.source_run)
+            root = read_run(root.source_run)
+        out.setdefault(system_name(root), []).append(run.path)
+    return dict(sorted(out.items()))
+
+
+def archive_attempts(folder: str | Path, package: OfficialPackage) -> dict[tuple[str, str], SampleAttempt]:
+    """Attempts for a folder of episode archives, each named by the block folder above it and
+    its sample slug (``<block>/<slug>.episode.zip``, or ``.../<block>/.../<slug>/final.episode.zip``
+    as in a run log; :func:`aw.official.convert.archive_sample`)."""
+    from aw.official.convert import archive_sample, find_archives
+
+    root = Path(folder).resolve()
+    out: dict[tuple[str, str], SampleAttempt] = {}
+    for arc in find_archives(root):
+        key = archive_sample(arc, package)
+        if key in out:
+            raise FormatError(arc, f"a second archive for {key[0]}/{key[1]} (first: {out[key].final_archive})")
+        result = {"status": "completed", "archive": {"status": "saved", "sha256": _sha256(arc)}}
+        out[key] = _ArchiveAttempt(key[0], key[1], root, root, arc.parent, {}, result, arc)
+    if not out:
+        raise FormatError(root, "no *.episode.zip archive in this folder")
+    return out
+
+
+@dataclass(frozen=True)
+class _ArchiveAttempt(SampleAttempt):
+    archive: Path = Path()
+
+    @property
+    def final_archive(self) -> Path:
+        return self.archive
+
+    @property
+    def tool_calls(self) -> int | None:
+        return None
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+# --- scoring -----------------------------------------------------------------------------------
+
+
+def score_state(inputs: EvaluationInputs, poses: np.ndarray) -> dict[str, Any]:
+    """Official metrics of one state ``poses (P, 7)`` by this project's ``exact`` evaluator:
+    ``SCD`` (x1000), ``PA``, ``SR``, ``parts`` ({part_id, target_part_id, chamfer, correct})
+    and ``alignment`` (rotation, translation, chamfer, seed)."""
+    from aw_eval import TaskGeometry, score
+    from aw_eval.results import start_label
+
+    geom = TaskGeometry.from_points(inputs.part_ids, np.asarray(inputs.points, dtype=np.float64),
+                                    np.asarray(inputs.target_poses, dtype=np.float64), float(inputs.divisor), inputs.groups)
+    res = score(geom, np.asarray(poses, dtype=np.float64), mode="exact")
+    ids = list(geom.part_ids)
+    threshold = geom.settings.threshold
+    parts = sorted(({"part_id": p, "target_part_id": ids[int(res.assignment[k])], "chamfer": float(res.part_errors[k]),
+                     "correct": bool(res.part_errors[k] <= threshold)} for k, p in enumerate(ids)), key=lambda r: r["part_id"])
+    kind, index = start_label(res.start_index)
+    alignment = {"rotation": res.reg_rotation.tolist(), "translation": res.reg_translation.tolist(), "chamfer": float(res.scd),
+                 "seed": f"{kind}-{index}"}
+    return {"SCD": SCD_SCALE * float(res.scd), "PA": float(res.pa), "SR": bool(res.sr), "parts": parts, "alignment": alignment}
+
+
+def score_attempt(attempt: SampleAttempt, sources: OfficialPackage) -> dict[str, Any]:
+    """The ``metrics.jsonl`` row of one counted attempt. As in the official evaluation, a
+    running attempt, a missing export or an archive that differs from ``result.json``'s
+    checksum is an error row (PA 0, SR 0), never a fallback to an earlier export."""
+    base = row_base(attempt)
+    try:
+        if not attempt.finished:
+            raise RuntimeError("Latest attempt is unfinished; an earlier export is not used instead")
+        if not attempt.archive_saved:
+            raise FileNotFoundError("Latest attempted execution has no saved final episode")
+        checksum = _sha256(attempt.final_archive)
+        if attempt.saved_sha256 and attempt.saved_sha256 != checksum:
+            raise ValueError("Final episode checksum differs from execution record")
+        inputs = sources.evaluation_inputs(attempt.block, attempt.sample_id)
+        poses, state_index = sources.final_state(attempt.block, attempt.sample_id, attempt.final_archive)
+        m = score_state(inputs, poses)
+        return scored_row(base, scd=m["SCD"], pa=m["PA"], sr=m["SR"], episode_sha256=checksum, state_index=state_index,
+                          parts=m["parts"], alignment=m["alignment"], scale_divisor=float(inputs.divisor))
+    except Exception as exc:  # every failure of one sample is that sample's error row
+        return error_row(base, exc)
+
+
+def _score_job(job: tuple[SampleAttempt, OfficialPackage]) -> dict[str, Any]:
+    return score_attempt(*job)
+
+
+def evaluate_system(attempts: Mapping[tuple[str, str], SampleAttempt], sources: OfficialPackage, out_dir: str | Path,
+                    jobs: int = 1) -> dict[str, Any]:
+    """Score every attempt, write ``metrics.jsonl`` and ``summary.json`` into the new folder
+    ``out_dir``; returns the summary."""
+    if not attempts:
+        raise ValueError("No final execution attempts to evaluate")
+    items = [attempts[k] for k in sorted(attempts)]
+    if jobs > 1 and len(items) > 1:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            rows = list(pool.map(_score_job, [(a, sources) for a in items]))
+    else:
+        rows = [score_attempt(a, sources) for a in items]
+    rows = sort_rows(rows)
+    summary = summarize(rows, sources.benchmark)
+    write_evaluation(out_dir, rows, summary)
+    return summary
+
+
+def evaluate(sources: OfficialPackage, runs_dir: str | Path, out_dir: str | Path, jobs: int = 1,
+             log: Callable[[str], None] = lambda m: None) -> dict[str, dict[str, Any]]:
+    """Every system found in ``runs_dir`` (module doc) -> its summary, written under
+    ``OUT/official/<system>/``."""
+    root = Path(runs_dir)
+    out = Path(out_dir) / "official"
+    if out.exists():
+        raise FileExistsError(f"{out}: already holds an official evaluation (use a new --out)")
+    runs = _runs_or_none(root)
+    if runs is None:
+        systems = {root.resolve().name: archive_attempts(root, sources)}
+    else:
+        systems = {}
+        for name, paths in systems_of_runs(runs).items():
+            chosen = select_attempts(paths)
+            for run in {a.run for a in chosen.values()}:
+                sources.check_run(read_run(run))
+            for attempt in chosen.values():
+                sources.check_attempt(attempt)
+            systems[name] = chosen
+    summaries = {}
+    for name, attempts in systems.items():
+        log(f"{name}: scoring {len(attempts)} attempts")
+        summaries[name] = evaluate_system(attempts, sources, out / name, jobs)
+    return summaries
+
+
+def _runs_or_none(root: Path) -> list[Path] | None:
+    if is_run_dir(root):
+        return [root.resolve()]
+    if root.is_dir():
+        runs = sorted(p.resolve() for p in root.iterdir() if is_run_dir(p))
+        if runs:
+            return runs
+        return None
+    raise FormatError(root, "runs directory not found")
+
+
+def _overall_text(summary: Mapping[str, Any]) -> str:
+    overall = summary.get("official_overall")
+    if overall is None:
+        return f"partial run ({summary['attempted']}/{summary['expected']} attempted): no Overall"
+    fmt = lambda v: "n/a" if v is None else f"{v:.4f}"  # noqa: E731
+    return f"Overall SCD {fmt(overall['SCD'])}  PA {fmt(overall['PA'])}  SR {fmt(overall['SR'])}"
+
+
+def main(package_dir: str, runs_dir: str, out_dir: str, jobs: int | None = None) -> int:
+    """``aw-score PACKAGE RUNS --out OUT``: print each system's result; 0 when every attempt
+    was scored (as the official ``eval`` exits), 1 when some are error rows, 2 on bad input."""
+    def log(msg: str) -> None:
+        print(f"aw-score: {msg}", file=sys.stderr)
+
+    try:
+        sources = OfficialPackage(package_dir, strict=False)
+        summaries = evaluate(sources, runs_dir, out_dir, jobs or 1, log)
+    except (FormatError, ValueError, FileExistsError, OSError) as exc:
+        print(f"aw-score: error: {exc}", file=sys.stderr)
+        return 2
+    for name, s in summaries.items():
+        print(f"{name}: {s['scored']}/{s['attempted']} scored; {_overall_text(s)}")
+    print(f"wrote {Path(out_dir) / 'official'}")
+    return 0 if all(s["scored"] == s["attempted"] for s in summaries.values()) else 1
