@@ -21,7 +21,7 @@ def register_compose(sub) -> None:
         "11-20 parts) and category coverage (Fantastic Breaks by category only), seeded, and build their tasks: "
         "PartNet twice (none and image), IKEA-Manual and AssemblyBench with their manuals, Fantastic Breaks without "
         "reference. The selection is written to OUT/composition.json.")
-    from aw.cli.prepare import add_suite_options
+    from aw.cli.suite import add_suite_options
 
     add_suite_options(p)
     p.add_argument("--partnet", metavar="DIR", help="PartNet assembly data (DGL/Manual-PA prepare_data folder)")
@@ -67,7 +67,7 @@ def catalogs_from_args(args: argparse.Namespace) -> dict:
 
 
 def _cmd_compose(args: argparse.Namespace) -> int:
-    from aw.cli.prepare import CliError, run_suite
+    from aw.cli.suite import CliError, run_suite
     from aw.sources.compose import compose, specs_for
 
     if args.per_source < 1:
@@ -110,7 +110,7 @@ def register_official(sub) -> None:
 
 
 def _cmd_official(args: argparse.Namespace) -> int:
-    from aw.cli.prepare import CliError
+    from aw.cli.suite import CliError
     from aw.official.convert import convert, convert_package
 
     try:
@@ -142,7 +142,7 @@ def register_official_export(sub) -> None:
 
 
 def _cmd_official_export(args: argparse.Namespace) -> int:
-    from aw.cli.prepare import CliError
+    from aw.cli.suite import CliError
     from aw.formats import read_trajectory
     from aw.formats.suite import suite_paths
     from aw.official.convert import initial_archive_path

@@ -15,7 +15,7 @@ from itertools import permutations, product
 import numpy as np
 from scipy.spatial import cKDTree
 
-from aw.prepare.official_protocol import pca_frame
+from aw.prepare.official_frame import pca_frame
 
 __all__ = ["THRESHOLD", "MAX_ITERATIONS", "IMPROVEMENT_TOLERANCE", "register", "geometry_groups"]
 
