@@ -145,6 +145,8 @@ def main(argv: list[str] | None = None) -> int:
         print(summary_from_report(report_md))
     print("\noracle-* systems read the hidden targets: calibration upper bounds, never results.")
     print(f"\nreport: {report_md}")
+    if (report / "report.html").is_file():
+        print(f"report with pictures and 3D views (open in a browser): {report / 'report.html'}")
     plots = sorted(report.rglob("*.png"))
     if plots:
         print("plots:")

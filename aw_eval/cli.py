@@ -2,7 +2,7 @@
 
     aw-score SUITE_DIR RUNS_DIR --out OUT_DIR [--final-only] [--final exact|fast]
              [--mode fast|exact] [--scheduler ADDRESS] [--jobs J] [--seed S]
-             [--bootstrap 10000] [--permutations 100000] [--no-plots] [--no-progress]
+             [--bootstrap 10000] [--permutations 100000] [--no-plots] [--no-html] [--no-progress]
 
 Runs are ``RUNS_DIR/<system>/<task_id>/`` (``trajectory.jsonl``, ``final.json``, optional
 ``run.json``). When SUITE_DIR is an official benchmark package (``benchmark.json``), RUNS_DIR is
@@ -64,6 +64,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="where the evaluator caches per-task geometry (default OUT_DIR/cache/geometry); "
                    "may be shared between studies")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--no-html", action="store_true", help="skip report.html and its folder report_files/ "
+                   "(pictures of every run, 3D views)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
 
@@ -120,7 +122,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                                      "worker_seconds": {"geometry": round(stats.seconds_geometry, 3),
                                                         "checkpoints": round(stats.seconds_checkpoints, 3),
                                                         "final_states": round(stats.seconds_final, 3)}},
-                        plots=not args.no_plots)
+                        plots=not args.no_plots, html=not args.no_html, log=log)
     doc = res["doc"]
     unscored = {k: len(v) for k, v in doc["unscored_runs"].items()}
     log(f"{len(study.systems)} systems x {len(study.entries)} tasks: {stats.cached} runs from the cache, "
@@ -132,6 +134,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         o = q[s]["overall"]
         print(f"{s}: Overall SR {o['sr']:.2f}%  PA {o['pa']:.2f}%")
     print(f"wrote {res['files']['report']}")
+    if "html" in res["files"]:
+        print(f"wrote {res['files']['html']}")
     return 0
 
 

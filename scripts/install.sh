@@ -20,6 +20,16 @@ if [ ${#need_pkgs[@]} -gt 0 ]; then
   fi
 fi
 
+# report.html's browser tests drive Debian's Chromium through playwright (no browser download)
+if ! command -v chromium >/dev/null; then
+  if [ "$(id -u)" = "0" ] && command -v apt-get >/dev/null; then
+    echo "[install] chromium missing (report.html's browser tests): apt-get install chromium"
+    (apt-get install -y -q chromium >/dev/null 2>&1) || { apt-get update -q >/dev/null && apt-get install -y -q chromium >/dev/null; }
+  else
+    echo "[install] note: report.html's browser tests need Chromium; as root: apt-get install -y chromium" >&2
+  fi
+fi
+
 PY=${PYTHON:-python3}
 "$PY" -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else 1)' || {
   echo "[install] ERROR: Python 3.11+ is needed ($PY is $("$PY" --version 2>&1))" >&2; exit 1; }

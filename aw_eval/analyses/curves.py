@@ -20,7 +20,7 @@ import numpy as np
 from aw_eval.study.model import RunScore
 from aw_eval.study.table import Study
 
-__all__ = ["NORMALIZED_POINTS", "BUDGET_MINUTES", "state_index", "normalized_values", "budget_values", "quality_curves",
+__all__ = ["NORMALIZED_POINTS", "BUDGET_MINUTES", "state_index", "normalized_times", "normalized_states", "normalized_values", "budget_values", "quality_curves",
            "pa_decreases"]
 
 NORMALIZED_POINTS = tuple(round(0.1 * i, 10) for i in range(11))
@@ -49,14 +49,25 @@ def _values_at(r: RunScore, times: Sequence[float | None], metric: str) -> np.nd
     return out
 
 
-def normalized_values(r: RunScore, metric: str, points: Sequence[float] = NORMALIZED_POINTS) -> np.ndarray:
-    """``metric`` of one run at normalized times ``points`` (1 = the final state)."""
+def normalized_times(r: RunScore, points: Sequence[float] = NORMALIZED_POINTS) -> list[float | None]:
+    """Seconds of one run at normalized times ``points`` (None at 1: the final state)."""
     if len(r.call_t):
         t0, t1 = float(r.call_t.min()), float(r.call_t.max())
     else:
         t0 = t1 = 0.0
-    times = [None if u >= 1 else t0 + u * (t1 - t0) for u in points]
-    return _values_at(r, times, metric)
+    return [None if u >= 1 else t0 + u * (t1 - t0) for u in points]
+
+
+def normalized_states(r: RunScore, points: Sequence[float] = NORMALIZED_POINTS) -> list[int | None]:
+    """The checkpoint in force at each normalized time (None: the final state), as
+    :func:`normalized_values` reads its scores."""
+    no_checkpoints = len(r.ck_pa) == 0
+    return [None if t is None or no_checkpoints else state_index(r.ck_t, t) for t in normalized_times(r, points)]
+
+
+def normalized_values(r: RunScore, metric: str, points: Sequence[float] = NORMALIZED_POINTS) -> np.ndarray:
+    """``metric`` of one run at normalized times ``points`` (1 = the final state)."""
+    return _values_at(r, normalized_times(r, points), metric)
 
 
 def budget_values(r: RunScore, metric: str, minutes: Sequence[float] = BUDGET_MINUTES) -> np.ndarray:

@@ -1,11 +1,12 @@
-"""Outputs of ``aw-score``: ``scores.json``, ``tasks.csv``, ``checkpoints.csv``, ``report.md``
-and PNG plots, all written into the output directory."""
+"""Outputs of ``aw-score``: ``scores.json``, ``tasks.csv``, ``checkpoints.csv``, ``report.md``,
+PNG plots and ``report.html`` (with its folder ``report_files/``), all written into the output
+directory."""
 
 from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import orjson
 
@@ -27,7 +28,8 @@ def write_json(path: Path, doc: Any) -> None:
 
 
 def write_outputs(study: Study, out_dir: str | Path, settings: AnalysisSettings, *, suite_dir: str = "",
-                  runs_dir: str = "", score_stats: dict[str, Any] | None = None, plots: bool = True) -> dict[str, Any]:
+                  runs_dir: str = "", score_stats: dict[str, Any] | None = None, plots: bool = True,
+                  html: bool = True, log: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Write every output; returns ``{"doc": scores document, "files": {name: path}}``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -39,7 +41,12 @@ def write_outputs(study: Study, out_dir: str | Path, settings: AnalysisSettings,
     made = write_plots(doc, out / "plots") if plots else {}
     doc["plots"] = {k: f"plots/{v}" for k, v in made.items()}
     write_json(files["scores"], doc)
-    files["report"].write_text(render_markdown(doc, doc["plots"]))
+    markdown = render_markdown(doc, doc["plots"])
+    files["report"].write_text(markdown)
+    if html:
+        from aw_eval.report.html import write_html  # imports plotly only when asked
+
+        files["html"] = write_html(study, doc, markdown, out, suite_dir or None, log=log).path
     for k, v in made.items():
         files[f"plot_{k}"] = out / "plots" / v
     return {"doc": doc, "files": files}

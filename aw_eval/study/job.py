@@ -109,6 +109,7 @@ def _score_run(req: RunRequest, task_id: str, geom, all_ids: list[str], centroid
         ck = evaluator.score_states(geom, ep.ck_poses, settings.checkpoint_mode)
         r.ck_pa, r.ck_sr, r.ck_sra, r.ck_scd = ck["pa"], ck["sr"], ck["sra"], ck["scd"]
         r.ck_part_errors, r.ck_assignment = ck["part_errors"], ck["assignment"]
+        r.ck_reg_rotation, r.ck_reg_translation = ck["reg_rotation"], ck["reg_translation"]
         dec = pa_decreases(geom, ep.ck_poses, ck["pa"], ck["assignment"], ck["reg_rotation"], ck["reg_translation"])
         r.ck_drop_index, r.ck_drop_assignment_changed = dec.index, dec.assignment_changed
         r.ck_drop_persist_alignment, r.ck_drop_persist_both = dec.persist_alignment, dec.persist_both
@@ -122,6 +123,7 @@ def _score_run(req: RunRequest, task_id: str, geom, all_ids: list[str], centroid
         fin, row = evaluator.score_states(geom, poses, settings.final_mode), 0
     r.pa, r.sr, r.sra, r.scd = (float(fin[k][row]) for k in ("pa", "sr", "sra", "scd"))
     r.part_errors, r.assignment = fin["part_errors"][row], fin["assignment"][row]
+    r.reg_rotation, r.reg_translation = fin["reg_rotation"][row], fin["reg_translation"][row]
     r.centred_cd, r.offset = evaluator.final_diagnostics(geom, poses, fin, row)
     r.seconds_final = time.perf_counter() - t0
     return r

@@ -41,8 +41,11 @@ class RunScore:
 
     Final state: ``pa`` (fraction), ``sr``, ``sra`` (0/1), ``scd`` (NaN when not scored),
     ``part_errors (P,)`` matched part CDs, ``assignment (P,)`` target index of each predicted part,
-    ``centred_cd (P,)`` and ``offset (P,)`` (failure-class diagnostics), ``moved (P,)``.
-    Checkpoints: ``ck_*`` arrays of length ``N`` and ``ck_part_errors``/``ck_assignment (N, P)``;
+    ``centred_cd (P,)`` and ``offset (P,)`` (failure-class diagnostics), ``moved (P,)``,
+    ``reg_rotation (3, 3)`` and ``reg_translation (3,)`` the saved registration (normalized
+    prediction onto the normalized target; empty in caches written before it was kept).
+    Checkpoints: ``ck_*`` arrays of length ``N``, ``ck_part_errors``/``ck_assignment (N, P)``,
+    ``ck_reg_rotation (N, 3, 3)`` and ``ck_reg_translation (N, 3)``;
     ``ck_drop_*`` ``(D,)`` describe the PA decreases (:mod:`aw_eval.study.decreases`).
     Calls and edits: see :class:`aw_eval.study.episode.EpisodeArrays`.
     """
@@ -69,6 +72,8 @@ class RunScore:
     centred_cd: np.ndarray = field(default_factory=lambda: np.zeros(0))
     offset: np.ndarray = field(default_factory=lambda: np.zeros(0))
     moved: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    reg_rotation: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    reg_translation: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     ck_seq: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     ck_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     ck_pa: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -77,6 +82,8 @@ class RunScore:
     ck_scd: np.ndarray = field(default_factory=lambda: np.zeros(0))
     ck_part_errors: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     ck_assignment: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), dtype=np.int64))
+    ck_reg_rotation: np.ndarray = field(default_factory=lambda: np.zeros((0, 3, 3)))
+    ck_reg_translation: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     ck_drop_index: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     ck_drop_assignment_changed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     ck_drop_persist_alignment: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))

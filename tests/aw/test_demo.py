@@ -27,6 +27,8 @@ def test_demo_runs_the_whole_loop(tmp_path):
         assert label in proc.stdout  # every system is in the printed summary
     report = out / "report" / "report.md"
     assert report.is_file() and str(report) in proc.stdout
+    page = out / "report" / "report.html"
+    assert page.is_file() and str(page) in proc.stdout and "section class=\"card\"" in page.read_text()
     assert list((out / "report").rglob("*.png"))
     assert "never results" in proc.stdout and "95% CI" in proc.stdout
     # A second run reuses the suite and every finished episode.

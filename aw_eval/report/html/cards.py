@@ -1,0 +1,288 @@
+"""One card per task: the target beside every system's final state (one camera, shared part
+colours), their scores and per-part errors, each run's filmstrip at the quality curves'
+normalized checkpoints, its PA/SCD curve, its tool calls, and the data of the 3D viewer."""
+
+from __future__ import annotations
+
+import html
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import orjson
+
+from aw.formats import FormatError, read_trajectory
+from aw_eval.analyses.curves import NORMALIZED_POINTS, normalized_states
+from aw_eval.report.fmt import DASH, fixed
+from aw_eval.report.html.markup import slug
+from aw_eval.report.html.scenes import TaskScene, aligned_poses
+from aw_eval.report.html.svg import Series, step_chart
+from aw_eval.study.episode import RunUnreadable, read_episode
+from aw_eval.study.model import RunScore
+from aw_eval.study.table import Study
+
+__all__ = ["RunView", "load_run_view", "task_card", "viewer_data", "system_colors", "CARD_SIZE", "FRAME_SIZE",
+           "MAX_VIEWER_STATES", "MAX_LISTED_CALLS"]
+
+CARD_SIZE = (320, 240)  # target and final-state pictures
+FRAME_SIZE = (160, 120)  # filmstrip frames
+MAX_VIEWER_STATES = 200  # recorded states per run in the 3D viewer (evenly spaced; first and last kept)
+MAX_VIEWER_FACES = 1500  # triangles per part in the 3D viewer (vertex clustering above it)
+MAX_LISTED_CALLS = 400  # tool calls listed per run
+_SYSTEM_PALETTE = ("#4C72B0", "#DD8452", "#55A868", "#C44E52", "#8172B3", "#937860", "#DA8BC3", "#8C8C8C",
+                   "#CCB974", "#64B5CD")
+
+
+def system_colors(systems: list[str]) -> dict[str, str]:
+    return {s: _SYSTEM_PALETTE[i % len(_SYSTEM_PALETTE)] for i, s in enumerate(systems)}
+
+
+@dataclass
+class RunView:
+    """What a card shows of one scored run: ``states (N, P, 7)`` its checkpoints and
+    ``final (P, 7)`` its final state, both aligned onto the target; ``calls`` its tool calls."""
+
+    system: str
+    score: RunScore
+    states: np.ndarray
+    final: np.ndarray
+    calls: list = field(default_factory=list)
+    note: str = ""
+
+
+def load_run_view(study: Study, system: str, task_id: str, scene: TaskScene, all_part_ids: list[str]) -> RunView | None:
+    """The run's recorded states, aligned; None when it was not scored or cannot be read again."""
+    rec = study.record(system, task_id)
+    r = rec.score
+    if not r.scored or rec.run_dir is None:
+        return None
+    # centroids only feed the edit magnitudes, which the card does not use
+    try:
+        ep = read_episode(rec.run_dir, task_id, all_part_ids, scene.part_ids, np.zeros((len(all_part_ids), 3)),
+                          scene.divisor)
+    except RunUnreadable:
+        return None
+    note = ""
+    if len(r.reg_rotation) == 0:
+        note = "drawn unregistered: the cached scores predate saved registrations (rescore with a fresh --out)"
+    final = aligned_poses(ep.final_poses, r.reg_rotation, r.reg_translation, scene.divisor)
+    states = np.zeros((0, len(scene.part_ids), 7))
+    if len(r.ck_pa) and len(ep.ck_poses) == len(r.ck_pa):
+        regs = len(r.ck_reg_rotation) == len(r.ck_pa)
+        states = np.stack([aligned_poses(p, r.ck_reg_rotation[k], r.ck_reg_translation[k], scene.divisor) if regs else p
+                           for k, p in enumerate(ep.ck_poses)])
+    elif len(r.ck_pa):
+        note = "the trajectory changed since it was scored: checkpoints not shown"
+    calls = []
+    tpath = Path(rec.run_dir) / "trajectory.jsonl"
+    if tpath.is_file():
+        try:
+            calls = read_trajectory(tpath).calls
+        except FormatError:
+            calls = []
+    return RunView(system, r, states, final, calls, note)
+
+
+# ---------------------------------------------------------------- numbers
+def _pa(x: float) -> str:
+    return f"{fixed(100 * x, 1)}%"
+
+
+def _scd(x: float) -> str:
+    return fixed(1000 * x, 2) if np.isfinite(x) else DASH
+
+
+def _run_numbers(r: RunScore) -> str:
+    return f"PA {_pa(r.pa)} · SR {int(r.sr)} · SCD {_scd(r.scd)}"
+
+
+def _img(src: str, alt: str, size: tuple[int, int]) -> str:
+    return f'<img src="{html.escape(src)}" alt="{html.escape(alt)}" width="{size[0]}" height="{size[1]}" loading="lazy">'
+
+
+def _x_of(r: RunScore) -> np.ndarray:
+    """Normalized time of each checkpoint (first to last call)."""
+    if len(r.call_t) == 0:
+        return np.zeros(len(r.ck_t))
+    t0, t1 = float(r.call_t.min()), float(r.call_t.max())
+    return np.clip((np.asarray(r.ck_t) - t0) / max(t1 - t0, 1e-9), 0.0, 1.0)
+
+
+# ---------------------------------------------------------------- card parts
+def _finals(scene: TaskScene | None, views: dict[str, RunView], study: Study, task_id: str, camera, folder: Path,
+            rel: str) -> str:
+    figs = []
+    if scene is not None:
+        figs.append(f'<figure>{_img(rel + scene.render(scene.target_poses, camera, CARD_SIZE, folder), "target", CARD_SIZE)}'
+                    f"<figcaption><b>Target</b></figcaption></figure>")
+    for s in study.systems:
+        r = study.score(s, task_id)
+        v = views.get(s)
+        if v is not None and scene is not None:
+            pic = _img(rel + scene.render(v.final, camera, CARD_SIZE, folder), f"{s} final state", CARD_SIZE)
+        else:
+            why = "; ".join(r.problems) if not r.scored else "no picture"
+            pic = f'<div class="nopic" style="width:{CARD_SIZE[0]}px;height:{CARD_SIZE[1]}px">{html.escape(r.status)}: {html.escape(why)}</div>'
+        nums = _run_numbers(r) if r.scored else f"{html.escape(r.status)} (PA = SR = 0)"
+        note = f'<br><span class="note">{html.escape(v.note)}</span>' if v is not None and v.note else ""
+        figs.append(f"<figure>{pic}<figcaption><b>{html.escape(s)}</b><br>{nums}{note}</figcaption></figure>")
+    return f'<div class="finals">{"".join(figs)}</div>'
+
+
+def _part_table(scene_ids: list[str], colors: np.ndarray | None, study: Study, doc_runs: dict, task_id: str) -> str:
+    systems = [s for s in study.systems if study.score(s, task_id).scored]
+    if not systems:
+        return ""
+    head = "<th>Part</th>" + "".join(f'<th class="r">{html.escape(s)} CD ×1000</th><th>class</th>' for s in systems)
+    rows = []
+    for i, pid in enumerate(scene_ids):
+        sw = ""
+        if colors is not None:
+            c = "#%02x%02x%02x" % tuple(int(round(255 * x)) for x in colors[i])
+            sw = f'<span class="sw" style="background:{c}"></span>'
+        tds = f'<td class="l">{sw}{html.escape(pid)}</td>'
+        for s in systems:
+            r = study.score(s, task_id)
+            e = float(r.part_errors[i]) if i < len(r.part_errors) else float("nan")
+            cls = (doc_runs[(s, task_id)].get("part_classes") or [""] * (i + 1))[i] if (s, task_id) in doc_runs else ""
+            tds += (f'<td class="r" data-v="{"" if not np.isfinite(e) else f"{1000 * e:.6g}"}">{fixed(1000 * e, 2)}</td>'
+                    f'<td class="l {"ok" if cls == "correct" else ""}">{html.escape(cls.replace("_", " "))}</td>')
+        rows.append(f"<tr>{tds}</tr>")
+    return (f'<table class="sortable parts"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
+            '<p class="note">Matched part Chamfer distance (normalized units, ×1000) of the final state; a part is '
+            "correct at or below 10. Classes: the geometric failure classes of Table A-11.</p>")
+
+
+def _curves(study: Study, task_id: str, views: dict[str, RunView], colors: dict[str, str]) -> str:
+    pa, scd = [], []
+    for s in study.systems:
+        r = study.score(s, task_id)
+        if not r.scored:
+            continue
+        if len(r.ck_pa):
+            xs = list(_x_of(r)) + [1.0]
+            pa.append(Series(s, colors[s], xs, [100 * v for v in r.ck_pa] + [100 * r.pa]))
+            scd.append(Series(s, colors[s], xs, [1000 * v for v in r.ck_scd] + [1000 * r.scd]))
+        else:
+            pa.append(Series(s, colors[s], [0.0, 1.0], [100 * r.pa] * 2))
+            scd.append(Series(s, colors[s], [0.0, 1.0], [1000 * r.scd] * 2))
+    if not pa:
+        return ""
+    legend = "".join(f'<span class="key"><span class="sw" style="background:{colors[s.label]}"></span>{html.escape(s.label)}</span>'
+                     for s in pa)
+    return (f'<div class="curves">{step_chart(pa, "PA (%) over normalized time", (0, 100), fmt=lambda v: f"{v:.0f}")}'
+            f'{step_chart(scd, "SCD ×1000 over normalized time", fmt=lambda v: f"{v:.3g}")}'
+            f'<div class="legend">{legend}</div></div>')
+
+
+def _filmstrip(view: RunView, scene: TaskScene, camera, folder: Path, rel: str) -> str:
+    r = view.score
+    frames = []
+    for u, k in zip(NORMALIZED_POINTS, normalized_states(r)):
+        if k is None or len(view.states) == 0:
+            poses, pa, scd = view.final, r.pa, r.scd
+        else:
+            poses, pa, scd = view.states[k], float(r.ck_pa[k]), float(r.ck_scd[k])
+        pic = _img(rel + scene.render(poses, camera, FRAME_SIZE, folder), f"{view.system} at {u:g}", FRAME_SIZE)
+        frames.append(f"<figure>{pic}<figcaption>t={u:g}<br>PA {_pa(pa)}<br>SCD {_scd(scd)}</figcaption></figure>")
+    return f'<div class="filmstrip">{"".join(frames)}</div>'
+
+
+def _calls(view: RunView) -> str:
+    items = []
+    for c in view.calls[:MAX_LISTED_CALLS]:
+        args = orjson.dumps(c.args).decode()
+        if len(args) > 160:
+            args = args[:157] + "..."
+        status = "ok" if c.ok else f"error: {c.error or ''}"
+        items.append(f'<li class="{"ok" if c.ok else "err"}"><code>{c.seq}</code> {c.t:.1f} s <b>{html.escape(c.tool)}</b> '
+                     f"<code>{html.escape(args)}</code> {html.escape(status)}</li>")
+    more = len(view.calls) - MAX_LISTED_CALLS
+    if more > 0:
+        items.append(f"<li>... and {more} more (trajectory.jsonl)</li>")
+    return (f"<details><summary>Tool calls ({len(view.calls)})</summary><ol class=\"calls\">{''.join(items)}</ol>"
+            "</details>") if view.calls else '<p class="note">No trajectory: no tool calls.</p>'
+
+
+NO_MESHES = "The suite has no meshes for this task (an official package): no pictures."
+
+
+def task_card(study: Study, task: dict[str, Any], doc_runs: dict, scene: TaskScene | None, views: dict[str, RunView],
+              folder: Path, rel: str, viewer_src: str | None, colors: dict[str, str], no_pictures: str = NO_MESHES) -> str:
+    """HTML of one task's card; pictures are rendered into ``folder`` (``rel``: its path from the
+    page); without a ``scene`` the card says ``no_pictures`` instead."""
+    tid = task["task_id"]
+    camera = None
+    if scene is not None:
+        camera = scene.camera([v.final for v in views.values()])
+    meta = " · ".join(str(x) for x in (task["source"], task["condition"], task["category"],
+                                       f"{task['n_parts']} parts", task["variant"]) if x)
+    parts = [f'<section class="card" id="task-{slug(tid)}"><h3>{html.escape(tid)}</h3><p class="meta">{html.escape(meta)}</p>',
+             _finals(scene, views, study, tid, camera, folder, rel)]
+    if scene is None:
+        parts.append(f'<p class="note">{html.escape(no_pictures)}</p>')
+    parts.append(_curves(study, tid, views, colors))
+    parts.append(_part_table(scene.part_ids if scene else (study.facts[tid].part_ids if tid in study.facts else []),
+                             scene.colors if scene else None, study, doc_runs, tid))
+    for s in study.systems:
+        v = views.get(s)
+        if v is None:
+            continue
+        parts.append(f'<div class="run"><h4>{html.escape(s)}</h4>')
+        if scene is not None:
+            parts.append(_filmstrip(v, scene, camera, folder, rel))
+        parts.append(_calls(v) + "</div>")
+    if viewer_src is not None:
+        parts.append(f'<button class="open3d" data-task="{html.escape(tid)}" data-src="{html.escape(viewer_src)}">'
+                     "Open the 3D view</button><div class=\"viewer\" hidden></div>")
+    parts.append("</section>")
+    return "".join(parts)
+
+
+# ---------------------------------------------------------------- 3D viewer data
+def _cluster(vertices: np.ndarray, faces: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
+    """Vertex clustering: snap vertices to a grid that leaves at most ``max_faces`` triangles."""
+    if len(faces) <= max_faces:
+        return vertices, faces
+    extent = float(np.ptp(vertices, axis=0).max()) or 1.0
+    cells = 64
+    while True:
+        q = np.floor((vertices - vertices.min(axis=0)) / (extent / cells)).astype(np.int64)
+        _, first, inverse = np.unique(q, axis=0, return_index=True, return_inverse=True)
+        f = inverse.reshape(-1)[faces]
+        f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
+        f = np.unique(np.sort(f, axis=1), axis=0) if len(f) > max_faces else f
+        if len(f) <= max_faces or cells <= 4:
+            return vertices[first], f
+        cells //= 2
+
+
+def _pick(n: int, k: int) -> list[int]:
+    if n <= k:
+        return list(range(n))
+    return sorted({int(round(i)) for i in np.linspace(0, n - 1, k)})
+
+
+def viewer_data(scene: TaskScene, views: dict[str, RunView]) -> dict[str, Any]:
+    """The 3D viewer's document of one task: decimated part meshes (baked frame), the target
+    poses, and per system its recorded states (aligned poses, PA, SCD), at most
+    :data:`MAX_VIEWER_STATES` of them plus the final state."""
+    parts = []
+    for pid, m, c in zip(scene.part_ids, scene.meshes, scene.colors):
+        v, f = _cluster(np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64), MAX_VIEWER_FACES)
+        parts.append({"id": pid, "color": "#%02x%02x%02x" % tuple(int(round(255 * x)) for x in c),
+                      "v": np.round(v, 5).reshape(-1).tolist(), "f": f.reshape(-1).tolist()})
+    systems = {}
+    for s, view in views.items():
+        r = view.score
+        states = []
+        for k in _pick(len(view.states), MAX_VIEWER_STATES):
+            states.append({"label": f"checkpoint {k} (call {int(r.ck_seq[k])}, {float(r.ck_t[k]):.1f} s)",
+                           "pa": 100 * float(r.ck_pa[k]), "scd": 1000 * float(r.ck_scd[k]),
+                           "poses": np.round(view.states[k], 6).tolist()})
+        states.append({"label": "final state", "pa": 100 * r.pa, "scd": 1000 * r.scd if np.isfinite(r.scd) else None,
+                       "poses": np.round(view.final, 6).tolist()})
+        systems[s] = {"states": states, "n_recorded": int(len(view.states))}
+    return {"task_id": scene.task_id, "parts": parts, "target": np.round(scene.target_poses, 6).tolist(),
+            "systems": systems}

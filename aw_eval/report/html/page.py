@@ -1,0 +1,192 @@
+"""Assembles ``report.html`` and its folder ``report_files/``:
+
+- ``report.css``, ``report.js`` (sortable tables), ``viewer.js`` (3D view), plotly's offline
+  bundle ``plotly-<version>.min.js`` (written once, loaded only when a 3D view opens);
+- ``renders/``: card pictures and filmstrip frames, named by content hash and reused;
+- ``viewer/``: one script per task with the 3D view's data, loaded when its view opens.
+
+Files in ``renders/`` and ``viewer/`` that the new page no longer uses are removed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import html
+import os
+import re
+import time
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any, Callable
+
+import orjson
+
+from aw.formats import FormatError, read_task
+from aw.formats.suite import suite_paths
+from aw.render_platform import RenderError
+from aw_eval.report.fmt import fixed
+from aw_eval.report.html.cards import load_run_view, system_colors, task_card, viewer_data
+from aw_eval.report.html.markup import markdown_to_html, slug
+from aw_eval.report.html.scenes import TaskScene
+from aw_eval.study.table import Study
+
+__all__ = ["write_html", "HtmlStats", "ASSETS_DIR"]
+
+ASSETS_DIR = "report_files"
+_STATIC = ("report.css", "report.js", "viewer.js")
+
+
+@dataclass
+class HtmlStats:
+    path: Path
+    html_bytes: int
+    files_bytes: int
+    renders: int
+    renders_new: int
+    seconds: float
+
+
+def _plotly_bundle(folder: Path) -> str:
+    """Write plotly's offline bundle once; returns its file name."""
+    import plotly
+    from plotly.offline import get_plotlyjs
+
+    name = f"plotly-{plotly.__version__}.min.js"
+    path = folder / name
+    if not path.is_file():
+        tmp = path.with_name(name + f".tmp{os.getpid()}")
+        tmp.write_text(get_plotlyjs(), encoding="utf-8")
+        tmp.replace(path)
+    for old in folder.glob("plotly-*.min.js"):
+        if old.name != name:
+            old.unlink()
+    return name
+
+
+def _copy_static(folder: Path) -> None:
+    pkg = resources.files("aw_eval.report.html") / "assets"
+    for name in _STATIC:
+        data = (pkg / name).read_bytes()
+        path = folder / name
+        if not path.is_file() or path.read_bytes() != data:
+            path.write_bytes(data)
+
+
+def _overview(doc: dict[str, Any], study: Study) -> str:
+    """A sortable table of every task: PA/SR per system, linking to the cards."""
+    runs = {(r["system"], r["task_id"]): r for r in doc["runs"]}
+    head = "<th>Task</th><th>Source</th><th>Condition</th><th>Variant</th><th class=\"r\">Parts</th>" + "".join(
+        f'<th class="r">{html.escape(s)} PA (%)</th><th class="r">SR</th>' for s in study.systems)
+    rows = []
+    for t in doc["tasks"]:
+        tid = t["task_id"]
+        tds = (f'<td class="l"><a href="#task-{slug(tid)}">{html.escape(tid)}</a></td><td class="l">{html.escape(t["source"])}'
+               f'</td><td class="l">{html.escape(t["condition"])}</td><td class="l">{html.escape(t["variant"])}</td>'
+               f'<td class="r" data-v="{t["n_parts"]}">{t["n_parts"]}</td>')
+        for s in study.systems:
+            r = runs[(s, tid)]
+            if r["status"] == "scored":
+                tds += f'<td class="r" data-v="{r["pa"]:.6g}">{fixed(r["pa"])}</td><td class="r" data-v="{r["sr"]:g}">{int(r["sr"])}</td>'
+            else:
+                tds += f'<td class="r" data-v="">{html.escape(r["status"])}</td><td class="r" data-v=""></td>'
+        rows.append(f"<tr>{tds}</tr>")
+    return f'<table class="sortable tasks"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
+
+
+def _toc(body: str) -> str:
+    links = [f'<a href="#{m.group(1)}">{m.group(2)}</a>' for m in re.finditer(r'<h2 id="([^"]+)">(.*?)</h2>', body)]
+    return "<nav><b>Contents</b>" + "".join(links) + "</nav>"
+
+
+def write_html(study: Study, doc: dict[str, Any], markdown: str, out_dir: str | Path, suite_dir: str | Path | None,
+               log: Callable[[str], None] | None = None) -> HtmlStats:
+    """Write ``out_dir/report.html`` and ``out_dir/report_files/``; ``markdown`` is report.md's text
+    (its image links are relative to ``out_dir``). Tasks whose meshes cannot be read (no
+    ``suite_dir``, official packages) get cards without pictures."""
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    files = out / ASSETS_DIR
+    renders, viewer = files / "renders", files / "viewer"
+    for d in (files, renders, viewer):
+        d.mkdir(parents=True, exist_ok=True)
+    _copy_static(files)
+    plotly_name = _plotly_bundle(files)
+    before = {p.name for p in renders.iterdir()}
+    colors = system_colors(list(study.systems))
+    doc_runs = {(r["system"], r["task_id"]): r for r in doc["runs"]}
+    used_renders: set[str] = set()
+    used_viewer: set[str] = set()
+    cards = []
+    rel = f"{ASSETS_DIR}/renders/"
+    no_render: str | None = None  # set when the renderer failed once: the other cards go without pictures
+    for task in doc["tasks"]:
+        tid = task["task_id"]
+        scene, views, viewer_src = None, {}, None
+        facts = study.facts.get(tid)
+        if suite_dir is not None and facts is not None:
+            try:
+                scene = TaskScene.load(Path(suite_dir), tid, list(facts.part_ids), facts.divisor)
+                all_ids = read_task(suite_paths(suite_dir, tid)[0]).part_ids
+            except (FormatError, OSError, ValueError, KeyError):
+                scene = None
+        try:
+            if scene is not None:
+                for s in study.systems:
+                    v = load_run_view(study, s, tid, scene, all_ids)
+                    if v is not None:
+                        views[s] = v
+                if views:
+                    vd = orjson.dumps(viewer_data(scene, views), option=orjson.OPT_SERIALIZE_NUMPY)
+                    name = f"{slug(tid)[:60]}-{hashlib.sha1(vd).hexdigest()[:12]}.js"
+                    path = viewer / name
+                    if not path.is_file():
+                        path.write_bytes(b"AWViewer.register(" + orjson.dumps(tid) + b"," + vd + b");\n")
+                    used_viewer.add(name)
+                    viewer_src = f"{ASSETS_DIR}/viewer/{name}"
+            card = None
+            if scene is not None and no_render is None:
+                try:
+                    card = task_card(study, task, doc_runs, scene, views, renders, rel, viewer_src, colors)
+                except RenderError as exc:
+                    no_render = f"No pictures: offscreen rendering is unavailable ({exc})."
+                    if log is not None:
+                        log(f"report.html without pictures: {exc}")
+            if card is None:
+                card = task_card(study, task, doc_runs, None, views, renders, rel, viewer_src, colors,
+                                 **({"no_pictures": no_render} if scene is not None and no_render else {}))
+        finally:
+            if scene is not None:
+                scene.close()
+        used_renders.update(p.split("/")[-1] for p in _srcs(card, rel))
+        cards.append(card)
+    for folder, used in ((renders, used_renders), (viewer, used_viewer)):
+        for p in folder.iterdir():
+            if p.name not in used:
+                p.unlink()
+    body = markdown_to_html(markdown)
+    body += ('\n<h2 id="tasks">Tasks</h2><p>Every task with each system\'s final PA and SR; the cards below show '
+             "the target beside each system's final state (registered onto the target, one camera, part colours "
+             "shared), filmstrips at the quality curves' normalized times, per-run curves and tool calls, and a 3D "
+             "view of the recorded states.</p>" + _overview(doc, study) + "".join(cards))
+    title = html.escape(f"AssemblyWorld scores: {doc['suite']['name']}")
+    page = (f'<!doctype html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'
+            f'<meta name="viewport" content="width=device-width, initial-scale=1">'
+            f'<link rel="stylesheet" href="{ASSETS_DIR}/report.css"></head><body>{_toc(body)}<main>{body}</main>'
+            f'<script src="{ASSETS_DIR}/report.js"></script>'
+            f'<script src="{ASSETS_DIR}/viewer.js" data-plotly="{ASSETS_DIR}/{plotly_name}"></script></body></html>\n')
+    path = out / "report.html"
+    tmp = path.with_name(f"report.html.tmp{os.getpid()}")
+    tmp.write_text(page, encoding="utf-8")
+    tmp.replace(path)
+    files_bytes = sum(p.stat().st_size for p in files.rglob("*") if p.is_file())
+    new = len(used_renders - before)
+    stats = HtmlStats(path, path.stat().st_size, files_bytes, len(used_renders), new, time.perf_counter() - t0)
+    if log is not None:
+        log(f"report.html: {stats.html_bytes / 1e6:.1f} MB page, {files_bytes / 1e6:.1f} MB in {ASSETS_DIR}/, "
+            f"{stats.renders} pictures ({new} rendered now), {stats.seconds:.1f} s")
+    return stats
+
+
+def _srcs(text: str, prefix: str) -> list[str]:
+    return re.findall(r'src="(' + re.escape(prefix) + r'[^"]+)"', text)

@@ -1,0 +1,138 @@
+"""report.html end to end: a tiny study scored by ``aw-score``, its page opened in Debian's
+Chromium (playwright, ``/usr/bin/chromium``, installed by scripts/install.sh) from the file system
+with the network cut: no console error, sortable tables, the 3D view's slider and system switcher,
+cards with real pictures; renders reused on a second call; ``--no-html``."""
+
+from __future__ import annotations
+
+import io
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from aw_eval.cli import main
+from aw_eval.study.fixtures import box_suite, write_scripted_run
+
+CHROMIUM = "/usr/bin/chromium"
+OPTS = ["--protocol", "n_surface=256", "--protocol", "n_fps=64", "--bootstrap", "200", "--permutations", "500",
+        "--no-progress", "--no-plots", "--jobs", "1"]
+TASK = "partnet-box000-none"
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    root = tmp_path_factory.mktemp("html")
+    suite = box_suite(root / "suite", objects_per_source=1, n_parts=[3, 2, 3, 2])
+    runs = root / "runs"
+    write_scripted_run(runs / "alpha" / TASK, suite, TASK, system="alpha", inspect_moves=False)
+    write_scripted_run(runs / "beta" / TASK, suite, TASK, system="beta", correct=["p01"], wrong_offset=0.5,
+                       inspect_moves=False)
+    write_scripted_run(runs / "alpha" / "fantastic_breaks-box000-none", suite, "fantastic_breaks-box000-none",
+                       system="alpha", inspect_moves=False)
+    out = root / "out"
+    assert main([str(suite), str(runs), "--out", str(out), *OPTS]) == 0
+    return {"root": root, "suite": suite, "runs": runs, "out": out}
+
+
+def test_page_and_its_folder(report):
+    out = report["out"]
+    page = (out / "report.html").read_text()
+    files = out / "report_files"
+    for name in ("report.css", "report.js", "viewer.js"):
+        assert (files / name).is_file() and f"report_files/{name}" in page
+    (bundle,) = files.glob("plotly-*.min.js")
+    assert bundle.stat().st_size > 1_000_000 and bundle.name in page
+    assert "Table 1: benchmark results" in page and "Table A-11" in page  # everything report.md has
+    assert page.count('<section class="card"') == 5  # every task, run or not
+    renders = list((files / "renders").iterdir())
+    assert renders and all(f'report_files/renders/{p.name}' in page for p in renders)
+    assert len(list((files / "viewer").iterdir())) == 2  # the two tasks with runs
+
+
+def test_second_call_reuses_every_picture_and_no_html_writes_none(report, capsys):
+    out = report["out"]
+    before = {p.name: p.stat().st_mtime_ns for p in (out / "report_files" / "renders").iterdir()}
+    capsys.readouterr()
+    assert main([str(report["suite"]), str(report["runs"]), "--out", str(out), *OPTS]) == 0
+    err = capsys.readouterr().err
+    assert f"{len(before)} pictures (0 rendered now)" in err
+    assert {p.name: p.stat().st_mtime_ns for p in (out / "report_files" / "renders").iterdir()} == before
+    other = report["root"] / "out-no-html"
+    shutil.copytree(out / "cache", other / "cache")
+    assert main([str(report["suite"]), str(report["runs"]), "--out", str(other), *OPTS, "--no-html"]) == 0
+    assert (other / "report.md").is_file()
+    assert not (other / "report.html").exists() and not (other / "report_files").exists()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not Path(CHROMIUM).is_file():
+        pytest.fail(f"{CHROMIUM} not found: run scripts/install.sh as root (it installs Debian's chromium)")
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=["--enable-unsafe-swiftshader", "--use-angle=swiftshader"])
+        yield b
+        b.close()
+
+
+def _cells(page, table: str, col: int) -> list[str]:
+    return page.eval_on_selector(table, f"t => Array.from(t.tBodies[0].rows).map(r => r.cells[{col}].textContent)")
+
+
+def _state_x(page) -> list[float]:
+    """x of the first vertex of every state trace of the open 3D view."""
+    return page.evaluate("""() => { const p = document.querySelector('.viewer .viewer-plot');
+        return p.data.filter(t => !t.name.startsWith('target')).map(t => t.x[0]); }""")
+
+
+def test_page_in_chromium(report, browser):
+    page = browser.new_page(viewport={"width": 1400, "height": 1000})
+    problems, remote = [], []
+    page.on("console", lambda m: problems.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: problems.append(str(e)))
+    page.route("http*://**", lambda route: (remote.append(route.request.url), route.abort()))
+    page.goto((report["out"] / "report.html").as_uri())
+    page.wait_for_load_state("load")
+
+    # tables sort by text and by number, both directions
+    tasks = "table.tasks"
+    names = _cells(page, tasks, 0)
+    page.click(f"{tasks} th >> nth=0")
+    assert _cells(page, tasks, 0) == sorted(names)
+    page.click(f"{tasks} th >> nth=0")
+    assert _cells(page, tasks, 0) == sorted(names, reverse=True)
+    page.click(f"{tasks} th >> nth=4")  # parts
+    parts = [int(x) for x in _cells(page, tasks, 4)]
+    assert parts == sorted(parts) and len(set(parts)) > 1
+
+    # a card's pictures load and are not blank
+    card = page.locator(f"section#task-{TASK}")
+    card.scroll_into_view_if_needed()
+    page.wait_for_function(f"""() => Array.from(document.querySelectorAll('#task-{TASK} .finals img'))
+        .every(i => i.complete && i.naturalWidth > 0)""")
+    shot = np.asarray(Image.open(io.BytesIO(card.locator(".finals").screenshot())).convert("RGB"))
+    assert len(np.unique(shot.reshape(-1, 3), axis=0)) > 200 and shot.std() > 10
+
+    # the 3D view: the slider steps through recorded states, the switcher changes system
+    card.locator("button.open3d").click()
+    page.wait_for_selector(f"#task-{TASK} .viewer[data-ready='1']", timeout=120_000)
+    viewer = card.locator(".viewer")
+    final_x = _state_x(page)
+    final_shot = viewer.screenshot()
+    page.eval_on_selector(f"#task-{TASK} .viewer-slider", "s => { s.value = '0'; s.dispatchEvent(new Event('input')); }")
+    page.wait_for_selector(f"#task-{TASK} .viewer[data-state='0']")
+    first_x = _state_x(page)
+    assert first_x != final_x
+    assert viewer.screenshot() != final_shot
+    assert "1/" in card.locator(".viewer-label").text_content()
+    page.select_option(f"#task-{TASK} .viewer-system", "beta")
+    page.wait_for_function(f"""() => {{ const v = document.querySelector('#task-{TASK} .viewer');
+        return v.dataset.state === String(document.querySelector('#task-{TASK} .viewer-slider').max); }}""")
+    assert _state_x(page) != final_x  # beta's final state is not alpha's
+
+    assert problems == [] and remote == []
+    page.close()
