@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
 from aw.camera import Camera
 from aw.pose import matrices_to_poses, poses_to_matrices
@@ -59,7 +60,7 @@ class TaskScene:
             h.update(np.ascontiguousarray(m.vertices, dtype=np.float64).tobytes())
             h.update(np.ascontiguousarray(m.faces, dtype=np.int64).tobytes())
         self.digest = h.hexdigest()
-        self._renderers: dict = {}  # (width, height) -> OffscreenRenderer, opened on first use
+        self._renderer = None  # opened on the first picture, at its size
 
     @classmethod
     def load(cls, suite_dir: Path, task_id: str, part_ids: list[str], divisor: float) -> "TaskScene":
@@ -97,7 +98,8 @@ class TaskScene:
         return Camera.framing(lo, hi)
 
     def render(self, poses: np.ndarray, camera: Camera, size: tuple[int, int], folder: Path) -> str:
-        """File name (in ``folder``) of the picture of ``poses (P, 7)``; rendered only if absent."""
+        """File name (in ``folder``) of the picture of ``poses (P, 7)``; rendered only if absent.
+        The first picture's size is the renderer's: ask for the largest first."""
         w, h = size
         key = hashlib.sha1(f"{_RENDER_VERSION}|{self.digest}|{w}x{h}|{camera.to_dict()}|".encode())
         key.update(np.round(np.asarray(poses, dtype=np.float64), 7).tobytes())
@@ -105,17 +107,19 @@ class TaskScene:
         name = f"{key.hexdigest()[:20]}.{RENDER_FORMAT}"
         path = folder / name
         if not path.is_file():
-            r = self._renderers.get(size)
-            if r is None:
+            if self._renderer is None:  # one per task: opening a GL context costs more than many pictures
                 from aw.render import OffscreenRenderer
 
-                r = self._renderers[size] = OffscreenRenderer(self.meshes, colors=self.colors, width=w, height=h)
+                self._renderer = OffscreenRenderer(self.meshes, colors=self.colors, width=w, height=h)
+            im = self._renderer.render(poses, camera)
+            if im.size != (w, h):  # smaller pictures (filmstrip frames) are scaled down
+                im = im.resize((w, h), Image.LANCZOS)
             tmp = path.with_name(path.name + ".tmp.jpg")
-            r.render(poses, camera).save(tmp, quality=_QUALITY, optimize=True)
+            im.save(tmp, quality=_QUALITY, optimize=True)
             tmp.replace(path)
         return name
 
     def close(self) -> None:
-        for r in self._renderers.values():
-            r.close()
-        self._renderers.clear()
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
