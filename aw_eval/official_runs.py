@@ -29,7 +29,7 @@ from aw.formats import FormatError
 from aw.official.evaluation_output import error_row, row_base, scored_row, sort_rows, summarize, write_evaluation
 from aw.official.evaluation_cache import EvaluationInputs
 from aw.official.package import OfficialPackage
-from aw.official.runlog import RunLog, SampleAttempt, is_run_dir, read_run, select_attempts
+from aw.official.runlog import RunLog, SampleAttempt, is_run_dir, read_attempts, read_run, select_attempts
 
 __all__ = ["is_official_package", "system_name", "systems_of_runs", "archive_attempts",
            "score_state", "score_attempt", "evaluate_system", "evaluate", "main"]
@@ -181,6 +181,9 @@ def evaluate(sources: OfficialPackage, runs_dir: str | Path, out_dir: str | Path
     out = Path(out_dir) / "official"
     if out.exists():
         raise FileExistsError(f"{out}: already holds an official evaluation (use a new --out)")
+    for inside in (root, sources.root):
+        if out.resolve().is_relative_to(inside.resolve()):
+            raise ValueError(f"--out {out_dir}: the evaluation must be written outside {inside}")
     runs = _runs_or_none(root)
     if runs is None:
         systems = {root.resolve().name: archive_attempts(root, sources)}
@@ -188,16 +191,29 @@ def evaluate(sources: OfficialPackage, runs_dir: str | Path, out_dir: str | Path
         systems = {}
         for name, paths in systems_of_runs(runs).items():
             chosen = select_attempts(paths)
-            for run in {a.run for a in chosen.values()}:
-                sources.check_run(read_run(run))
-            for attempt in chosen.values():
-                sources.check_attempt(attempt)
+            for run in _chain_runs(paths):  # every run and sample of the chains, pending ones included
+                sources.check_run(run)
+                for attempt in read_attempts(run):
+                    sources.check_attempt(attempt)
             systems[name] = chosen
     summaries = {}
     for name, attempts in systems.items():
         log(f"{name}: scoring {len(attempts)} attempts")
         summaries[name] = evaluate_system(attempts, sources, out / name, jobs)
     return summaries
+
+
+def _chain_runs(paths: Iterable[Path]) -> list[RunLog]:
+    """The given runs and every run they resume, each once."""
+    seen: dict[Path, RunLog] = {}
+    for path in paths:
+        run = read_run(path)
+        while run.path not in seen:
+            seen[run.path] = run
+            if run.source_run is None:
+                break
+            run = read_run(run.source_run)
+    return list(seen.values())
 
 
 def _runs_or_none(root: Path) -> list[Path] | None:

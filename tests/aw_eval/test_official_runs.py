@@ -151,3 +151,11 @@ def test_run_logs_that_differ_from_the_package_are_refused(package, tmp_path, ca
     _attempt(package, run, "partnet-none", "21905", FINAL, tmp_path)
     assert cli_main([str(package.root), str(logs), "--out", str(tmp_path / "out")]) == 2
     assert "run.json: tasks['partnet-none'] differs" in capsys.readouterr().err
+
+
+def test_the_evaluation_is_written_outside_the_runs(package, tmp_path, capsys):
+    logs = tmp_path / "logs"
+    run = _new_run(package, logs, {"partnet-none": ["21905"]}, run_id="r1")
+    _attempt(package, run, "partnet-none", "21905", FINAL, tmp_path)
+    assert cli_main([str(package.root), str(logs), "--out", str(logs / "eval")]) == 2
+    assert "must be written outside" in capsys.readouterr().err
