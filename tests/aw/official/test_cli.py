@@ -81,3 +81,15 @@ def test_export_a_native_run(tmp_path, capsys):
     np.testing.assert_allclose([o["position"] + o["quaternion"] for o in state["objects"]], restored.final_poses(), atol=1e-12)
     header = read_trajectory(tmp_path / "run" / "trajectory.jsonl").header
     np.testing.assert_allclose(restored.poses[0], [header.initial_poses[p] for p in ids], atol=1e-12)
+
+
+def test_one_line_errors(tmp_path, capsys):
+    assert main(["official", str(tmp_path), "--out", str(tmp_path / "suite")]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("aw-prepare: error: ") and "benchmark.json not found" in err and len(err.splitlines()) == 1
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "trajectory.jsonl").write_text("")
+    (tmp_path / "bad.episode.zip").write_bytes(b"PK not really")
+    assert main(["official-export", str(tmp_path / "run"), "--initial", str(tmp_path / "bad.episode.zip"),
+                 "--out", str(tmp_path / "x.episode.zip")]) == 1
+    assert len(capsys.readouterr().err.splitlines()) == 1
