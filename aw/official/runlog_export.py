@@ -29,10 +29,10 @@ from typing import Any
 
 from aw.formats import FormatError, read_run_info, read_trajectory
 from aw.official.ids import task_id_for_sample
-from aw.official.package import OfficialPackage
+from aw.official.package import REVISION, OfficialPackage
 from aw.official.runlog import RunLog, create_run, write_json, write_result
 
-__all__ = ["export_runs"]
+__all__ = ["export_runs", "main"]
 
 _EXECUTION = {"finished": "completed", "timeout": "timeout", "error": "failed", "crashed": "failed", "hung": "failed"}
 
@@ -65,7 +65,7 @@ def export_runs(system_dir: str | Path, package: OfficialPackage, logs_dir: str 
     run = create_run(logs_dir, selection, inputs, {b: package.task_text(b) for b in selection},
                      {b: package.blocks[b]["reference_mode"] for b in selection}, options or {"agent": src.name},
                      protocol_text=protocol_text, run_id=run_id,
-                     benchmark={"revision": package.benchmark.get("revision"), "local": str(package.root)})
+                     benchmark={"revision": REVISION, "local": str(package.root)})
     statuses = [_write_sample(run, package, block, sid, task_dir) for (block, sid), task_dir in sorted(recorded.items())]
     done = len(statuses) == len(inputs) and all(s == "completed" for s in statuses)
     meta = dict(run.meta, status="completed" if done else "failed",
@@ -113,3 +113,31 @@ def _parse_time(text: str) -> datetime:
     except ValueError:
         raise ValueError(f"started_at {text!r} is not an ISO-8601 time") from None
     return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m aw.official.runlog_export PKG RUNS/<system> --logs LOGS``: print the run folder."""
+    import argparse
+    import sys
+
+    p = argparse.ArgumentParser(prog="python -m aw.official.runlog_export",
+                                description="Write one system's recorded runs as an official run log.")
+    p.add_argument("package", metavar="PKG", help="official benchmark package (benchmark.json)")
+    p.add_argument("system_dir", metavar="RUNS/SYSTEM", help="recorded runs: SYSTEM/<block>--<slug>/trajectory.jsonl")
+    p.add_argument("--logs", default="logs", help="folder that receives the run (default logs)")
+    p.add_argument("--model", default=None, help="model name recorded in run.json's options")
+    p.add_argument("--all-samples", action="store_true", help="select every package sample (unrecorded ones stay pending)")
+    args = p.parse_args(argv)
+    options = {"agent": Path(args.system_dir).name, **({"model": args.model} if args.model else {})}
+    try:
+        run = export_runs(args.system_dir, OfficialPackage(args.package, strict=False), args.logs, options=options,
+                          all_samples=args.all_samples)
+    except (FormatError, ValueError, OSError) as exc:
+        print(f"runlog_export: error: {exc}", file=sys.stderr)
+        return 2
+    print(run.path)
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -74,3 +74,15 @@ def test_tasks_that_are_not_package_samples_are_refused(package, tmp_path):
     (system_dir / "Chair_reidar" / "trajectory.jsonl").write_text("{}\n")
     with pytest.raises(FormatError, match="Chair_reidar: task id 'Chair_reidar' is not <block>--<slug>"):
         export_runs(system_dir, package, tmp_path / "logs")
+
+
+def test_command_line(package, tmp_path, capsys):
+    from aw.official.runlog_export import main
+
+    system_dir, finals = _project_runs(package, tmp_path)
+    assert main([str(package.root), str(system_dir), "--logs", str(tmp_path / "logs"), "--model", "m"]) == 0
+    run = read_run(capsys.readouterr().out.strip())
+    assert run.options == {"agent": "mysystem", "model": "m"} and len(run.meta["benchmark"]["revision"]) == 40
+    assert sorted(select_attempts([run.path])) == sorted(finals)
+    assert main([str(package.root), str(tmp_path / "nowhere"), "--logs", str(tmp_path / "logs")]) == 2
+    assert "nowhere: no recorded run" in capsys.readouterr().err
