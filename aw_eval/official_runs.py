@@ -14,7 +14,6 @@ of the same run.
 
 from __future__ import annotations
 
-import hashlib
 import re
 import sys
 from collections.abc import Callable, Iterable, Mapping
@@ -28,7 +27,7 @@ import numpy as np
 from aw.formats import FormatError
 from aw.official.evaluation_output import error_row, row_base, scored_row, sort_rows, summarize, write_evaluation
 from aw.official.evaluation_cache import EvaluationInputs
-from aw.official.package import OfficialPackage
+from aw.official.package import OfficialPackage, file_sha256
 from aw.official.runlog import RunLog, SampleAttempt, is_run_dir, read_attempts, read_run, select_attempts
 
 __all__ = ["is_official_package", "system_name", "systems_of_runs", "archive_attempts",
@@ -78,7 +77,7 @@ def archive_attempts(folder: str | Path, package: OfficialPackage) -> dict[tuple
         key = archive_sample(arc, package)
         if key in out:
             raise FormatError(arc, f"a second archive for {key[0]}/{key[1]} (first: {out[key].final_archive})")
-        result = {"status": "completed", "archive": {"status": "saved", "sha256": _sha256(arc)}}
+        result = {"status": "completed", "archive": {"status": "saved", "sha256": file_sha256(arc)}}
         out[key] = _ArchiveAttempt(key[0], key[1], root, root, arc.parent, {}, result, arc)
     if not out:
         raise FormatError(root, "no *.episode.zip archive in this folder")
@@ -96,14 +95,6 @@ class _ArchiveAttempt(SampleAttempt):
     @property
     def tool_calls(self) -> int | None:
         return None
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 # --- scoring -----------------------------------------------------------------------------------
@@ -139,7 +130,7 @@ def score_attempt(attempt: SampleAttempt, sources: OfficialPackage) -> dict[str,
             raise RuntimeError("Latest attempt is unfinished; an earlier export is not used instead")
         if not attempt.archive_saved:
             raise FileNotFoundError("Latest attempted execution has no saved final episode")
-        checksum = _sha256(attempt.final_archive)
+        checksum = file_sha256(attempt.final_archive)
         if attempt.saved_sha256 and attempt.saved_sha256 != checksum:
             raise ValueError("Final episode checksum differs from execution record")
         inputs = sources.evaluation_inputs(attempt.block, attempt.sample_id)

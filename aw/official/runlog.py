@@ -22,8 +22,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import tempfile
 import uuid
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -32,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from aw.formats import FormatError
+from aw.official.evaluation_cache import write_json
 from aw.official.ids import sample_slug
 
 __all__ = ["RUN_KIND", "RUN_FILE", "FINAL_ARCHIVE", "RunLog", "SampleAttempt", "sample_slug", "new_run_id", "utc_now",
@@ -278,21 +277,6 @@ def select_attempts(runs: Iterable[str | Path | RunLog]) -> dict[tuple[str, str]
 
 
 # --- writing -----------------------------------------------------------------------------------
-
-
-def write_json(path: str | Path, value: Any) -> None:
-    """Write JSON the way the runner does (indent 2, no NaN, trailing newline), atomically."""
-    file = Path(path)
-    file.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=file.parent, prefix=f".{file.name}.")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            json.dump(value, fh, indent=2, allow_nan=False)
-            fh.write("\n")
-        os.replace(tmp, file)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def create_run(logs_dir: str | Path, selection: Mapping[str, Sequence[str]], inputs: Mapping[tuple[str, str], Mapping[str, Any]],

@@ -37,8 +37,9 @@ __all__ = ["export_runs", "main"]
 _EXECUTION = {"finished": "completed", "timeout": "timeout", "error": "failed", "crashed": "failed", "hung": "failed"}
 
 
-def export_runs(system_dir: str | Path, package: OfficialPackage, logs_dir: str | Path, *, options: Mapping[str, Any] | None = None,
-                protocol_text: str = "", run_id: str | None = None, all_samples: bool = False) -> RunLog:
+def export_runs(system_dir: str | Path, package: OfficialPackage, logs_dir: str | Path, *,
+                options: Mapping[str, Any] | None = None, protocol_text: str = "", run_id: str | None = None,
+                all_samples: bool = False) -> RunLog:
     """Write ``LOGS/<run id>/`` from ``RUNS/<system>/`` (module doc); returns the run."""
     src = Path(system_dir)
     tasks = sorted(p for p in src.iterdir() if (p / "trajectory.jsonl").is_file()) if src.is_dir() else []

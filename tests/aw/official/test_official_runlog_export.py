@@ -27,7 +27,8 @@ def _project_runs(package, tmp_path):
     """Official archives of three samples (the PartNet id in both blocks) converted to project runs."""
     runs = tmp_path / "runs"
     finals = {}
-    for k, (block, sid) in enumerate([("partnet-none", "21905"), ("partnet-final-image", "21905"), ("ikea-manualbook", "Chair/reidar")]):
+    samples = [("partnet-none", "21905"), ("partnet-final-image", "21905"), ("ikea-manualbook", "Chair/reidar")]
+    for k, (block, sid) in enumerate(samples):
         final = FINAL.copy()
         final[1, :3] += [0.0, 0.01 * k, 0.0]
         arc = write_active(package.initial_archive(block, sid), tmp_path / f"{k}.episode.zip", final)
