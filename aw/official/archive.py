@@ -35,6 +35,7 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 
 import numpy as np
+import orjson
 
 from aw.official.errors import (
     ArchiveTooLargeError,
@@ -227,13 +228,9 @@ def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> byte
 
 def _json(data: bytes, path: Path, where: str) -> Any:
     try:
-        return json.loads(data.decode("utf-8"), parse_constant=_reject_constant)
-    except (ValueError, UnicodeDecodeError) as exc:
+        return orjson.loads(data)  # strict JSON: NaN and Infinity literals are refused
+    except orjson.JSONDecodeError as exc:
         raise InconsistentEpisodeError(path, f"{where}: not valid JSON ({exc})") from None
-
-
-def _reject_constant(name: str) -> Any:
-    raise ValueError(f"{name} is not a JSON number")
 
 
 def _jsonl(files: dict[str, bytes], name: str, path: Path) -> list[dict[str, Any]]:
@@ -443,7 +440,7 @@ def _check_frame(rec: dict[str, Any], trace: bool, path: Path, where: str) -> No
     camera = _keys(rec["camera"], {"position", "target"}, set(), path, f"{where}: camera")
     if not (_is_int(rec["index"]) and _is_int(rec["groupCounter"]) and _vec3(camera["position"]) and _vec3(camera["target"])):
         raise bad(path, f"{where}: index and groupCounter must be integers >= 0, camera position/target 3 numbers")
-    if float(np.linalg.norm(np.subtract(camera["position"], camera["target"]))) < 0.001:
+    if math.dist(camera["position"], camera["target"]) < 0.001:
         raise bad(path, f"{where}: camera position and target less than 0.001 apart")
     if not isinstance(rec["groups"], list):
         raise bad(path, f"{where}: groups must be a list")
