@@ -14,6 +14,7 @@ of the same run.
 
 from __future__ import annotations
 
+import os
 import re
 import sys
 from collections.abc import Callable, Iterable, Mapping
@@ -227,14 +228,16 @@ def _overall_text(summary: Mapping[str, Any]) -> str:
 
 
 def main(package_dir: str, runs_dir: str, out_dir: str, jobs: int | None = None) -> int:
-    """``aw-score PACKAGE RUNS --out OUT``: print each system's result; 0 when every attempt
-    was scored (as the official ``eval`` exits), 1 when some are error rows, 2 on bad input."""
+    """``aw-score PACKAGE RUNS --out OUT [--jobs J]`` (J worker processes, default the number of
+    cores): print each system's result; 0 when every attempt was scored (as the official
+    ``eval`` exits), 1 when some are error rows, 2 on bad input."""
+
     def log(msg: str) -> None:
         print(f"aw-score: {msg}", file=sys.stderr)
 
     try:
         sources = OfficialPackage(package_dir, strict=False)
-        summaries = evaluate(sources, runs_dir, out_dir, jobs or 1, log)
+        summaries = evaluate(sources, runs_dir, out_dir, jobs or os.cpu_count() or 1, log)
     except (FormatError, ValueError, FileExistsError, OSError) as exc:
         print(f"aw-score: error: {exc}", file=sys.stderr)
         return 2

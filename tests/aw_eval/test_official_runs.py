@@ -112,7 +112,7 @@ def test_aw_score_rescores_an_official_run_chain(package, tmp_path):
     resumed = _new_run(package, logs, {"partnet-none": ["743"]}, source=first, run_id="r2")
     _attempt(package, resumed, "partnet-none", "743", FINAL, tmp_path)
     out = tmp_path / "out"
-    assert cli_main([str(package.root), str(logs), "--out", str(out)]) == 1  # one attempt is an error row
+    assert cli_main([str(package.root), str(logs), "--out", str(out), "--jobs", "2"]) == 1  # one attempt is an error row
     folder = out / "official" / "codex-m1"
     rows = read_metrics(folder / "metrics.jsonl")
     assert [(r["block"], r["sample_id"], r["status"]) for r in rows] == [
@@ -136,7 +136,7 @@ def test_aw_score_takes_a_folder_of_archives(package, tmp_path):
     folder = tmp_path / "episodes"
     write_active(package.initial_archive("partnet-final-image", "743"), folder / "partnet-final-image" / "743.episode.zip", OFF)
     out = tmp_path / "out"
-    assert cli_main([str(package.root), str(folder), "--out", str(out)]) == 0
+    assert cli_main([str(package.root), str(folder), "--out", str(out), "--jobs", "1"]) == 0
     (row,) = read_metrics(out / "official" / "episodes" / "metrics.jsonl")
     expected = score_state(package.evaluation_inputs("partnet-final-image", "743"), OFF)
     assert (row["block"], row["sample_id"]) == ("partnet-final-image", "743")
