@@ -33,7 +33,7 @@ from aw.formats import FormatError
 from aw.official.runlog import SampleAttempt, write_json
 
 __all__ = ["PROTOCOL", "EXPECTED_TOTAL", "METRICS_FILE", "SUMMARY_FILE", "RESOURCE_NOTE", "row_base", "scored_row", "error_row",
-           "sort_rows", "summarize", "write_evaluation", "read_metrics", "read_summary"]
+           "sort_rows", "summarize", "write_evaluation", "read_metrics", "read_summary", "compare_evaluations", "main"]
 
 PROTOCOL = "assembly-evaluation-v1"
 EXPECTED_TOTAL = 100
@@ -169,3 +169,82 @@ def read_summary(path: str | Path) -> dict[str, Any]:
     if value.get("status") not in ("complete", "partial") or not isinstance(value.get("blocks"), dict):
         raise FormatError(file, "status must be 'complete' or 'partial', blocks an object")
     return value
+
+
+def _close(a: Any, b: Any, rtol: float) -> bool:
+    if a is None or b is None:
+        return a is b
+    return abs(float(a) - float(b)) <= rtol * max(abs(float(a)), abs(float(b))) + 1e-15
+
+
+def _compare_rows(key: tuple[str, str], a: Mapping[str, Any], b: Mapping[str, Any], rtol: float) -> list[str]:
+    where = f"{key[0]}/{key[1]}"
+    if a["status"] != b["status"]:
+        return [f"{where}: status {a['status']!r} != {b['status']!r}"]
+    out = [f"{where}: {m} {a[m]!r} != {b[m]!r}" for m in ("PA", "SR") if a[m] != b[m]]
+    if not _close(a["SCD"], b["SCD"], rtol):
+        out.append(f"{where}: SCD {a['SCD']!r} != {b['SCD']!r}")
+    if a["status"] == "scored":
+        out += [f"{where}: {k} {a.get(k)!r} != {b.get(k)!r}" for k in ("state_index", "episode_sha256") if a.get(k) != b.get(k)]
+        pa, pb = a.get("parts") or [], b.get("parts") or []
+
+        def matches(parts):
+            return [(p["part_id"], p["target_part_id"], p["correct"]) for p in parts]
+
+        if matches(pa) != matches(pb) or not all(_close(p["chamfer"], q["chamfer"], rtol) for p, q in zip(pa, pb)):
+            out.append(f"{where}: part matches or part Chamfers differ")
+    return out
+
+
+def compare_evaluations(expected_dir: str | Path, actual_dir: str | Path, rtol: float = 1e-9) -> list[str]:
+    """What differs between two evaluation folders (e.g. the official ``eval`` output and
+    ``aw-score``'s for the same run): rows by (block, sample id), statuses, PA and SR exactly,
+    SCD and part Chamfers to ``rtol``, part matches, restored state and archive digest; the
+    summaries' status, counts and means. An empty list: they agree."""
+    a_dir, b_dir = Path(expected_dir), Path(actual_dir)
+    rows_a = {(r["block"], r["sample_id"]): r for r in read_metrics(a_dir / METRICS_FILE)}
+    rows_b = {(r["block"], r["sample_id"]): r for r in read_metrics(b_dir / METRICS_FILE)}
+    out = [f"{k[0]}/{k[1]}: only in {a_dir}" for k in sorted(set(rows_a) - set(rows_b))]
+    out += [f"{k[0]}/{k[1]}: only in {b_dir}" for k in sorted(set(rows_b) - set(rows_a))]
+    for key in sorted(set(rows_a) & set(rows_b)):
+        out += _compare_rows(key, rows_a[key], rows_b[key], rtol)
+    sa, sb = read_summary(a_dir / SUMMARY_FILE), read_summary(b_dir / SUMMARY_FILE)
+    out += [f"summary: {k} {sa.get(k)!r} != {sb.get(k)!r}"
+            for k in ("status", "attempted", "expected", "scored") if sa.get(k) != sb.get(k)]
+    groups = [("blocks", sa["blocks"], sb["blocks"]), ("sources", sa.get("sources") or {}, sb.get("sources") or {})]
+    groups.append(("official_overall", {"": sa["official_overall"]} if sa["official_overall"] else {},
+                   {"": sb["official_overall"]} if sb["official_overall"] else {}))
+    for name, ga, gb in groups:
+        if set(ga) != set(gb):
+            out.append(f"summary: {name} {sorted(ga)} != {sorted(gb)}")
+        for k in sorted(set(ga) & set(gb)):
+            out += [f"summary: {name}[{k!r}].{m} {ga[k][m]!r} != {gb[k][m]!r}"
+                    for m in _METRICS if not _close(ga[k][m], gb[k][m], rtol)]
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m aw.official.evaluation_output EXPECTED ACTUAL``: list the differences of two
+    evaluation folders; 0 when they agree, 1 when they differ, 2 on unreadable input."""
+    import argparse
+    import sys
+
+    p = argparse.ArgumentParser(prog="python -m aw.official.evaluation_output",
+                                description="Compare two evaluation folders (metrics.jsonl + summary.json).")
+    p.add_argument("expected", help="e.g. the official eval output")
+    p.add_argument("actual", help="e.g. aw-score's OUT/official/<system>")
+    p.add_argument("--rtol", type=float, default=1e-9, help="relative tolerance of SCD and Chamfers (default 1e-9)")
+    args = p.parse_args(argv)
+    try:
+        diffs = compare_evaluations(args.expected, args.actual, args.rtol)
+    except (FormatError, KeyError, TypeError) as exc:
+        print(f"evaluation_output: error: {exc}", file=sys.stderr)
+        return 2
+    for line in diffs:
+        print(line)
+    print("the evaluations agree" if not diffs else f"{len(diffs)} differences")
+    return 1 if diffs else 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -132,3 +132,23 @@ def test_bad_evaluation_files_get_named_errors(tmp_path):
     summary.write_text('{"protocol": "v0"}')
     with pytest.raises(FormatError, match="summary.json: not an official summary"):
         read_summary(summary)
+
+
+def test_comparing_two_evaluations(tmp_path, capsys):
+    from aw.official.evaluation_output import compare_evaluations, main
+
+    bench = _benchmark()
+    rows = _rows(bench)
+    a = write_evaluation(tmp_path / "a", rows, summarize(rows, bench))
+    near = [{**r, "SCD": r["SCD"] * (1 + 1e-13)} if r["status"] == "scored" else r for r in rows]
+    b = write_evaluation(tmp_path / "b", near, summarize(near, bench))
+    assert compare_evaluations(a, b) == [] and main([str(a), str(b)]) == 0
+    changed = [dict(r) for r in rows[:-1]]
+    changed[3]["PA"] = 0.5 if changed[3]["PA"] != 0.5 else 0.25
+    c = write_evaluation(tmp_path / "c", changed, summarize(changed, bench))
+    diffs = compare_evaluations(a, c)
+    assert f"{rows[-1]['block']}/{rows[-1]['sample_id']}: only in {a}" in diffs
+    assert any(d.startswith(f"{rows[3]['block']}/{rows[3]['sample_id']}: PA") for d in diffs)
+    assert "summary: status 'complete' != 'partial'" in diffs
+    assert main([str(a), str(c)]) == 1 and "differences" in capsys.readouterr().out
+    assert main([str(a), str(tmp_path / "missing")]) == 2
