@@ -12,6 +12,11 @@
   suite and runs, and recorded runs back to official episode archives;
 * :mod:`aw.official.ids`: sample ids and their folder names; :mod:`aw.official.errors`: the
   named errors.
+* :mod:`aw.official.runlog`: the runner's run-log tree (``logs/<run>/...``), resumed chains
+  merged as the official evaluation merges them, and the tree written;
+  :mod:`aw.official.runlog_export`: runs recorded here written as one run log;
+* :mod:`aw.official.evaluation_output`: ``metrics.jsonl`` and ``summary.json`` read, computed
+  from rows by the official rules, written and compared.
 
 The formats are described in ``docs/formats.md``.
 """
