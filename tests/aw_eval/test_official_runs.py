@@ -161,3 +161,15 @@ def test_the_evaluation_is_written_outside_the_runs(package, tmp_path, capsys):
     _attempt(package, run, "partnet-none", "21905", FINAL, tmp_path)
     assert cli_main([str(package.root), str(logs), "--out", str(logs / "eval")]) == 2
     assert "must be written outside" in capsys.readouterr().err
+
+
+def test_unusable_runs_folders_get_one_line_errors(package, tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    stray = tmp_path / "stray" / "nowhere" / "21905.episode.zip"
+    stray.parent.mkdir(parents=True)
+    stray.write_bytes(b"not a zip")
+    for runs, message in ((tmp_path / "missing", "runs directory not found"), (tmp_path / "empty", "no *.episode.zip archive"),
+                          (tmp_path / "stray", "no block folder above the archive")):
+        assert cli_main([str(package.root), str(runs), "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1
