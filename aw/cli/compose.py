@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 __all__ = ["register_compose", "register_official", "register_official_export", "catalogs_from_args"]
@@ -120,7 +121,11 @@ def _cmd_official(args: argparse.Namespace) -> int:
         else:
             if not args.runs:
                 raise CliError("--episodes needs --runs")
-            manifest, runs = convert(args.package, args.episodes, args.out, args.runs, system=args.system, force=args.force)
+            skipped: list[str] = []
+            manifest, runs = convert(args.package, args.episodes, args.out, args.runs, system=args.system, force=args.force,
+                                     skipped=skipped)
+            for line in skipped:
+                print(f"aw-prepare: not converted (the official scorer counts it as an error): {line}", file=sys.stderr)
     except FileExistsError as exc:
         raise CliError(str(exc)) from None
     print(f"wrote {len(manifest.tasks)} tasks to {args.out}" + (f" and {len(runs)} runs to {args.runs}" if runs else ""))

@@ -37,7 +37,7 @@ from aw.official.ids import sample_id_from_slug, task_id_for_sample
 from aw.official.package import REFERENCE_CONDITIONS, OfficialPackage
 
 __all__ = ["initial_archive_path", "convert_package", "project_camera", "end_reason", "episode_records",
-           "write_episode_run", "find_archives", "archive_sample", "convert"]
+           "write_episode_run", "find_archives", "archive_sample", "run_log_archives", "convert"]
 
 _NO_CALLS_START = "1970-01-01T00:00:00.000Z"  # an archive without calls has no wall-clock time
 _EXTRA_STATE = "state"  # tool name of a state a call recorded beyond its first
@@ -196,9 +196,14 @@ def archive_sample(archive: Path, pkg: OfficialPackage) -> tuple[str, str]:
     return block, sid
 
 
-def _official_result(archive: Path) -> dict:
-    """What the runner's ``result.json`` beside a run log's archive says of the attempt (kept for
-    information: the official scorer scores every saved archive, whatever the execution's end)."""
+def _official_result(result: dict) -> dict:
+    """What the runner's ``result.json`` says of the attempt (kept for information: the official
+    scorer scores every saved archive, whatever the execution's end)."""
+    execution = result.get("execution") if isinstance(result.get("execution"), dict) else {}
+    return {"official_status": result.get("status"), "official_execution": execution.get("status")}
+
+
+def _result_beside(archive: Path) -> dict:
     path = archive.parent / "result.json"
     if archive.name != "final.episode.zip" or not path.is_file():
         return {}
@@ -208,25 +213,72 @@ def _official_result(archive: Path) -> dict:
         raise FormatError(path, f"not valid JSON ({exc})") from None
     if not isinstance(result, dict):
         raise FormatError(path, "expected a JSON object")
-    execution = result.get("execution") if isinstance(result.get("execution"), dict) else {}
-    return {"official_status": result.get("status"), "official_execution": execution.get("status")}
+    return _official_result(result)
+
+
+def run_log_archives(folder: str | Path, pkg: OfficialPackage, skipped: list[str] | None = None) -> list[tuple[str, str, str, Path, dict]]:
+    """``(system, block, sample id, final archive, extra)`` for every attempt that counts in the
+    run logs of ``folder`` (a run folder or a ``logs/`` folder): runs are grouped by the first
+    run of their resume chain (the system is that run's folder name) and each group's attempts
+    are selected as the official evaluation selects them (``aw.official.runlog.select_attempts``:
+    a later attempt replaces an earlier one). Attempts the official scorer would not score (still
+    running, no saved archive, archive digest differing from ``result.json``) are listed in
+    ``skipped``."""
+    from aw.official.package import file_sha256
+    from aw.official.runlog import find_runs, is_run_dir, read_run, select_attempts
+
+    chains: dict[Path, list] = {}
+    for path in find_runs(folder):
+        run = read_run(path)
+        pkg.check_run(run)
+        root, seen = run, {run.path}
+        while root.source_run is not None and root.source_run not in seen and is_run_dir(root.source_run):
+            seen.add(root.source_run)
+            root = read_run(root.source_run)
+        chains.setdefault(root.path, []).append(run)
+    out = []
+    for root, runs in sorted(chains.items()):
+        try:
+            attempts = select_attempts(runs)
+        except ValueError as exc:
+            raise FormatError(root, str(exc)) from None
+        for (block, sid), attempt in sorted(attempts.items()):
+            pkg.check_attempt(attempt)
+            why = ("the attempt is still running" if not attempt.finished else
+                   "no saved final archive" if not attempt.archive_saved else
+                   "final archive differs from result.json's sha256"
+                   if attempt.saved_sha256 and attempt.saved_sha256 != file_sha256(attempt.final_archive) else None)
+            if why is not None:
+                if skipped is not None:
+                    skipped.append(f"{attempt.directory}: {why}")
+                continue
+            extra = {"block": block, "sample_id": sid, "official_run": str(attempt.run), **_official_result(attempt.result)}
+            out.append((root.name, block, sid, attempt.final_archive, extra))
+    return out
 
 
 def convert(package: str | Path, episodes: str | Path | Iterable[str | Path], suite_out: str | Path, runs_out: str | Path,
-            system: str | None = None, force: bool = False) -> tuple[SuiteManifest, list[Path]]:
-    """Convert a package and its episode archives. An archive's system is ``system``, else the
-    run folder it lies in (the folder above ``blocks/``), else ``official``."""
+            system: str | None = None, force: bool = False, skipped: list[str] | None = None) -> tuple[SuiteManifest, list[Path]]:
+    """Convert a package and its episode archives: the counted attempts of run logs (when
+    ``episodes`` is a run folder or holds run folders), else every ``*.episode.zip`` below it
+    (``<block>/<slug>.episode.zip``). A run's system is ``system``, else the first run of its
+    resume chain, else ``official``; attempts that are not scored are listed in ``skipped``."""
+    from aw.official.runlog import is_run_dir
+
     pkg = OfficialPackage(package, strict=False)
     manifest = convert_package(pkg, suite_out, force=force)
-    archives = find_archives(episodes) if isinstance(episodes, (str, Path)) else [Path(p) for p in episodes]
+    folder = Path(episodes) if isinstance(episodes, (str, Path)) else None
+    if folder is not None and folder.is_dir() and (is_run_dir(folder) or any(is_run_dir(p) for p in folder.iterdir())):
+        items = run_log_archives(folder, pkg, skipped)
+    else:
+        archives = find_archives(episodes) if folder is not None else [Path(p) for p in episodes]
+        items = []
+        for arc in archives:
+            block, sid = archive_sample(arc, pkg)
+            items.append(("official", block, sid, arc, {"block": block, "sample_id": sid, **_result_beside(arc)}))
     runs = []
-    for arc in archives:
-        block, sid = archive_sample(arc, pkg)
+    for name, block, sid, arc, extra in items:
         inputs = pkg.evaluation_inputs(block, sid)
         ep = read_part_episode(arc, pkg.initial_archive(block, sid), inputs.part_ids)
-        parts = arc.resolve().parts
-        run_name = parts[parts.index("blocks") - 1] if "blocks" in parts[:-1] else None
-        extra = {"block": block, "sample_id": sid, **_official_result(arc)}
-        runs.append(write_episode_run(ep, runs_out, system or run_name or "official", task_id_for_sample(block, sid),
-                                      force=force, extra=extra))
+        runs.append(write_episode_run(ep, runs_out, system or name, task_id_for_sample(block, sid), force=force, extra=extra))
     return manifest, runs

@@ -171,3 +171,34 @@ def write_package(root: Path, samples: dict[str, list[str]] = PACKAGE_SAMPLES) -
                                          "evaluation": {"protocol": "assembly-evaluation-v1", "similarity_policy": "geometry",
                                                         "similarity_threshold": 0.0001}})
     return root
+
+
+def write_run_log(logs: Path, pkg, finals: dict[tuple[str, str], np.ndarray | None], run_id: str,
+                  source_run: Path | None = None, status: str = "completed") -> Path:
+    """A run of the official runner's layout (``aw.official.runlog``) over ``pkg``: each
+    (block, sample id) of ``finals`` gets a final archive reaching those poses (None: a failed
+    attempt without an export)."""
+    from aw.official.runlog import create_run, write_result
+
+    selection: dict[str, list[str]] = {}
+    for block, sid in finals:
+        selection.setdefault(block, []).append(sid)
+    inputs = {}
+    for block, sid in finals:
+        sample = pkg.sample(block, sid)
+        inputs[(block, sid)] = {**sample.expected, "initial_path": str(sample.initial_path), "initial_calls": 0,
+                                "identity": pkg.configuration(block)[1]["identity"], "reference": sample.reference}
+    run = create_run(logs, selection, inputs, {b: pkg.task_text(b) for b in selection},
+                     {b: pkg.blocks[b]["reference_mode"] for b in selection}, {"agent": "fixture", "model": "m"},
+                     source_run=source_run, run_id=run_id)
+    for (block, sid), final in finals.items():
+        if final is None:
+            write_result(run, block, sid, {"status": "failed", "execution": {"status": "failed"}})
+            continue
+        path = run.sample_dir(block, sid) / "staged.episode.zip"
+        arc = write_active(pkg.initial_archive(block, sid), path, final=final)
+        data = path.read_bytes()
+        path.unlink()
+        write_result(run, block, sid, {"status": status, "execution": {"status": "completed"}}, final_archive=data,
+                     archive_calls=len(arc.calls))
+    return run.path

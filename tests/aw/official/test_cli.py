@@ -11,7 +11,7 @@ from aw.formats import Task, TaskPart, read_final, read_trajectory, write_task
 from aw.official.archive import read_archive
 from aw.official.episode import read_part_episode
 from aw.prompt import task_prompt
-from tests.aw.official.builders import FINAL, write_active, write_package
+from tests.aw.official.builders import FINAL, write_package, write_run_log
 
 
 def test_convert_then_export(tmp_path, capsys):
@@ -19,8 +19,8 @@ def test_convert_then_export(tmp_path, capsys):
     from aw.official.package import OfficialPackage
 
     pkg = OfficialPackage(pkg_root, strict=False)
-    logs = tmp_path / "logs" / "run-1" / "blocks" / "partnet-none" / "samples" / "743"
-    original = write_active(pkg.initial_archive("partnet-none", "743"), logs / "final.episode.zip")
+    run = write_run_log(tmp_path / "logs", pkg, {("partnet-none", "743"): FINAL}, "run-1")
+    original = read_archive(run / "blocks" / "partnet-none" / "samples" / "743" / "final.episode.zip")
     assert main(["official", str(pkg_root), "--episodes", str(tmp_path / "logs"), "--out", str(tmp_path / "suite"),
                  "--runs", str(tmp_path / "runs")]) == 0
     assert "wrote 1 tasks" in capsys.readouterr().out

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -13,23 +15,24 @@ from aw.official.errors import ExportError
 from aw.official.eval_points import suite_eval_inputs
 from aw.official.export import export_run
 from aw.official.package import OfficialPackage
-from tests.aw.official.builders import FINAL, PART_IDS, write_active, write_package
+from tests.aw.official.builders import FINAL, PART_IDS, write_package, write_run_log
+
+
+RUN = "2026-01-02T030405.123456+0000-1a2b3c4d"
 
 
 @pytest.fixture(scope="module")
 def converted(tmp_path_factory):
-    """A package, a run log with final archives for two blocks holding the same sample id,
-    converted to a suite and runs."""
+    """A package and a run log (final archives for two blocks holding the same sample id, one
+    of them from a timed-out execution), converted to a suite and runs."""
     root = tmp_path_factory.mktemp("conv")
     pkg = OfficialPackage(write_package(root / "benchmark"), strict=False)
-    logs = root / "logs" / "2026-01-02T030405.123456+0000-1a2b3c4d" / "blocks"
-    for block in ("partnet-none", "partnet-final-image"):
-        write_active(pkg.initial_archive(block, "21905"), logs / block / "samples" / "21905" / "final.episode.zip",
-                     final=FINAL if block == "partnet-none" else FINAL[::-1].copy())
-    write_active(pkg.initial_archive("ikea-manualbook", "Chair/reidar"),
-                 logs / "ikea-manualbook" / "samples" / "Chair--reidar" / "final.episode.zip")
-    (logs / "partnet-final-image" / "samples" / "21905" / "result.json").write_text(
-        '{"status": "failed", "execution": {"status": "timeout"}, "archive": {"status": "saved"}}')
+    run = write_run_log(root / "logs", pkg, {("partnet-none", "21905"): FINAL, ("partnet-final-image", "21905"): FINAL[::-1].copy(),
+                                             ("ikea-manualbook", "Chair/reidar"): FINAL}, RUN)
+    result = run / "blocks" / "partnet-final-image" / "samples" / "21905" / "result.json"
+    value = json.loads(result.read_text())
+    value.update(status="failed", execution={"status": "timeout"})
+    result.write_text(json.dumps(value))
     manifest, runs = convert(pkg.root, root / "logs", root / "suite", root / "runs")
     return root, pkg, manifest, runs
 
@@ -51,7 +54,7 @@ def test_suite_of_the_package(converted):
 
 def test_runs_of_the_archives(converted):
     root, _, _, runs = converted
-    system = "2026-01-02T030405.123456+0000-1a2b3c4d"
+    system = RUN
     assert sorted(p.name for p in runs) == ["ikea-manualbook--Chair--reidar", "partnet-final-image--21905", "partnet-none--21905"]
     run = root / "runs" / system / "partnet-final-image--21905"
     traj = read_trajectory(run / "trajectory.jsonl")
@@ -71,7 +74,7 @@ def test_runs_of_the_archives(converted):
 def test_round_trip_keeps_states(converted, tmp_path):
     """official -> project -> official: the same state indices and vectors, so the same scores."""
     root, pkg, _, _ = converted
-    system = "2026-01-02T030405.123456+0000-1a2b3c4d"
+    system = RUN
     original = read_archive(root / "logs" / system / "blocks" / "ikea-manualbook" / "samples" / "Chair--reidar" / "final.episode.zip")
     initial = pkg.initial_archive("ikea-manualbook", "Chair/reidar")
     again = export_run(root / "runs" / system / "ikea-manualbook--Chair--reidar", initial, tmp_path / "again.episode.zip")
@@ -87,9 +90,25 @@ def test_round_trip_keeps_states(converted, tmp_path):
 
 def test_export_refuses_another_tasks_archive(converted, tmp_path):
     root, pkg, _, _ = converted
-    run = root / "runs" / "2026-01-02T030405.123456+0000-1a2b3c4d" / "partnet-none--21905"
+    run = root / "runs" / RUN / "partnet-none--21905"
     other = tmp_path / "other.episode.zip"
     from tests.aw.official.builders import write_setup
 
     with pytest.raises(ExportError, match="parts"):
         export_run(run, write_setup(other, PART_IDS[:2]), tmp_path / "x.episode.zip")
+
+
+def test_resumed_chain_counts_its_latest_attempt(tmp_path):
+    """A resumed run replaces its source run's attempt, even a failed one replacing a saved
+    export (which is then not converted), and both stay one system: the chain's first run."""
+    pkg = OfficialPackage(write_package(tmp_path / "benchmark", {"partnet-none": ["21905", "743"]}), strict=False)
+    first = write_run_log(tmp_path / "logs", pkg, {("partnet-none", "21905"): FINAL, ("partnet-none", "743"): FINAL}, "run-a")
+    moved = FINAL.copy()
+    moved[0, :3] += 0.25
+    write_run_log(tmp_path / "logs", pkg, {("partnet-none", "21905"): moved, ("partnet-none", "743"): None}, "run-b", source_run=first)
+    skipped = []
+    _, runs = convert(pkg.root, tmp_path / "logs", tmp_path / "suite", tmp_path / "runs", skipped=skipped)
+    assert [p.relative_to(tmp_path / "runs").as_posix() for p in runs] == ["run-a/partnet-none--21905"]
+    final = read_final(runs[0] / "final.json").poses
+    assert np.array_equal([final[p] for p in PART_IDS], moved)
+    assert len(skipped) == 1 and "run-b" in skipped[0] and "no saved final archive" in skipped[0]
