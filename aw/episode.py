@@ -9,11 +9,12 @@ turns these results and :class:`EpisodeError` into MCP content and tool errors.
 Timing and recording rules (also in ``docs/harnesses.md``):
 
 - The header line is written when the episode object is created (server start); its
-  ``started_at`` is that time.
-- The first ``start_episode`` call starts the episode clock and the execution budget; later
-  calls are idempotent (recorded, nothing changes). Calls before it are recorded with
-  ``episode_active: false`` and ``t = 0`` (the clock has not started), so ``t`` never decreases
-  along a trajectory.
+  ``started_at`` is that time, and every record carries ``server_t``, seconds since then.
+- The episode clock and the execution budget start at the first ``start_episode`` call or the
+  first edit, whichever comes first, so an agent that never calls ``start_episode`` is still
+  limited; later ``start_episode`` calls are idempotent (recorded, nothing changes). ``t`` is
+  seconds on that clock. Calls before it are recorded with ``episode_active: false`` and no
+  ``t``; the trajectory reader gives them their real, negative time before the clock start.
 - After the budget runs out, pose and group edits are refused with an error (queries, camera
   moves and captures still work), the state is kept, ``final.json`` is written at once with
   reason ``timeout``, and the closing line says ``timeout``.
@@ -40,7 +41,9 @@ import numpy as np
 
 from aw.camera import IMAGE_HEIGHT, IMAGE_WIDTH, VERTICAL_FOV_DEG
 from aw.formats import FinalState, Task, TrajectoryCall, TrajectoryEnd, TrajectoryHeader, TrajectoryWriter, write_final
+from aw.formats.task import MAX_BUDGET_MINUTES
 from aw.formats.trajectory import CameraState
+from aw.runlock import RunDirBusy, RunDirLock
 from aw.scene import (
     MAX_ANGLE_DEG,
     MAX_COORDINATE,
@@ -71,7 +74,8 @@ class EpisodeError(Exception):
 
 
 class RunDirError(Exception):
-    """The run directory cannot be used (it already holds a recording, or is not writable)."""
+    """The run directory cannot be used (it holds a recording, a live process is recording into
+    it, or it is not writable)."""
 
 
 @dataclass
@@ -144,8 +148,9 @@ class Episode:
         if len(meshes) != len(task.parts):
             raise ValueError(f"{len(meshes)} meshes for {len(task.parts)} parts")
         budget = task.budget_minutes if budget_minutes is None else float(budget_minutes)
-        if not (math.isfinite(budget) and budget > 0):
-            raise ValueError(f"budget_minutes must be a positive number, got {budget_minutes!r}")
+        if not (math.isfinite(budget) and 0 < budget <= MAX_BUDGET_MINUTES):
+            raise ValueError(f"budget_minutes must be a positive number of at most {MAX_BUDGET_MINUTES:g}, "
+                             f"got {budget_minutes!r}")
         self.task = task
         self.part_ids = task.part_ids
         self.budget_s = 60.0 * budget
@@ -157,22 +162,27 @@ class Episode:
         self._lock = threading.RLock()
         self._seq = 0
         self._t0: float | None = None
+        self._server_t0 = clock()
         self._timed_out = False
         self._closed = False
         self._timer: threading.Timer | None = None
         self.end_reason: str | None = None
 
         self.scene: Scene = scene_from_meshes(self.part_ids, self._meshes)
-        self._prepare_run_dir(overwrite)
-        header = TrajectoryHeader(
-            task_id=task.task_id,
-            system=system,
-            started_at=_utc_now(),
-            part_ids=self.part_ids,
-            initial_poses=self.scene.pose_dict(),
-            camera=CameraState(**self.scene.camera.to_dict()),
-        )
-        self._writer = TrajectoryWriter(self.run_dir / TRAJECTORY_FILE, header)
+        # Held until close(): a second server on this directory is refused, --overwrite or not.
+        self._run_lock = RunDirLock(self.run_dir)
+        try:
+            self._run_lock.acquire()
+        except RunDirBusy as exc:
+            raise RunDirError(str(exc)) from None
+        except OSError as exc:
+            raise RunDirError(f"cannot create {self.run_dir}: {exc.strerror}") from None
+        try:
+            self._prepare_run_dir(overwrite)
+            self._writer = self._open_trajectory(system)
+        except BaseException:
+            self._run_lock.release()
+            raise
         self._handlers: dict[str, Callable[..., _Outcome]] = {
             "list_objects": self._list_objects,
             "get_object": self._get_object,
@@ -189,6 +199,17 @@ class Episode:
         }
 
     # ------------------------------------------------------------------ run dir
+    def _open_trajectory(self, system: str) -> TrajectoryWriter:
+        header = TrajectoryHeader(
+            task_id=self.task.task_id,
+            system=system,
+            started_at=_utc_now(),
+            part_ids=self.part_ids,
+            initial_poses=self.scene.pose_dict(),
+            camera=CameraState(**self.scene.camera.to_dict()),
+        )
+        return TrajectoryWriter(self.run_dir / TRAJECTORY_FILE, header)
+
     def _prepare_run_dir(self, overwrite: bool) -> None:
         existing = [n for n in (TRAJECTORY_FILE, FINAL_FILE, CAPTURE_DIR) if (self.run_dir / n).exists()]
         if existing and not overwrite:
@@ -222,8 +243,11 @@ class Episode:
     def closed(self) -> bool:
         return self._closed
 
+    def _server_t(self) -> float:
+        return round(self._clock() - self._server_t0, 6)
+
     def elapsed(self) -> float:
-        """Seconds since ``start_episode`` (0 before it)."""
+        """Seconds on the episode clock (0 before it starts)."""
         return 0.0 if self._t0 is None else self._clock() - self._t0
 
     @property
@@ -282,6 +306,8 @@ class Episode:
                 msg = f"invalid arguments for {tool}: {exc}"
                 self._record(tool, args, ok=False, error=msg)
                 raise EpisodeError(msg) from None
+            if tool in EDIT_TOOLS and self._t0 is None:
+                self._begin()  # the first edit starts the clock if start_episode was skipped
             self._check_budget()
             try:
                 if tool in EDIT_TOOLS and self._timed_out:
@@ -312,7 +338,8 @@ class Episode:
         self._seq += 1
         rec = TrajectoryCall(
             seq=self._seq,
-            t=round(self.elapsed(), 6),
+            t=round(self.elapsed(), 6) if self.started else None,
+            server_t=self._server_t(),
             tool=tool,
             args=_jsonable_args(args),
             ok=ok,
@@ -340,12 +367,13 @@ class Episode:
                 self._timer.cancel()
             try:
                 self._writer.end(
-                    TrajectoryEnd(reason=final_reason, t=round(self.elapsed(), 6), message=message,
-                                  poses=self.scene.pose_dict())
+                    TrajectoryEnd(reason=final_reason, t=round(self.elapsed(), 6) if self.started else None,
+                                  server_t=self._server_t(), message=message, poses=self.scene.pose_dict())
                 )
             finally:
                 self._write_final(final_reason)
             renderer, self._renderer = self._renderer, None
+            self._run_lock.release()
         if renderer is not None:
             try:
                 renderer.close()

@@ -9,6 +9,10 @@ import trimesh
 
 from aw.formats import FormatError, Task
 
+# Part meshes are in normalized scene units (about 1); beyond this the renderer's camera fit and
+# the evaluator's arithmetic overflow, so such a file is refused by name.
+MAX_VERTEX_COORDINATE = 1e6
+
 
 def load_mesh(path: str | Path) -> trimesh.Trimesh:
     """Load one triangle mesh without trimesh's processing (vertex order is kept)."""
@@ -23,6 +27,9 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
         raise FormatError(path, "contains no triangles")
     if not np.all(np.isfinite(mesh.vertices)):
         raise FormatError(path, "has non-finite vertex coordinates")
+    if np.abs(mesh.vertices).max() > MAX_VERTEX_COORDINATE:
+        raise FormatError(path, f"has vertex coordinates beyond +-{MAX_VERTEX_COORDINATE:g} (scene units are "
+                                "normalized, about 1)")
     return mesh
 
 

@@ -43,6 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "an official run log (run.json), a logs/ folder of runs or a folder of *.episode.zip")
     p.add_argument("--out", required=True, metavar="OUT_DIR", help="output directory (also holds the cache)")
     p.add_argument("--final-only", action="store_true", help="score final states only (no checkpoints)")
+    p.add_argument("--trust-final", action="store_true",
+                   help="score final.json even where it contradicts the trajectory's last recorded state "
+                   "(default: the trajectory wins; the contradiction is listed either way)")
     p.add_argument("--final", choices=("exact", "fast"), default="exact",
                    help="registration mode for final states (default exact: the protocol, every start refined)")
     p.add_argument("--mode", choices=("fast", "exact"), default="fast",
@@ -101,7 +104,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
     try:
         settings = ScoreSettings(checkpoint_mode=args.mode, final_mode=args.final, final_only=args.final_only,
-                                 protocol=tuple(overrides))
+                                 trust_final=args.trust_final, protocol=tuple(overrides))
     except (ValueError, TypeError) as exc:
         print(f"aw-score: error: --protocol: {exc}", file=sys.stderr)
         return 2

@@ -48,6 +48,15 @@ def _annotations(spec: ToolSpec) -> ToolAnnotations:
     )
 
 
+class ExactArgs(FuncMetadata):
+    """Argument validation against the published schema only. The SDK's default first decodes any
+    string argument that looks like JSON (for clients that send arrays as strings), which accepts
+    inputs the schema refuses and breaks valid strings: a group named "null" lost its name."""
+
+    def pre_parse_json(self, data: dict[str, Any]) -> dict[str, Any]:
+        return dict(data)
+
+
 class EpisodeTool(Tool):
     """A tool whose arguments are checked against its closed model before anything runs, so that
     schema-level rejections are recorded in the trajectory like every other call."""
@@ -81,7 +90,7 @@ def _make_tool(spec: ToolSpec, episode: Episode) -> EpisodeTool:
         return result
 
     structured = spec.kind != "capture"
-    meta = FuncMetadata(arg_model=spec.args, output_model=dict[str, Any] if structured else None)
+    meta = ExactArgs(arg_model=spec.args, output_model=dict[str, Any] if structured else None)
     return EpisodeTool(
         fn=invoke,
         name=spec.name,

@@ -30,8 +30,11 @@ def _positive_minutes(text: str) -> float:
         v = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (math.isfinite(v) and v > 0):
-        raise argparse.ArgumentTypeError(f"must be a positive number of minutes, got {text!r}")
+    from aw.formats.task import MAX_BUDGET_MINUTES
+
+    if not (math.isfinite(v) and 0 < v <= MAX_BUDGET_MINUTES):
+        raise argparse.ArgumentTypeError(f"must be a positive number of minutes, at most {MAX_BUDGET_MINUTES:g}, "
+                                         f"got {text!r}")
     return v
 
 
@@ -127,7 +130,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         server = build_server(episode, log_level=args.log_level)
         if args.transport == "stdio":
-            server.run("stdio")
+            from aw_server.stdio import serve_stdio
+
+            serve_stdio(server)  # answers malformed lines with JSON-RPC errors
         else:
             print(f"aw-serve: MCP endpoint http://{args.host}:{args.port}/mcp", file=sys.stderr, flush=True)
             server.run("streamable-http", host=args.host, port=args.port)

@@ -10,6 +10,10 @@ from pydantic import AfterValidator
 PART_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
 SOURCES = ("partnet", "ikea_manual", "assemblybench", "fantastic_breaks")
 CONDITIONS = ("none", "image", "manual")
+# Sanity bounds of a recorded pose: far beyond any scene (edits stop at +-1000 units), well inside
+# what the evaluator's float arithmetic handles (1e308 positions broke its eigen-solver).
+MAX_POSE_POSITION = 1e6
+MAX_POSE_QUAT_COMPONENT = 1e6
 
 
 def _check_pose(values: list[float]) -> list[float]:
@@ -17,6 +21,10 @@ def _check_pose(values: list[float]) -> list[float]:
         raise ValueError(f"a pose is [x, y, z, qw, qx, qy, qz]: 7 numbers, got {len(values)}")
     if not all(math.isfinite(v) for v in values):
         raise ValueError("pose contains non-finite values")
+    if any(abs(v) > MAX_POSE_POSITION for v in values[:3]):
+        raise ValueError(f"pose position beyond +-{MAX_POSE_POSITION:g} scene units")
+    if any(abs(v) > MAX_POSE_QUAT_COMPONENT for v in values[3:]):
+        raise ValueError(f"pose quaternion component beyond +-{MAX_POSE_QUAT_COMPONENT:g}")
     if math.sqrt(sum(v * v for v in values[3:])) < 1e-9:
         raise ValueError("pose quaternion has zero length")
     return [float(v) for v in values]

@@ -14,6 +14,9 @@ from aw.formats.common import PART_ID_PATTERN
 from aw.formats.errors import FormatError
 from aw.formats.io import read_model, write_json_atomic
 
+# Longest execution budget (about 69 days): a longer one overflows the server's expiry timer.
+MAX_BUDGET_MINUTES = 100_000.0
+
 TASK_FORMAT = "assemblyworld.task"
 TASK_FORMAT_VERSION = 1
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".stl", ".off")
@@ -52,7 +55,7 @@ class Task(BaseModel):
     parts: list[TaskPart] = Field(min_length=1)
     references: list[str] = Field(default_factory=list, description="image paths relative to the task dir, in order")
     conventions: dict[str, str] = Field(default_factory=lambda: dict(CONVENTIONS))
-    budget_minutes: float = Field(default=60.0, gt=0)
+    budget_minutes: float = Field(default=60.0, gt=0, le=MAX_BUDGET_MINUTES)
 
     # Set by read_task; not serialized.
     _root: Path | None = None

@@ -49,7 +49,10 @@ class TrajectoryCall(BaseModel):
     model_config = ConfigDict(extra="forbid")
     type: Literal["call"] = "call"
     seq: int = Field(ge=1)
-    t: float = Field(description="seconds since start_episode (negative before it)")
+    t: float | None = Field(default=None, description="seconds since the episode clock started (start_episode or "
+                            "the first edit); absent in the file for calls before it, and filled in by "
+                            "read_trajectory as a negative time from server_t")
+    server_t: float | None = Field(default=None, description="seconds since the server started (the header's started_at)")
     tool: str
     args: dict[str, Any] = Field(default_factory=dict)
     ok: bool
@@ -65,7 +68,8 @@ class TrajectoryEnd(BaseModel):
     model_config = ConfigDict(extra="forbid")
     type: Literal["end"] = "end"
     reason: Literal["finished", "timeout", "error", "disconnect", "interrupted"]
-    t: float
+    t: float | None = Field(default=None, description="as in a call line; absent if the clock never started")
+    server_t: float | None = None
     message: str = ""
     poses: dict[str, PoseList]
 
@@ -199,6 +203,8 @@ def read_trajectory(path: str | Path) -> Trajectory:
                 raise FormatError(path, f"line {i}: changed names unknown part ids {unknown}")
             if rec.changed and rec.poses is None:
                 raise FormatError(path, f"line {i}: parts changed but the poses after the call are missing")
+            if rec.t is None and rec.server_t is None:
+                raise FormatError(path, f"line {i}: a call needs t or server_t")
             if traj.calls and rec.seq <= traj.calls[-1].seq:
                 raise FormatError(path, f"line {i}: sequence number {rec.seq} is not increasing")
             traj.calls.append(rec)
@@ -206,12 +212,34 @@ def read_trajectory(path: str | Path) -> Trajectory:
             traj.end = rec
     if traj is None:
         raise FormatError(path, "empty or truncated before the header line")
+    _resolve_times(traj)
     traj.truncated = truncated or (traj.end is None)
     if truncated:
         traj.problems.append("last line was cut mid-write and was dropped")
     if traj.end is None:
         traj.problems.append("no end record (the episode did not close)")
     return traj
+
+
+def _resolve_times(traj: Trajectory) -> None:
+    """Give every call (and the end) a time on the episode clock: calls recorded before the clock
+    started carry only ``server_t`` and get ``t = server_t - (server_t at the clock start)`` < 0.
+    An episode whose clock never started has its start taken at its last record, so all its
+    times are <= 0."""
+    start = next((c.server_t - c.t for c in traj.calls if c.t is not None and c.server_t is not None), None)
+    end = traj.end
+    if start is None and end is not None and end.t is not None and end.server_t is not None:
+        start = end.server_t - end.t
+    if start is None:
+        stamps = [c.server_t for c in traj.calls if c.server_t is not None]
+        if end is not None and end.server_t is not None:
+            stamps.append(end.server_t)
+        start = max(stamps, default=0.0)
+    for c in traj.calls:
+        if c.t is None:
+            c.t = round(c.server_t - start, 6)
+    if end is not None and end.t is None:
+        end.t = round(end.server_t - start, 6) if end.server_t is not None else 0.0
 
 
 class TrajectoryWriter:

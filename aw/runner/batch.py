@@ -23,7 +23,9 @@ from typing import Any, Callable
 
 from aw.formats import FormatError, RunInfo, read_manifest, read_task, read_trajectory, write_run_info
 from aw.formats.suite import suite_paths
+from aw.formats.task import MAX_BUDGET_MINUTES
 from aw.formats.trajectory import FinalState, write_final
+from aw.runlock import holder_of
 from aw.runner.supervise import MARKER_VAR, WorkerProcess, kill_everything, new_marker, run_supervised
 
 DEFAULT_AGENT_TIMEOUT_MIN = 10.0
@@ -117,8 +119,8 @@ def _check_config(cfg: BatchConfig) -> None:
         raise RunnerError("--jobs must be at least 1")
     if not (cfg.limit_seconds > 0):
         raise RunnerError("--timeout-minutes must be positive")
-    if cfg.budget_minutes is not None and not cfg.budget_minutes > 0:
-        raise RunnerError("--budget-minutes must be positive")
+    if cfg.budget_minutes is not None and not 0 < cfg.budget_minutes <= MAX_BUDGET_MINUTES:
+        raise RunnerError(f"--budget-minutes must be positive and at most {MAX_BUDGET_MINUTES:g}")
     if cfg.think_seconds < 0 or cfg.call_timeout <= 0:
         raise RunnerError("--think-seconds must be >= 0 and --call-timeout positive")
     if not cfg.system or "/" in cfg.system or cfg.system in (".", ".."):
@@ -378,7 +380,13 @@ def run_episode(
 ) -> RunInfo:
     """Run one episode from a clean run directory and write its ``run.json``. Baseline agents
     run in ``worker`` (one is started for this episode alone if none is given). An episode cut
-    short by ``cancel`` (Ctrl-C) leaves no run directory, so that a rerun resumes with it."""
+    short by ``cancel`` (Ctrl-C) leaves no run directory, so that a rerun resumes with it. A run
+    directory that a live server is still recording into is left untouched (an ``error`` run)."""
+    busy = holder_of(ep.run_dir)
+    if busy is not None:
+        return RunInfo(system=cfg.system, task_id=ep.task_id, agent=cfg.agent or cfg.harness_model or "",
+                       harness=cfg.harness, ended="error",
+                       error=f"runner refused: {ep.run_dir} is being recorded by {busy}; left untouched")
     if ep.run_dir.exists():
         shutil.rmtree(ep.run_dir)
     ep.run_dir.mkdir(parents=True)

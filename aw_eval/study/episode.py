@@ -4,8 +4,9 @@ pose edits with their magnitudes. No evaluator here: this is pure bookkeeping on
 Pose arrays follow the evaluator's part order (``geom.part_ids``: scored parts, distractors
 excluded); a missing-part task simply has fewer parts. Checkpoints are the initial state and the
 state after every pose-changing call (:meth:`aw.formats.Trajectory.checkpoints`). The final state
-is ``final.json`` when present and valid for this task, else the trajectory's last recorded state;
-which one was used is reported.
+is ``final.json`` when present, valid for this task and in agreement with the trajectory's last
+recorded state, else that state (a contradiction is a listed problem; ``trust_final`` keeps
+final.json); which one was used is reported.
 """
 
 from __future__ import annotations
@@ -40,6 +41,9 @@ MANIPULATE_TOOLS = frozenset({"translate_objects", "rotate_objects", "set_object
 KIND_NAMES = ("inspect", "observe", "manipulate", "other")
 # Edits rotating every affected part by less than this count as translations (Appendix C.1).
 ROTATION_CUTOFF_DEG = 0.5
+# final.json and the trajectory's last state are written from one scene state: any difference
+# beyond float noise is a contradiction.
+FINAL_MATCH_TOL = 1e-6
 
 
 def call_kind(tool: str) -> int:
@@ -140,15 +144,35 @@ def _read_final_state(run_dir: Path, task_id: str, all_part_ids: Sequence[str], 
     if missing:
         problems.append(f"final.json lacks poses of parts {missing}; ignored")
         return None
+    unknown = sorted(set(final.poses) - set(all_part_ids))
+    if unknown:
+        problems.append(f"final.json names parts {unknown} that task {task_id!r} does not have; ignored")
+        return None
     return final
 
 
+def contradicting_parts(final: dict[str, Sequence[float]], recorded: dict[str, Sequence[float]],
+                        part_ids: Sequence[str], tol: float = FINAL_MATCH_TOL) -> list[str]:
+    """Parts whose ``final.json`` pose differs from the trajectory's last recorded pose (beyond
+    ``tol`` per component; ``q`` and ``-q`` are the same rotation)."""
+    out = []
+    for pid in part_ids:
+        a, b = np.asarray(final[pid], dtype=np.float64), np.asarray(recorded[pid], dtype=np.float64)
+        qa, qb = normalize_quaternion(a[3:]), normalize_quaternion(b[3:])
+        if np.abs(a[:3] - b[:3]).max() > tol or min(np.abs(qa - qb).max(), np.abs(qa + qb).max()) > tol:
+            out.append(pid)
+    return out
+
+
 def read_episode(run_dir: str | Path, task_id: str, all_part_ids: Sequence[str], scored_ids: Sequence[str],
-                 centroids: np.ndarray, divisor: float, *, final_only: bool = False) -> EpisodeArrays:
+                 centroids: np.ndarray, divisor: float, *, final_only: bool = False,
+                 trust_final: bool = False) -> EpisodeArrays:
     """Read ``run_dir``'s trajectory and final.json for ``task_id``.
 
     ``all_part_ids``: the task's parts (distractors included) with ``centroids: (A, 3)`` in the
-    same order; ``scored_ids``: the evaluator's parts, a subset. Raises :class:`RunUnreadable`
+    same order; ``scored_ids``: the evaluator's parts, a subset. A ``final.json`` that contradicts
+    the trajectory's last recorded state is a problem, and the trajectory's state is scored unless
+    ``trust_final``. Raises :class:`RunUnreadable`
     when no usable state exists; recoverable damage (a cut last line, a bad final.json next to a
     good trajectory) is listed in ``problems``.
     """
@@ -208,8 +232,16 @@ def read_episode(run_dir: str | Path, task_id: str, all_part_ids: Sequence[str],
             names = {ids[a] for a in affected}
             revisit.append(bool(names & edited))
             edited |= names
+        if final is not None:
+            differ = contradicting_parts(final.poses, traj.final_poses(), ids)
+            if differ:
+                kept = "final.json (--trust-final)" if trust_final else "the trajectory's"
+                problems.append(f"final.json contradicts the trajectory's last recorded state (parts {differ}); "
+                                f"scored {kept}")
+                if not trust_final:
+                    final = None
         final_all = poses_array(final.poses, ids) if final is not None else poses_array(traj.final_poses(), ids)
-        if final is None and traj.end is None:
+        if final is None and traj.end is None and not (run_dir / "final.json").is_file():
             problems.append("no final.json and no end record: scored the last recorded state")
         moved |= np.any(np.abs(final_all - all_poses[0]) > 1e-9, axis=-1)
         return EpisodeArrays(

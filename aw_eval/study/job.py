@@ -39,6 +39,8 @@ class ScoreSettings:
     checkpoint_mode: str = "fast"
     final_mode: str = "exact"
     final_only: bool = False
+    # Score final.json even where it contradicts the trajectory's last recorded state.
+    trust_final: bool = False
     # Overrides of the evaluation protocol's numbers (ProtocolSettings fields): not the paper's
     # protocol; for experiments and fast tests. Sorted (name, value) pairs.
     protocol: tuple[tuple[str, float], ...] = ()
@@ -52,7 +54,9 @@ class ScoreSettings:
 
     def key(self) -> str:
         proto = ",".join(f"{k}={v!r}" for k, v in self.protocol)
-        return f"ck={self.checkpoint_mode};final={self.final_mode};final_only={int(self.final_only)};protocol={proto}"
+        trust = ";trust_final=1" if self.trust_final else ""
+        return (f"ck={self.checkpoint_mode};final={self.final_mode};final_only={int(self.final_only)}{trust};"
+                f"protocol={proto}")
 
 
 @dataclass(frozen=True)
@@ -93,7 +97,7 @@ def _score_run(req: RunRequest, task_id: str, geom, all_ids: list[str], centroid
     scored_ids = list(geom.part_ids)
     try:
         ep = read_episode(req.run_dir, task_id, all_ids, scored_ids, centroids, float(geom.divisor),
-                          final_only=settings.final_only)
+                          final_only=settings.final_only, trust_final=settings.trust_final)
     except RunUnreadable as exc:
         return RunScore.unscored(req.system, task_id, STATUS_UNREADABLE, [str(exc)])
     r = RunScore(system=req.system, task_id=task_id, status=STATUS_SCORED, problems=list(ep.problems),

@@ -245,6 +245,7 @@ def score_study(suite_dir: str | Path, runs_dir: str | Path, out_dir: str | Path
         runs[(s, t)] = RunRecord(sc, info, problem, run_dir)
     study = Study(manifest.name, entries, systems, runs, facts, unknown,
                   settings={"checkpoint_mode": settings.checkpoint_mode, "final_mode": settings.final_mode,
-                            "final_only": settings.final_only, "evaluator_version": ev_version,
+                            "final_only": settings.final_only, "trust_final": settings.trust_final,
+                            "evaluator_version": ev_version,
                             "protocol_overrides": {k: v for k, v in settings.protocol}})
     return study, stats

@@ -68,8 +68,8 @@ def test_recording_and_clock(episode):
     assert traj.header.system == "unit" and traj.header.part_ids == ["p01", "p02"]
     rows = [(c.seq, c.tool, c.t, c.episode_active, c.ok) for c in traj.calls]
     assert rows == [
-        (1, "list_objects", 0.0, False, True),
-        (2, "get_object", 0.0, False, True),
+        (1, "list_objects", -10.0, False, True),  # real times before the clock start, never a fake 0
+        (2, "get_object", -5.0, False, True),
         (3, "start_episode", 0.0, True, True),
         (4, "translate_objects", 2.5, True, True),
         (5, "start_episode", 3.5, True, True),
@@ -79,8 +79,43 @@ def test_recording_and_clock(episode):
     assert traj.calls[3].args == {"ids": ["p01"], "delta": [0, 0, 1]}
     assert traj.calls[3].poses == {"p01": [0, 0, 1, 1, 0, 0, 0], "p02": [0, 0, 0, 1, 0, 0, 0]}
     assert traj.calls[5].error.startswith("unknown id 'zz'") and traj.calls[5].poses is None
-    assert traj.end.reason == "disconnect" and traj.end.t == 4.5
+    assert traj.end.reason == "disconnect" and traj.end.t == 4.5 and traj.end.server_t == 14.5
+    assert [c.server_t for c in traj.calls] == [0.0, 5.0, 10.0, 12.5, 13.5, 13.5]
     assert read_final(run / "final.json").poses == traj.end.poses
+    # In the file, calls before the clock start carry no t (the clock had not started).
+    first = (run / "trajectory.jsonl").read_text().splitlines()[1]
+    assert '"server_t":0.0' in first and '"t":' not in first
+
+
+def test_first_edit_starts_the_clock(episode):
+    """An agent that never calls start_episode is still limited: its first edit starts the budget."""
+    ep, clock, run = episode, episode.clock, episode.run_dir
+    ep.call("get_state")
+    clock.now += 3
+    assert not ep.started
+    ep.call("translate_objects", {"ids": ["p01"], "delta": [0, 0, 1]})
+    assert ep.started and ep.call("get_state")["episode"]["started"] is True
+    clock.now += 61
+    with pytest.raises(EpisodeError, match="budget of 1 minutes is exhausted"):
+        ep.call("translate_objects", {"ids": ["p01"], "delta": [0, 0, 1]})
+    assert ep.close() == "timeout"
+    traj = read_trajectory(run / "trajectory.jsonl")
+    assert [(c.t, c.episode_active) for c in traj.calls] == [(-3.0, False), (0.0, True), (0.0, True), (61.0, True)]
+    assert read_final(run / "final.json").poses["p01"] == [0, 0, 1, 1, 0, 0, 0]
+
+
+def test_clock_never_started(tmp_path):
+    """Only queries: the clock never starts; times are real and end at 0 (the end record)."""
+    task, meshes = _task()
+    clock = Clock()
+    ep = Episode(task, meshes, tmp_path / "run", clock=clock)
+    ep.call("list_objects")
+    clock.now += 2
+    ep.call("get_state")
+    clock.now += 1
+    ep.close()
+    traj = read_trajectory(tmp_path / "run" / "trajectory.jsonl")
+    assert [c.t for c in traj.calls] == [-3.0, -1.0] and traj.end.t == 0.0
 
 
 def test_budget(episode):
@@ -121,7 +156,7 @@ def test_run_dir_refusal_and_overwrite(tmp_path):
 
 def test_bad_budget(tmp_path):
     task, meshes = _task()
-    for bad in (0, -1, float("nan"), float("inf")):
+    for bad in (0, -1, float("nan"), float("inf"), 1e9, 1e308):
         with pytest.raises(ValueError, match="budget_minutes"):
             Episode(task, meshes, tmp_path / f"r{bad}", budget_minutes=bad)
 

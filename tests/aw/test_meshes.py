@@ -23,6 +23,7 @@ def test_load_mesh_keeps_vertex_order(tmp_path):
         (None, "mesh file not found"),
         ("v 0 0 0\nv 1 0 0\n", "no triangles"),
         ("", "no triangles"),
+        ("v 0 0 0\nv 1e308 0 0\nv 0 1 0\nf 1 2 3\n", "vertex coordinates beyond +-1e+06"),
     ],
 )
 def test_load_mesh_errors_name_the_file(tmp_path, content, problem):
@@ -32,6 +33,16 @@ def test_load_mesh_errors_name_the_file(tmp_path, content, problem):
     with pytest.raises(FormatError) as info:
         load_mesh(path)
     assert info.value.path == path and problem in info.value.problem
+
+
+def test_load_mesh_with_a_latin1_comment(tmp_path):
+    """A non-UTF-8 byte in a comment (exporters write Latin-1) is decoded, not refused."""
+    path = tmp_path / "part.obj"
+    path.write_bytes("# Exportiert von Bl\u00e9nder, Gr\u00f6\u00dfe 1\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".encode("latin-1"))
+    with pytest.raises(UnicodeDecodeError):
+        path.read_bytes().decode("utf-8")
+    m = load_mesh(path)
+    assert m.vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0]] and m.faces.tolist() == [[0, 1, 2]]
 
 
 def test_load_task_meshes_in_part_order(tmp_path):

@@ -147,3 +147,33 @@ def test_edit_magnitudes_small_angles_and_pivots():
     after = np.array([_pose((0, 0, 0), (0, 0, 1), 180)])
     t, r = edit_magnitudes(before, after, np.array([[1.0, 0, 0]]), 4.0)
     assert r[0] == pytest.approx(180.0) and t[0] == pytest.approx(0.5)
+
+
+def test_final_json_contradicting_the_trajectory(tmp_path):
+    """A final.json whose poses differ from the recorded end state: a named problem, and the
+    trajectory's state is scored unless trust_final."""
+    calls, last = _episode_calls()
+    forged = {**last, "p02": _pose((0, 0, 0))}  # p02 back at the origin: not what was recorded
+    _write(tmp_path, calls, TrajectoryEnd(reason="finished", t=10.0, poses=last),
+           FinalState(task_id="task-1", reason="finished", poses=forged))
+    ep = read_episode(tmp_path, "task-1", IDS, SCORED, CENTROIDS, DIVISOR)
+    assert ep.final_from == "trajectory" and np.allclose(ep.final_poses[0], last["p02"])
+    (problem,) = [p for p in ep.problems if "contradicts" in p]
+    assert "parts ['p02']" in problem and "scored the trajectory's" in problem
+    trusted = read_episode(tmp_path, "task-1", IDS, SCORED, CENTROIDS, DIVISOR, trust_final=True)
+    assert trusted.final_from == "final.json" and np.allclose(trusted.final_poses[0], forged["p02"])
+    assert any("contradicts" in p and "--trust-final" in p for p in trusted.problems)
+    # q and -q are the same rotation: no contradiction
+    flipped = {**last, "p02": last["p02"][:3] + [-v for v in last["p02"][3:]]}
+    write_final(tmp_path / "final.json", FinalState(task_id="task-1", reason="finished", poses=flipped))
+    same = read_episode(tmp_path, "task-1", IDS, SCORED, CENTROIDS, DIVISOR)
+    assert same.final_from == "final.json" and not any("contradicts" in p for p in same.problems)
+
+
+def test_final_json_naming_an_unknown_part(tmp_path):
+    calls, last = _episode_calls()
+    _write(tmp_path, calls, TrajectoryEnd(reason="finished", t=10.0, poses=last),
+           FinalState(task_id="task-1", reason="finished", poses={**last, "p99": I7}))
+    ep = read_episode(tmp_path, "task-1", IDS, SCORED, CENTROIDS, DIVISOR)
+    assert ep.final_from == "trajectory"
+    assert any("names parts ['p99']" in p and "does not have" in p for p in ep.problems)

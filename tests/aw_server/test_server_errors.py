@@ -42,6 +42,10 @@ BAD_CALLS = [
     ("translate_objects", {"ids": ["p01"], "delta": [1, 2]}, ["delta:", "at least 3 items"]),
     ("translate_objects", {"ids": ["p01"], "delta": [True, 0, 0]}, ["delta[0]:", "valid number"]),
     ("translate_objects", {"ids": ["p01"], "delta": "up"}, ["delta:", "valid list"]),
+    # Arrays sent as JSON strings are what the schema refuses (no pre-parsing of strings).
+    ("translate_objects", {"ids": '["p01"]', "delta": [1, 0, 0]}, ["ids:", "valid list"]),
+    ("translate_objects", {"ids": ["p01"], "delta": "[1, 0, 0]"}, ["delta:", "valid list"]),
+    ("move_camera", {"yaw": "10"}, ["yaw:", "valid number"]),
     ("translate_objects", {"ids": ["p01"], "delta": [1, 0, 0], "space": "local"}, ["space:", "'world' or 'camera'"]),
     ("translate_objects", {"ids": ["p01"], "delta": [1, 0, 0], "speed": 2}, ["unexpected argument 'speed'", "ids, delta, space"]),
     ("translate_objects", {"delta": [1, 0, 0]}, ["ids: required argument is missing"]),
@@ -187,6 +191,19 @@ async def test_bad_input_and_no_leaks(box_task, tmp_path):
     assert traj.end.reason == "disconnect"
 
 
+async def test_strings_stay_strings(box_task, tmp_path):
+    """Valid strings that look like JSON are taken as the strings they are."""
+    task_dir, _, _ = box_task
+    async with Client(server_params(task_dir, tmp_path / "run")) as c:
+        r = await c.call_tool("start_episode", {"task": "[1,2,3]"})
+        assert not r.is_error, result_text(r)
+        for name in ("null", "[1]", "{}", "12", "true"):
+            g = await c.call_tool("group_objects", {"ids": ["p01"], "name": name})
+            assert not g.is_error and g.structured_content["group"]["name"] == name, result_text(g)
+    traj = read_trajectory(tmp_path / "run" / "trajectory.jsonl")
+    assert traj.calls[0].args == {"task": "[1,2,3]"} and traj.calls[1].args["name"] == "null"
+
+
 def _rpc(id_: int, method: str, params: dict) -> str:
     return json.dumps({"jsonrpc": "2.0", "id": id_, "method": method, "params": params})
 
@@ -221,8 +238,18 @@ def test_raw_json_numbers(box_task, tmp_path):
             res = ask(call % (i, delta), i)["result"]
             assert res["isError"] is True
             assert "finite number" in res["content"][0]["text"], res
-        broken = ask('{"jsonrpc":"2.0","id":5,"method":"tools/call","params":{"name":"translate_o', None)
-        assert broken is None
+        # Lines the transport cannot decode get a JSON-RPC error reply (with the id when it can be
+        # read off the line), never silence.
+        broken = ask('{"jsonrpc":"2.0","id":5,"method":"tools/call","params":{"name":"translate_o', 5)
+        assert broken["error"]["code"] == -32700
+        huge_int = ask(call % (7, "[" + "1" * 5001 + ", 0, 0]"), 7)
+        assert huge_int["error"]["code"] == -32700 and "number out of range" in huge_int["error"]["message"]
+        deep = ask(call % (8, "[" * 5000 + "]" * 5000), 8)
+        assert deep["error"]["code"] == -32700 and "recursion limit" in deep["error"]["message"]
+        assert ask('{"jsonrpc":"2.0","id":"s9","params":{}}', "s9")["error"]["code"] == -32600
+        assert ask("[1, 2]", None) is None
+        not_rpc = json.loads(proc.stdout.readline())
+        assert not_rpc["id"] is None and not_rpc["error"]["code"] == -32600
         ok = ask(call % (6, "[0.25, 0, 0]"), 6)["result"]
         assert ok["isError"] is False
         proc.stdin.close()

@@ -243,3 +243,24 @@ def test_startup_refusals(box_task, tmp_path):
     assert bad_budget.returncode == 2 and "positive" in bad_budget.stderr
     nan_budget = _cli(str(task_dir), "--record", str(run), "--budget-minutes", "nan")
     assert nan_budget.returncode == 2
+    for huge in ("1e9", "1e308"):  # once a traceback in the expiry timer, or Infinity in results
+        res = _cli(str(task_dir), "--record", str(run), "--budget-minutes", huge)
+        assert res.returncode == 2 and "at most 100000" in res.stderr and "Traceback" not in res.stderr
+
+
+async def test_overwrite_of_a_live_recording_is_refused(box_task, tmp_path):
+    """A second ``aw-serve --overwrite`` on a directory a live server records into is refused,
+    naming the live server; the first server's recording is complete."""
+    task_dir, _, _ = box_task
+    run = tmp_path / "run"
+    async with Client(server_params(task_dir, run)) as c:
+        await c.call_tool("translate_objects", {"ids": ["p02"], "delta": [0.5, 0, 0]})
+        (live_pid,) = _server_pids(run)
+        second = await anyio.to_thread.run_sync(lambda: _cli(str(task_dir), "--record", str(run), "--overwrite"))
+        assert second.returncode == 2
+        assert f"is being recorded by pid {live_pid}" in second.stderr and "cli.py" in second.stderr.split("(", 1)[1]
+        await c.call_tool("set_object_pose", {"id": "p03", "position": [0, 0, 1]})
+    traj = read_trajectory(run / "trajectory.jsonl")
+    assert [c.tool for c in traj.calls] == ["translate_objects", "set_object_pose"] and traj.end.reason == "disconnect"
+    assert read_final(run / "final.json").poses["p03"] == [0, 0, 1, 1, 0, 0, 0]
+    assert sorted(p.name for p in (run / "captures").iterdir()) == []

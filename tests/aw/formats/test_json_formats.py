@@ -73,6 +73,8 @@ def test_targets_round_trip(tmp_path):
     [
         (lambda d: d["parts"]["p01"].update(pose=[0, 0, 0]), "7 numbers"),
         (lambda d: d["parts"]["p01"].update(pose=[0, 0, 0, 0, 0, 0, 0]), "zero length"),
+        (lambda d: d["parts"]["p01"].update(pose=[1e308, 0, 0, 1, 0, 0, 0]), "position beyond +-1e+06"),
+        (lambda d: d["parts"]["p01"].update(pose=[0, 0, 0, 1e308, 0, 0, 0]), "quaternion component beyond"),
         (lambda d: d["parts"]["p01"].update(pose="identity"), "parts.p01.pose"),
         (lambda d: d["parts"]["p01"].update(distractor="no"), "parts.p01.distractor"),
         (lambda d: d.update(parts={}), "parts"),
