@@ -101,11 +101,15 @@ def _utc_now() -> str:
 
 
 def _jsonable_args(args: Mapping[str, Any]) -> dict[str, Any]:
-    """The call's arguments as plain JSON (NaN/inf become strings; oversized input is cut)."""
+    """The call's arguments as plain JSON (NaN/inf and integers beyond 64 bits become strings;
+    oversized input is cut)."""
 
     def clean(v):
         if isinstance(v, float) and not math.isfinite(v):
             return repr(v)
+        if isinstance(v, int) and not isinstance(v, bool) and not -(2**63) <= v < 2**64:
+            # beyond what JSON writers (orjson) take: kept as text, or its size if even that is huge
+            return str(v) if v.bit_length() < 14_000 else f"<integer of {v.bit_length()} bits>"
         if isinstance(v, (str, int, float, bool)) or v is None:
             return v
         if isinstance(v, Mapping):

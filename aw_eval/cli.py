@@ -83,7 +83,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return official_runs.main(args.suite_dir, args.runs_dir, args.out, args.jobs)
 
     from aw_eval.report import AnalysisSettings, write_outputs
-    from aw_eval.study import ScoreSettings, StudyError, score_study
+    from aw_eval.study import ScoreSettings, ScoringFailed, StudyError, score_study
 
     def log(msg: str) -> None:
         print(f"aw-score: {msg}", file=sys.stderr)
@@ -113,6 +113,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         study, stats = score_study(args.suite_dir, args.runs_dir, out, settings, scheduler=args.scheduler,
                                    n_jobs=args.jobs, progress=not args.no_progress and sys.stderr.isatty(), log=log,
                                    geometry_cache=args.geometry_cache)
+    except ScoringFailed as exc:  # the tool failed, not the runs: no report of zeros
+        print(f"aw-score: error: {exc}", file=sys.stderr)
+        return 1
     except StudyError as exc:
         print(f"aw-score: error: {exc}", file=sys.stderr)
         return 2
@@ -139,6 +142,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"wrote {res['files']['report']}")
     if "html" in res["files"]:
         print(f"wrote {res['files']['html']}")
+    if doc.get("partial"):
+        failed = {k: len(doc["unscored_runs"][k]) for k in ("error", "task_error") if k in doc["unscored_runs"]}
+        log(f"error: the study is partial: runs not scored {failed} (marked in scores.json and the report)")
+        return 1
     return 0
 
 

@@ -14,7 +14,14 @@ AGENTS: dict[str, AgentFn] = {
     "oracle": oracle.run,
     "heuristic": heuristic.run,
 }
+# The --agent-option keys each agent reads (ctx.options); any other key is refused by aw-run.
+AGENT_OPTIONS: dict[str, frozenset[str]] = {
+    "idle": frozenset({"views"}),
+    "random": frozenset({"edits"}),
+    "oracle": frozenset({"noise"}),
+    "heuristic": frozenset(),
+}
 # Agents that must be handed the hidden targets file (never a benchmark result).
 NEEDS_TARGETS = frozenset({"oracle"})
 
-__all__ = ["AGENTS", "NEEDS_TARGETS", "AgentContext", "AgentOutcome", "AgentFn"]
+__all__ = ["AGENTS", "AGENT_OPTIONS", "NEEDS_TARGETS", "AgentContext", "AgentOutcome", "AgentFn"]

@@ -102,7 +102,7 @@ class Episode:
 
 
 def _check_config(cfg: BatchConfig) -> None:
-    from aw.agents import AGENTS
+    from aw.agents import AGENT_OPTIONS, AGENTS
     from aw.runner.harness import HARNESSES
 
     if (cfg.agent is None) == (cfg.harness is None):
@@ -111,6 +111,13 @@ def _check_config(cfg: BatchConfig) -> None:
         raise RunnerError(f"unknown agent {cfg.agent!r}; available: {', '.join(sorted(AGENTS))}")
     if cfg.harness is not None and cfg.harness not in HARNESSES:
         raise RunnerError(f"unknown harness {cfg.harness!r}; available: {', '.join(sorted(HARNESSES))}")
+    if cfg.agent_options:
+        known = AGENT_OPTIONS.get(cfg.agent or "", frozenset())
+        unknown = sorted(set(cfg.agent_options) - known)
+        if unknown:
+            who = f"agent {cfg.agent!r}" if cfg.agent else f"harness {cfg.harness!r}"
+            raise RunnerError(f"unknown --agent-option {', '.join(unknown)} for {who}; known: "
+                              f"{', '.join(sorted(known)) or 'none'}")
     if cfg.noise is not None and cfg.agent != "oracle":
         raise RunnerError("--noise applies to the oracle agent only")
     if cfg.noise is not None and not (cfg.noise >= 0 and cfg.noise < float("inf")):

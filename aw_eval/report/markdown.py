@@ -348,6 +348,8 @@ def render_markdown(doc: dict[str, Any], plots: dict[str, str] | None = None) ->
         f"; seed {st['seed']}. Generated {doc['generated_at']} (schema {doc['format']} v{doc['format_version']})." +
         (f" **Protocol overrides (not the paper's protocol): {st['protocol_overrides']}.**"
          if st.get("protocol_overrides") else ""),
+        *([f"**PARTIAL STUDY: {sum(len(doc['unscored_runs'].get(k, [])) for k in ('error', 'task_error'))} runs could "
+           "not be scored (listed under Runs); the tables count them 0.**"] if doc.get("partial") else []),
         "## Runs", _runs(doc),
         "## Table 1: benchmark results", _table1(doc),
         "## Quality per cell (PA, SR, SR^a, SCD)", _quality_full(doc),

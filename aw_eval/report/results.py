@@ -60,6 +60,9 @@ def _run_entry(study: Study, system: str, task_id: str) -> dict[str, Any]:
     return entry
 
 
+PARTIAL_STATUSES = ("error", "task_error")
+
+
 def build_results(study: Study, settings: AnalysisSettings, *, suite_dir: str = "", runs_dir: str = "",
                   score_stats: dict[str, Any] | None = None) -> dict[str, Any]:
     """Run every analysis; returns the ``scores.json`` document."""
@@ -90,6 +93,9 @@ def build_results(study: Study, settings: AnalysisSettings, *, suite_dir: str = 
         "tasks": tasks,
         "runs": runs,
         "unscored_runs": by_status,
+        # Runs the tool failed to score (the evaluator raised, a task's geometry did not load): the
+        # aggregates count them 0, so the study is incomplete, not a measurement of those runs.
+        "partial": any(st in by_status for st in PARTIAL_STATUSES),
         "unknown_runs": study.unknown_runs,
         "quality": analyses.quality(study),
         "resources": analyses.resources(study),

@@ -13,7 +13,7 @@ an in-memory :class:`Study` for the statistics, analyses and reports.
 from aw_eval.study.episode import EpisodeArrays, RunUnreadable, call_kind, edit_magnitudes, read_episode
 from aw_eval.study.job import RunRequest, ScoreSettings, TaskJob, TaskOutput, score_task
 from aw_eval.study.model import STATUS_MISSING, STATUS_SCORED, STATUS_UNREADABLE, RunScore, TaskFacts
-from aw_eval.study.runner import ScoreStats, StudyError, discover_runs, score_study
+from aw_eval.study.runner import ScoreStats, ScoringFailed, StudyError, discover_runs, score_study
 from aw_eval.study.table import RunRecord, Study
 
 __all__ = [
@@ -28,6 +28,7 @@ __all__ = [
     "ScoreSettings",
     "ScoreStats",
     "Study",
+    "ScoringFailed",
     "StudyError",
     "TaskFacts",
     "TaskJob",

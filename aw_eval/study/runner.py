@@ -14,6 +14,7 @@ import os
 import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,11 +27,17 @@ from aw_eval.study.job import STATUS_ERROR, RunRequest, ScoreSettings, TaskJob, 
 from aw_eval.study.model import STATUS_MISSING, RunScore
 from aw_eval.study.table import RunRecord, Study
 
-__all__ = ["StudyError", "discover_runs", "score_study", "ScoreStats", "default_jobs"]
+__all__ = ["StudyError", "ScoringFailed", "discover_runs", "score_study", "ScoreStats", "default_jobs"]
 
 
 class StudyError(Exception):
     """A problem with the inputs as a whole (no suite, no runs directory): one line for the user."""
+
+
+class ScoringFailed(StudyError):
+    """The scoring machinery failed (a worker process died, the process pool broke, a Dask worker
+    was lost): a failure of the tool, not of the runs, so no run is scored 0 for it. Tasks scored
+    before the failure are cached; a rerun resumes."""
 
 
 @dataclass
@@ -81,6 +88,12 @@ def discover_runs(runs_dir: Path, task_ids: set[str]) -> tuple[list[str], dict[t
     if not runs_dir.is_dir():
         raise StudyError(f"{runs_dir}: runs directory not found")
     systems = sorted(p.name for p in runs_dir.iterdir() if p.is_dir() and not p.name.startswith("."))
+    as_tasks = [s for s in systems if s in task_ids and _is_run_dir(runs_dir / s)]
+    if as_tasks:
+        shown = ", ".join(as_tasks[:3]) + (", ..." if len(as_tasks) > 3 else "")
+        raise StudyError(f"{runs_dir} looks like one system's folder: its subdirectories {shown} are runs of suite "
+                         f"tasks; pass the runs root that holds it ({runs_dir.parent}), laid out as "
+                         "RUNS_DIR/<system>/<task_id>/")
     found: dict[tuple[str, str], Path] = {}
     unknown: list[dict[str, Any]] = []
     for s in systems:
@@ -105,11 +118,13 @@ def _worker_init() -> None:
     os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
 
 
-def _failed(job: TaskJob, exc: BaseException) -> TaskOutput:
-    """The output of a job whose worker failed: every run gets status ``error`` (not cached)."""
-    msg = f"worker failed: {type(exc).__name__}: {exc}".strip()
-    return TaskOutput(job.task_id, None, [RunScore.unscored(r.system, job.task_id, STATUS_ERROR, [msg]) for r in job.runs],
-                      error=msg)
+def _failed(job: TaskJob, exc: BaseException, where: str) -> ScoringFailed:
+    """The error for a job whose worker failed."""
+    msg = f"scoring failed: {where} died or broke while scoring task {job.task_id} ({type(exc).__name__}: {exc})"
+    if isinstance(exc, BrokenProcessPool):
+        msg += ("; if score_study is called from a script, put the call under `if __name__ == \"__main__\":` "
+                "(worker processes import the script)")
+    return ScoringFailed(msg + "; tasks scored before it are cached, and a rerun resumes from them")
 
 
 def _run_jobs(jobs: list[TaskJob], *, scheduler: str | None, n_jobs: int) -> tuple[Iterator[TaskOutput], str, Callable[[], None]]:
@@ -132,13 +147,22 @@ def _run_jobs(jobs: list[TaskJob], *, scheduler: str | None, n_jobs: int) -> tup
         def gen_dask() -> Iterator[TaskOutput]:
             for fut in dask_completed(futures):
                 try:
-                    yield fut.result()
-                except Exception as exc:  # a worker died or could not run the job
-                    yield _failed(job_of[fut.key], exc)
+                    out = fut.result()
+                except Exception as exc:  # a worker died (KilledWorker) or could not run the job
+                    raise _failed(job_of[fut.key], exc, "a Dask worker") from None
+                yield out
 
         return gen_dask(), f"dask:{scheduler}", client.close
     if n_jobs <= 1 or len(jobs) == 1:
-        return (score_task(j) for j in jobs), "in-process", lambda: None
+        def gen_inline() -> Iterator[TaskOutput]:
+            for j in jobs:
+                try:
+                    out = score_task(j)
+                except Exception as exc:  # score_task reports bad runs itself: this is a bug or a crash
+                    raise _failed(j, exc, "the scoring code") from exc
+                yield out
+
+        return gen_inline(), "in-process", lambda: None
     pool = ProcessPoolExecutor(max_workers=min(n_jobs, len(jobs)), mp_context=multiprocessing.get_context("spawn"),
                                initializer=_worker_init)
     futs = {pool.submit(score_task, j): j for j in jobs}
@@ -146,9 +170,10 @@ def _run_jobs(jobs: list[TaskJob], *, scheduler: str | None, n_jobs: int) -> tup
     def gen_pool() -> Iterator[TaskOutput]:
         for f in as_completed(futs):
             try:
-                yield f.result()
+                out = f.result()
             except Exception as exc:  # e.g. BrokenProcessPool: a worker was killed
-                yield _failed(futs[f], exc)
+                raise _failed(futs[f], exc, "a scoring worker process") from None
+            yield out
 
     return gen_pool(), f"processes:{min(n_jobs, len(jobs))}", lambda: pool.shutdown(cancel_futures=True)
 

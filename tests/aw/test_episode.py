@@ -225,3 +225,15 @@ def test_renderer_failure_is_an_internal_error(tmp_path):
     ep.close()
     calls = read_trajectory(tmp_path / "run" / "trajectory.jsonl").calls
     assert calls[0].error.startswith("internal error: RuntimeError") and calls[0].image is None
+
+
+def test_huge_integers_are_recorded_not_fatal(episode):
+    """Integers beyond 64 bits (a fuzzer's) are recorded as text; recording never fails on them."""
+    for value in (10**30, -(10**30), 10**5000):
+        with pytest.raises(EpisodeError, match="invalid arguments"):
+            episode.call("list_objects", {"x": value})
+    episode.reject("get_object", {"id": 2**64}, "invalid")
+    episode.close()
+    traj = read_trajectory(episode.run_dir / "trajectory.jsonl")
+    assert [c.args for c in traj.calls] == [{"x": str(10**30)}, {"x": str(-(10**30))}, {"x": "<integer of 16610 bits>"},
+                                            {"id": str(2**64)}]

@@ -152,9 +152,11 @@ async def test_budget_exhausted(box_task, tmp_path):
     task_dir, _, _ = box_task
     run = tmp_path / "run"
     async with Client(server_params(task_dir, run, "--budget-minutes", "0.01")) as c:  # 0.6 s
-        await c.call_tool("translate_objects", {"ids": ["p01"], "delta": [1, 0, 0]})  # before the clock: no budget
+        # The first edit starts the clock even without start_episode, which then changes nothing.
+        await c.call_tool("translate_objects", {"ids": ["p01"], "delta": [1, 0, 0]})
         r = await c.call_tool("start_episode", {})
         assert r.structured_content["episode"]["budget_minutes"] == 0.01
+        assert "already started" in r.structured_content["message"]
         ok = await c.call_tool("translate_objects", {"ids": ["p02"], "delta": [0, 1, 0]})
         assert not ok.is_error
         await anyio.sleep(1.0)
@@ -182,7 +184,7 @@ async def test_budget_exhausted(box_task, tmp_path):
     traj = read_trajectory(run / "trajectory.jsonl")
     assert traj.end.reason == "timeout"
     assert [c.ok for c in traj.calls if c.tool != "get_state"] == [True, True, True, False, False, False, False, True, True]
-    assert traj.calls[0].episode_active is False and traj.calls[0].t == 0.0
+    assert traj.calls[0].episode_active is True and traj.calls[0].t == 0.0
 
 
 def _free_port() -> int:

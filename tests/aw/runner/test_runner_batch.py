@@ -136,3 +136,15 @@ def test_cli_rejects_a_missing_suite(tmp_path, capsys):
 def test_config_needs_exactly_one_of_agent_or_harness(tiny_suite, tmp_path):
     with pytest.raises(RunnerError, match="exactly one"):
         run_batch(BatchConfig(suite_dir=tiny_suite, system="x", out_dir=tmp_path, progress=False))
+
+
+def test_unknown_agent_options_are_refused_with_the_known_list(tiny_suite, tmp_path, capsys):
+    # `edit` is a typo of the random agent's `edits`: once accepted and ignored.
+    rc = aw_run([str(tiny_suite), "--agent", "random", "--agent-option", "edit=3", "--out", str(tmp_path / "o")])
+    assert rc == 2
+    err = capsys.readouterr().err
+    assert "unknown --agent-option edit for agent 'random'; known: edits" in err
+    assert not (tmp_path / "o").exists()
+    with pytest.raises(RunnerError, match="known: none"):
+        run_batch(BatchConfig(suite_dir=tiny_suite, system="x", out_dir=tmp_path / "o", agent="heuristic",
+                              agent_options={"views": 2}, progress=False))
