@@ -12,7 +12,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from aw_eval.jaxcfg import jax_modules
+from aw_eval.kernels.jaxcfg import jax_modules
 
 __all__ = ["chamfer", "chamfer_pairs", "CHUNK"]
 

@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 
 from aw_eval.geometry import Checkpoint, TaskGeometry
-from aw_eval.matching import match_parts
+from aw_eval.matching import match_parts, match_within_groups
 from aw_eval.results import Registration, ScoreResult
 
-__all__ = ["finalize", "rescore_thresholds"]
+__all__ = ["finalize", "finalize_costs", "rescore_thresholds"]
 
 
 def finalize(geom: TaskGeometry, ck: Checkpoint, reg: Registration, mode: str) -> ScoreResult:
@@ -28,6 +28,21 @@ def finalize(geom: TaskGeometry, ck: Checkpoint, reg: Registration, mode: str) -
     a = geom.divisor * np.einsum("pji,kj->pik", ck.rotations, reg.rotation)  # div R_i^T R_reg^T
     b = -np.einsum("pji,pj->pi", ck.rotations, geom.divisor * (reg.rotation.T @ reg.translation) + ck.poses[:, :3])
     assign, errors = match_parts(geom.index(), moved, geom.groups, (a, b))
+    return _result(geom, reg, assign, errors, mode)
+
+
+def finalize_costs(geom: TaskGeometry, reg: Registration, part_cd: np.ndarray, mode: str) -> ScoreResult:
+    """Metrics under registration ``reg`` from every pair's part CD ``part_cd (P, P)`` (registered
+    pred part i, target part j; computed by the ``jax`` backend): Hungarian within groups on them."""
+    cost = np.full_like(part_cd, np.inf)
+    for g in geom.groups:
+        cost[np.ix_(g, g)] = part_cd[np.ix_(g, g)]
+    assign, errors = match_within_groups(cost, geom.groups)
+    return _result(geom, reg, assign, errors, mode)
+
+
+def _result(geom: TaskGeometry, reg: Registration, assign: np.ndarray, errors: np.ndarray, mode: str) -> ScoreResult:
+    st = geom.settings
     ok = errors <= st.threshold
     return ScoreResult(
         pa=float(ok.mean()),

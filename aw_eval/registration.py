@@ -9,6 +9,9 @@ nearest distances) improves by less than ``tol`` (1e-9); keep the best state vis
 with the lowest objective wins; on an exact tie the earlier start wins.
 
 ``exact`` runs every start at full resolution (the same numbers as :mod:`aw_eval.reference`);
+The ``jax`` backend registers many checkpoints of a task at once, every start of every
+checkpoint in lock step on an XLA device (:func:`register_exact_many`, over
+:func:`aw_eval.kernels.icp_batch`): the same rule and the same numbers to rounding.
 ``fast`` prunes the starts coarse-to-fine (:func:`aw_eval.kernels.coarse_to_fine`) and refines
 further where a decision is near its threshold (agreement with ``exact`` is measured, not
 guaranteed; see docs/performance.md).
@@ -20,15 +23,19 @@ import numpy as np
 
 from aw.pose import as_finite
 from aw_eval.geometry import Checkpoint, TaskGeometry
-from aw_eval.kernels import ICPProblem, build_tree, coarse_to_fine, fast_settings, graph_for, same_basin
+from aw_eval.kernels import (ICPProblem, accelerator_present, build_tree, coarse_to_fine, fast_settings, graph_for,
+                             icp_batch, same_basin)
 from aw_eval.results import Registration
 from aw_eval.settings import ProtocolSettings
 from aw_eval.starts import pca_starts, same_id_starts, start_frame
 
-__all__ = ["MODES", "checkpoint_starts", "register_points", "register_exact", "register_fast", "escalate", "near_threshold",
+__all__ = ["MODES", "BACKENDS", "resolve_backend", "register_exact_many", "checkpoint_starts", "register_points", "register_exact", "register_fast", "escalate", "near_threshold",
            "register", "register_checkpoint", "CONTACT_WALKS"]
 
 MODES = ("exact", "fast")
+# numba: compiled walks on the CPU, one start at a time; jax: batched brute force on any XLA
+# device; auto: jax for exact when JAX sees an accelerator, numba otherwise
+BACKENDS = ("auto", "numba", "jax")
 
 
 def checkpoint_starts(geom: TaskGeometry, ck: Checkpoint) -> tuple[np.ndarray, np.ndarray]:
@@ -82,6 +89,19 @@ def _own_graph_where_parts_touch(index, pred_parts: np.ndarray):
 
 def _full_problem(geom: TaskGeometry, ck: Checkpoint) -> ICPProblem:
     return geom.index().assembly_problem(ck.poses, ck.rotations, ck.parts, geom.divisor)
+
+
+def register_exact_many(geom: TaskGeometry, cks: list[Checkpoint]) -> list[Registration]:
+    """The protocol's registration of every checkpoint of ``cks`` at once (``jax`` backend): all
+    starts of all checkpoints run in lock step; per checkpoint the lowest objective wins, ties
+    to the earlier start (``argmin`` takes the first)."""
+    st = geom.settings
+    starts = [checkpoint_starts(geom, ck) for ck in cks]
+    preds = np.stack([ck.points for ck in cks])
+    obj, rot, trans = icp_batch(preds, geom.index().target, np.stack([s[0] for s in starts]),
+                                np.stack([s[1] for s in starts]), st.max_iters, st.tol)
+    best = np.argmin(obj, axis=1)
+    return [Registration(float(obj[c, k]), rot[c, k], trans[c, k], int(k), obj[c]) for c, k in enumerate(best)]
 
 
 def register_exact(geom: TaskGeometry, ck: Checkpoint) -> Registration:
@@ -152,6 +172,19 @@ def register(pred, target, starts=None, settings=None) -> Registration:
 def check_mode(mode: str) -> None:
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+
+
+def resolve_backend(backend: str, mode: str) -> str:
+    """``"numba"`` or ``"jax"`` for ``backend`` in :data:`BACKENDS` and ``mode``: ``auto`` picks
+    ``jax`` for ``exact`` where JAX sees a GPU or TPU; ``jax`` runs ``exact`` only (``fast``'s
+    pruning is a CPU design)."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    if backend == "auto":
+        return "jax" if mode == "exact" and accelerator_present() else "numba"
+    if backend == "jax" and mode != "exact":
+        raise ValueError(f"backend 'jax' runs mode 'exact' only, got mode {mode!r}")
+    return backend
 
 
 def register_checkpoint(geom: TaskGeometry, poses, mode: str = "exact") -> Registration:

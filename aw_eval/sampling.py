@@ -12,7 +12,7 @@ from functools import lru_cache
 import numpy as np
 import trimesh
 
-from aw_eval.jaxcfg import jax_modules
+from aw_eval.kernels.jaxcfg import jax_modules
 from aw_eval.settings import ProtocolSettings
 
 __all__ = ["part_seed", "surface_samples", "fps_numpy", "fps_jax", "part_clouds"]

@@ -7,7 +7,9 @@
 3. registered parts are matched to target parts within equivalence groups (:mod:`aw_eval.matching`);
 4. PA, SR, SCD and SR^a follow (:mod:`aw_eval.metrics`).
 
-Scoring one checkpoint (:func:`score`) is a pure function of ``(geometry, poses, mode)``. A batch
+Scoring one checkpoint (:func:`score`) is a pure function of ``(geometry, poses, mode)``;
+``backend`` only chooses where the arithmetic runs (``numba`` on the CPU, ``jax`` on any XLA
+device, many checkpoints at once; the same numbers to rounding). A batch
 (:func:`score_batch`) removes duplicate rows; in ``fast`` mode it also reads its rows as a
 trajectory (a near-threshold refinement may start from the previous row's), so a batch is a pure
 function of its rows in order: any worker layout gives identical numbers.
@@ -22,21 +24,41 @@ import numpy as np
 
 from aw_eval.chamfer import chamfer_pairs
 from aw_eval.geometry import Checkpoint, TaskGeometry
-from aw_eval.kernels import fast_settings
-from aw_eval.metrics import finalize
-from aw_eval.registration import MODES, check_mode, escalate, near_threshold, register_exact, register_fast
+from aw_eval.kernels import fast_settings, part_cd_batch
+from aw_eval.metrics import finalize, finalize_costs
+from aw_eval.registration import (BACKENDS, MODES, check_mode, escalate, near_threshold, register_exact, register_exact_many,
+                                  register_fast, resolve_backend)
 from aw_eval.results import BatchScores, Registration, ScoreResult
 
-__all__ = ["MODES", "score", "score_batch", "part_diagnostics", "PartDiagnostics"]
+__all__ = ["MODES", "BACKENDS", "JAX_CHUNK", "score", "score_batch", "part_diagnostics", "PartDiagnostics"]
 
 
-def score(geom: TaskGeometry, poses, mode: str = "exact") -> ScoreResult:
+# Checkpoints per call of the jax backend (calls are padded to a power of two up to it, so a
+# study compiles a handful of shapes)
+JAX_CHUNK = 32
+
+
+def score(geom: TaskGeometry, poses, mode: str = "exact", backend: str = "auto") -> ScoreResult:
     """Score one checkpoint ``poses (P, 7)`` (scored parts, in ``geom.part_ids`` order)."""
     check_mode(mode)
+    backend = resolve_backend(backend, mode)
     poses = geom.check_poses(poses)
     if poses.ndim != 2:
         raise ValueError(f"score takes one checkpoint (P, 7); use score_batch for {poses.shape}")
+    if backend == "jax":
+        return _score_many_jax(geom, [geom.checkpoint(poses)], mode)[0]
     return _score_one(geom, geom.checkpoint(poses), mode, None)[0]
+
+
+def _score_many_jax(geom: TaskGeometry, cks: list[Checkpoint], mode: str) -> list[ScoreResult]:
+    """``exact`` scores of ``cks`` on the jax backend: registration and every part pair's CD
+    batched over the checkpoints; the Hungarian step and the metrics on the host."""
+    size = 1 << (len(cks) - 1).bit_length()  # padded with copies of the last checkpoint
+    padded = cks + [cks[-1]] * (size - len(cks))
+    regs = register_exact_many(geom, padded)
+    moved = np.stack([ck.parts @ r.rotation.T + r.translation for ck, r in zip(padded, regs)])
+    costs = part_cd_batch(moved, geom.target_parts())
+    return [finalize_costs(geom, r, c, mode) for r, c in zip(regs[: len(cks)], costs)]
 
 
 def _score_one(geom: TaskGeometry, ck: Checkpoint, mode: str, warm: Registration | None) -> tuple[ScoreResult, Registration | None]:
@@ -59,7 +81,7 @@ def _score_one(geom: TaskGeometry, ck: Checkpoint, mode: str, warm: Registration
     return res, refined
 
 
-def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None) -> BatchScores:
+def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None, backend: str = "auto") -> BatchScores:
     """Score ``poses (N, P, 7)`` in row order (identical rows are scored once, at their first
     occurrence). ``exact`` rows equal :func:`score`'s. In ``fast`` mode the rows are taken as a
     trajectory: a row refined near a threshold starts its refinement from the previous row's
@@ -68,9 +90,11 @@ def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None) -
     batch gives the same numbers in any process or worker layout, but splitting a trajectory
     into other batches may change the last digits of a refined row.
 
-    ``progress``: optional callable ``(done, total)`` called after each unique row.
+    ``progress``: optional callable ``(done, total)`` called after each unique row (on the
+    ``jax`` backend, after each call of up to :data:`JAX_CHUNK` of them).
     """
     check_mode(mode)
+    backend = resolve_backend(backend, mode)
     poses = geom.check_poses(poses)
     if poses.ndim != 3:
         raise ValueError(f"score_batch takes (N, P, 7) poses, got {poses.shape}")
@@ -84,7 +108,14 @@ def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None) -
     t0 = time.perf_counter()
     results = {}
     warm = None
-    for done, k in enumerate(sorted(first)):
+    order = sorted(first)
+    if backend == "jax":
+        for lo in range(0, len(order), JAX_CHUNK):
+            keys = order[lo: lo + JAX_CHUNK]
+            results.update(zip(keys, _score_many_jax(geom, [geom.checkpoint(poses[k]) for k in keys], mode)))
+            if progress is not None:
+                progress(lo + len(keys), len(first))
+    for done, k in enumerate(order if backend == "numba" else []):
         results[k], warm = _score_one(geom, geom.checkpoint(poses[k]), mode, warm)
         if progress is not None:
             progress(done + 1, len(first))

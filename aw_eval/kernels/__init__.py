@@ -11,7 +11,8 @@ The protocol asks two things of it, and only through the names exported here:
 
 Inside: compiled KD-trees (``kdtree``), Delaunay walks with Voronoi certificates
 (``delaunay``), walks through a posed assembly's parts (``partwalk``), the fused ICP kernel
-(``icp``) and the coarse stage (``fast``). Nothing here decides what is scored: every result is
+(``icp``) and the coarse stage (``fast``); and their XLA counterpart for accelerators
+(``jax_icp``: the same ICP batched over checkpoints x starts with brute-force neighbours). Nothing here decides what is scored: every result is
 the protocol's (``fast`` excepted, whose agreement is measured).
 """
 
@@ -19,6 +20,8 @@ from aw_eval.kernels.compile import compile_kernels
 from aw_eval.kernels.fast import FastSettings, coarse_to_fine, fast_settings, same_basin
 from aw_eval.kernels.icp import ICPProblem, ICPResult, build_tree, graph_for
 from aw_eval.kernels.index import TaskIndex, mean_squared_norm
+from aw_eval.kernels.jax_icp import accelerator_present, icp_batch, part_cd_batch
 
-__all__ = ["FastSettings", "fast_settings", "ICPProblem", "ICPResult", "TaskIndex", "build_tree", "coarse_to_fine",
-           "compile_kernels", "graph_for", "mean_squared_norm", "same_basin"]
+__all__ = ["FastSettings", "fast_settings", "ICPProblem", "ICPResult", "TaskIndex", "accelerator_present", "build_tree", "coarse_to_fine",
+           "compile_kernels", "graph_for", "icp_batch", "mean_squared_norm", "part_cd_batch",
+           "same_basin"]

@@ -1,0 +1,45 @@
+"""The ``jax`` backend scores the protocol (``exact``) with the numbers of the ``numba`` backend:
+identical PA/SR, SCD within 1e-9 relative, on the CPU at small sizes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import aw_eval
+from aw_eval.fixtures import random_checkpoints, swap_identical
+from aw_eval.registration import resolve_backend
+from eval_helpers import small_task
+
+
+def _agree(a, b):
+    assert np.array_equal(a.pa, b.pa) and np.array_equal(a.sr, b.sr) and np.array_equal(a.sra, b.sra)
+    # SCDs of exact registrations are rounding noise (~1e-32): relative error above an absolute floor
+    assert np.all(np.abs(a.scd - b.scd) <= 1e-9 * np.maximum(a.scd, b.scd) + 1e-20)
+    assert np.allclose(a.part_errors, b.part_errors, rtol=1e-9, atol=1e-20)
+
+
+def test_jax_batch_equals_numba_exact_with_swapped_identical_parts():
+    """Far, near and exact checkpoints of a 3-part table with identical legs (two of them with
+    the legs' poses exchanged), one jax call of 8 checkpoints padded from 7."""
+    geom, obj = small_task(3, 16)
+    cks = random_checkpoints(obj, 5, seed=3)
+    legs = next(g for g in geom.groups if len(g) > 1)
+    cks = np.concatenate([cks, [swap_identical(geom, c, legs[0], legs[1]) for c in cks[1:3]]])
+    numba = aw_eval.score_batch(geom, cks, mode="exact", backend="numba")
+    jax = aw_eval.score_batch(geom, cks, mode="exact", backend="jax")
+    _agree(numba, jax)
+    assert {0.0, 1.0} <= set(numba.pa.tolist())  # failed and solved checkpoints both
+    one = aw_eval.score(geom, cks[3], mode="exact", backend="jax")
+    assert (one.pa, one.sr) == (jax.pa[3], jax.sr[3])
+
+
+def test_backend_choice_and_bad_input():
+    assert resolve_backend("numba", "fast") == "numba"
+    assert resolve_backend("jax", "exact") == "jax"
+    # the tests run JAX on the CPU: auto keeps the compiled CPU kernels
+    assert resolve_backend("auto", "exact") == "numba"
+    with pytest.raises(ValueError, match="backend 'jax' runs mode 'exact' only"):
+        resolve_backend("jax", "fast")
+    with pytest.raises(ValueError, match="backend must be one of"):
+        resolve_backend("gpu", "exact")
