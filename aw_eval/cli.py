@@ -1,7 +1,7 @@
 """``aw-score``: rescore whole studies and write the paper's tables, intervals, tests and plots.
 
     aw-score SUITE_DIR RUNS_DIR --out OUT_DIR [--final-only] [--final exact|fast]
-             [--mode fast|exact] [--scheduler ADDRESS] [--jobs J] [--seed S]
+             [--mode fast|exact] [--backend auto|numba|jax] [--scheduler ADDRESS] [--jobs J] [--seed S]
              [--bootstrap 10000] [--permutations 100000] [--no-plots] [--no-html] [--no-progress]
 
 Runs are ``RUNS_DIR/<system>/<task_id>/`` (``trajectory.jsonl``, ``final.json``, optional
@@ -50,6 +50,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="registration mode for final states (default exact: the protocol, every start refined)")
     p.add_argument("--mode", choices=("fast", "exact"), default="fast",
                    help="registration mode for trajectory checkpoints (default fast)")
+    p.add_argument("--backend", choices=("auto", "numba", "jax"), default="auto",
+                   help="where exact scoring runs: numba (compiled, CPU), jax (batched over checkpoints x starts, "
+                   "any XLA device), auto (jax when JAX sees a GPU/TPU; default)")
     p.add_argument("--scheduler", metavar="ADDRESS", default=None,
                    help="Dask scheduler address (e.g. tcp://host:8786): one job per task on the cluster; "
                    "workers must see SUITE_DIR and RUNS_DIR at the same paths")
@@ -104,7 +107,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 2
     try:
         settings = ScoreSettings(checkpoint_mode=args.mode, final_mode=args.final, final_only=args.final_only,
-                                 trust_final=args.trust_final, protocol=tuple(overrides))
+                                 trust_final=args.trust_final, protocol=tuple(overrides), backend=args.backend)
     except (ValueError, TypeError) as exc:
         print(f"aw-score: error: --protocol: {exc}", file=sys.stderr)
         return 2

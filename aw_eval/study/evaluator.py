@@ -14,9 +14,11 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["prepare_thread", "protocol_settings", "load_geometry", "score_states", "final_diagnostics", "evaluator_version", "MODES"]
+__all__ = ["prepare_thread", "protocol_settings", "load_geometry", "score_states", "final_diagnostics", "evaluator_version", "MODES",
+           "BACKENDS"]
 
 MODES = ("exact", "fast")
+BACKENDS = ("auto", "numba", "jax")  # aw_eval.registration.BACKENDS, without importing aw_eval here
 
 
 @functools.lru_cache(maxsize=1)
@@ -73,14 +75,16 @@ def load_geometry(task_dir: Path, targets_path: Path, cache_dir: Path | None, ov
     return aw_eval.load_task_geometry(task_dir, targets_path, cache_dir=cache_dir, settings=settings)
 
 
-def score_states(geom, poses: np.ndarray, mode: str) -> dict[str, np.ndarray]:
+def score_states(geom, poses: np.ndarray, mode: str, backend: str = "auto") -> dict[str, np.ndarray]:
     """Scores of ``poses: (N, P, 7)``: ``part_errors (N, P)``, ``assignment (N, P)``, ``pa``,
-    ``sr``, ``sra``, ``scd`` ``(N,)`` and the raw batch result under ``"batch"``."""
+    ``sr``, ``sra``, ``scd`` ``(N,)`` and the raw batch result under ``"batch"``. ``backend``
+    applies to ``exact`` (``fast`` always runs on the CPU kernels)."""
     import aw_eval
 
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
-    b = aw_eval.score_batch(geom, np.asarray(poses, dtype=np.float64), mode=mode)
+    b = aw_eval.score_batch(geom, np.asarray(poses, dtype=np.float64), mode=mode,
+                            backend=backend if mode == "exact" else "numba")
     return {
         "part_errors": np.asarray(b.part_errors, dtype=np.float64),
         "assignment": np.asarray(b.assignment, dtype=np.int64),

@@ -44,11 +44,16 @@ class ScoreSettings:
     # Overrides of the evaluation protocol's numbers (ProtocolSettings fields): not the paper's
     # protocol; for experiments and fast tests. Sorted (name, value) pairs.
     protocol: tuple[tuple[str, float], ...] = ()
+    # Where exact scoring runs (aw_eval.registration.BACKENDS; fast runs on the CPU kernels):
+    # the same numbers to rounding, so not part of the cache key.
+    backend: str = "auto"
 
     def __post_init__(self) -> None:
         for name in ("checkpoint_mode", "final_mode"):
             if getattr(self, name) not in evaluator.MODES:
                 raise ValueError(f"{name} must be one of {evaluator.MODES}, got {getattr(self, name)!r}")
+        if self.backend not in evaluator.BACKENDS:
+            raise ValueError(f"backend must be one of {evaluator.BACKENDS}, got {self.backend!r}")
         object.__setattr__(self, "protocol", tuple(sorted(self.protocol)))
         evaluator.protocol_settings(self.protocol)  # validates names and values
 
@@ -110,7 +115,7 @@ def _score_run(req: RunRequest, task_id: str, geom, all_ids: list[str], centroid
     ck = None
     t0 = time.perf_counter()
     if len(ep.ck_poses):
-        ck = evaluator.score_states(geom, ep.ck_poses, settings.checkpoint_mode)
+        ck = evaluator.score_states(geom, ep.ck_poses, settings.checkpoint_mode, settings.backend)
         r.ck_pa, r.ck_sr, r.ck_sra, r.ck_scd = ck["pa"], ck["sr"], ck["sra"], ck["scd"]
         r.ck_part_errors, r.ck_assignment = ck["part_errors"], ck["assignment"]
         r.ck_reg_rotation, r.ck_reg_translation = ck["reg_rotation"], ck["reg_translation"]
@@ -124,7 +129,7 @@ def _score_run(req: RunRequest, task_id: str, geom, all_ids: list[str], centroid
         fin, row, poses = ck, len(ep.ck_poses) - 1, ep.ck_poses
     else:
         poses = ep.final_poses[None]
-        fin, row = evaluator.score_states(geom, poses, settings.final_mode), 0
+        fin, row = evaluator.score_states(geom, poses, settings.final_mode, settings.backend), 0
     r.pa, r.sr, r.sra, r.scd = (float(fin[k][row]) for k in ("pa", "sr", "sra", "scd"))
     r.part_errors, r.assignment = fin["part_errors"][row], fin["assignment"][row]
     r.reg_rotation, r.reg_translation = fin["reg_rotation"][row], fin["reg_translation"][row]

@@ -58,3 +58,31 @@ def test_schedule_jobs_largest_first_and_repeated_meshes_last(tmp_path):
     jobs = [task("a-none", ["x", "y"]), task("a-image", ["x", "y"]), task("b", ["u", "v", "w"]), task("c", ["z"])]
     order = [j.task_id for j in schedule_jobs(jobs, {"a-none": 2, "a-image": 2, "b": 3, "c": 1})]
     assert order == ["b", "a-image", "c", "a-none"]
+
+
+def test_jax_backend_scores_a_study_as_numba_does(tmp_path):
+    """``ScoreSettings(backend="jax")`` (``aw-score --backend jax``) scores exact final states with
+    the numba backend's PA/SR and SCD within 1e-9 relative; a backend that does not exist is refused."""
+    import pytest
+
+    from aw_eval.registration import BACKENDS
+    from aw_eval.study import evaluator
+
+    assert evaluator.BACKENDS == BACKENDS
+    with pytest.raises(ValueError, match="backend must be one of"):
+        ScoreSettings(backend="gpu")
+    blocks = (("fantastic_breaks", ("none",)),)
+    suite = box_suite(tmp_path / "suite", objects_per_source=1, n_parts=2, blocks=blocks)
+    write_scripted_run(tmp_path / "runs" / "S" / "fantastic_breaks-box000-none", suite, "fantastic_breaks-box000-none",
+                       system="S", correct=["p01"], inspect_moves=False)
+    geo = tmp_path / "geometry"
+    out = {}
+    for backend in ("numba", "jax"):
+        settings = ScoreSettings(final_only=True, protocol=SMALL, backend=backend)
+        out[backend] = score_study(suite, tmp_path / "runs", tmp_path / backend, settings, n_jobs=1, progress=False,
+                                   geometry_cache=geo)[0]
+    (key, a), = out["numba"].runs.items()
+    b = out["jax"].runs[key]
+    assert a.score.status == b.score.status == "scored"
+    assert (a.score.pa, a.score.sr, a.score.sra) == (b.score.pa, b.score.sr, b.score.sra)
+    assert abs(a.score.scd - b.score.scd) <= 1e-9 * abs(a.score.scd) + 1e-20
