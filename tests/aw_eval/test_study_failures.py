@@ -105,3 +105,44 @@ def test_runs_the_tool_failed_to_score_mark_the_study_partial():
     doc = build_results(make_study(entries, runs), AnalysisSettings(n_draws=20, n_permutations=20))
     assert doc["partial"] is True and doc["unscored_runs"]["error"][0]["task_id"] == entries[0].task_id
     assert "**PARTIAL STUDY: 1 runs could not be scored" in render_markdown(doc)
+
+
+def test_a_lost_dask_worker_is_an_error_not_zeros(small, tmp_path):
+    import signal
+    import threading
+    import time
+
+    import dask
+    import psutil
+    from distributed import Client, LocalCluster
+
+    from aw_eval.study import ScoringFailed
+
+    root, suite, runs, tasks = small
+    outcome: dict = {}
+
+    def score(address: str) -> None:
+        try:
+            outcome["study"] = score_study(suite, runs, tmp_path / "o", ScoreSettings(), scheduler=address, progress=False)
+        except Exception as exc:
+            outcome["error"] = exc
+
+    # No retry on another worker: the first worker lost mid-task fails the task (KilledWorker).
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+        with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+            thread = threading.Thread(target=score, args=(cluster.scheduler_address,))
+            thread.start()
+            with Client(cluster.scheduler_address) as watcher:
+                while not any(watcher.processing().values()):
+                    assert thread.is_alive(), outcome
+                    time.sleep(0.02)
+                workers = [p for p in psutil.Process().children(recursive=True)
+                           if "spawn_main" in " ".join(p.cmdline())]
+                assert workers
+                for p in workers:
+                    os.kill(p.pid, signal.SIGKILL)
+                thread.join(600)
+    assert "study" not in outcome
+    err = outcome["error"]
+    assert isinstance(err, ScoringFailed) and "a Dask worker died or broke while scoring task" in str(err)
+    assert "KilledWorker" in str(err)

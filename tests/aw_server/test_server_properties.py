@@ -55,7 +55,7 @@ class Live:
         return {"poses": s["poses"], "groups": s["groups"], "camera": s["camera"]}
 
     def recorded(self) -> int:
-        return len((self.run_dir / "trajectory.jsonl").read_text().splitlines()) - 1
+        return (self.run_dir / "trajectory.jsonl").read_bytes().count(b"\n") - 1  # lines after the header
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +68,7 @@ def live(box_task, tmp_path_factory):
 
 
 @EXAMPLES
-@given(tool=st.sampled_from([s.name for s in TOOL_SPECS if s.kind != "capture"] + ["no_such_tool"]), args=arguments)
+@given(tool=st.sampled_from([s.name for s in TOOL_SPECS] + ["no_such_tool"]), args=arguments)
 def test_any_arguments_to_any_tool(live, tool, args):
     before = live.state()
     result = live.call(tool, args)

@@ -148,3 +148,27 @@ def test_unknown_agent_options_are_refused_with_the_known_list(tiny_suite, tmp_p
     with pytest.raises(RunnerError, match="known: none"):
         run_batch(BatchConfig(suite_dir=tiny_suite, system="x", out_dir=tmp_path / "o", agent="heuristic",
                               agent_options={"views": 2}, progress=False))
+
+
+def test_a_run_dir_a_live_server_records_into_is_left_untouched(tiny_suite, tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    run_dir = tmp_path / "o" / "idle" / "tiny_table_none"
+    hold = ("import sys, time; from aw.runlock import RunDirLock; RunDirLock(sys.argv[1], command='live-server')"
+            ".acquire(); print('locked', flush=True); time.sleep(120)")
+    proc = subprocess.Popen([sys.executable, "-c", hold, str(run_dir)], stdout=subprocess.PIPE, text=True,
+                            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    try:
+        assert proc.stdout.readline().strip() == "locked"
+        (run_dir / "trajectory.jsonl").write_text("live\n")
+        res = run_batch(BatchConfig(suite_dir=tiny_suite, system="idle", out_dir=tmp_path / "o", agent="idle",
+                                    tasks=["tiny_table_none"], overwrite=True, progress=False))
+    finally:
+        proc.kill()
+        proc.wait()
+        proc.stdout.close()
+    (info,) = res.runs
+    assert info.ended == "error" and f"being recorded by pid {proc.pid}" in info.error and "live-server" in info.error
+    assert (run_dir / "trajectory.jsonl").read_text() == "live\n" and not (run_dir / "run.json").exists()
