@@ -177,3 +177,15 @@ def test_final_json_naming_an_unknown_part(tmp_path):
     ep = read_episode(tmp_path, "task-1", IDS, SCORED, CENTROIDS, DIVISOR)
     assert ep.final_from == "trajectory"
     assert any("names parts ['p99']" in p and "does not have" in p for p in ep.problems)
+
+
+def test_final_json_with_extreme_poses_is_named_not_scored(tmp_path):
+    """Poses of 1e308 once reached the evaluator ("Eigenvalues did not converge")."""
+    calls, last = _episode_calls()
+    _write(tmp_path, calls, TrajectoryEnd(reason="finished", t=10.0, poses=last))
+    (tmp_path / "final.json").write_text(
+        '{"format": "assemblyworld.final", "format_version": 1, "task_id": "task-1", "reason": "finished", "poses": '
+        '{"p01": [1e308, 0, 0, 1, 0, 0, 0], "p02": [0, 0, 0, 1, 0, 0, 0], "p03": [0, 0, 0, 1, 0, 0, 0]}}')
+    ep = read_episode(tmp_path, "task-1", IDS, SCORED, CENTROIDS, DIVISOR)
+    assert ep.final_from == "trajectory" and np.isfinite(ep.final_poses).all()
+    assert any("final.json unreadable" in p and "position beyond +-1e+06" in p for p in ep.problems)

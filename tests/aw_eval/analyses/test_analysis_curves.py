@@ -69,3 +69,17 @@ def test_study_curves_end_at_the_table_values():
     r.ck_drop_persist_alignment, r.ck_drop_persist_both = np.array([False]), np.array([True])
     assert pa_decreases(study)["A"] == {"decreases": 1, "with_assignment_change": 1, "persist_alignment_fixed": 0,
                                         "persist_both_fixed": 1}
+
+
+def test_calls_before_the_clock_start_have_negative_times():
+    """Queries before start_episode / the first edit are recorded at their real negative times:
+    budgets count from the clock start, normalized time from the first call."""
+    from aw_eval.analyses.dynamics import call_positions
+
+    r = _run()
+    r.call_t = np.array([-20.0, -10.0, 0.0, 10.0, 20.0, 30.0])
+    assert budget_values(r, "pa", [0, 10 / 60]).tolist() == [0.0, 0.25]
+    v = normalized_values(r, "pa", [0.0, 0.4, 0.6, 1.0])  # t = -20, 0, 10, final
+    assert v.tolist() == [0.0, 0.0, 0.25, 1.0]
+    pos = call_positions(r.call_t)
+    assert pos[0] == 0.0 and pos[-1] == 1.0 and np.all(np.diff(pos) > 0)
