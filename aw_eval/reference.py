@@ -112,11 +112,14 @@ def icp(p, t_pts, r0, t0, max_iters: int = 100, tol: float = 1e-9, tree_t: cKDTr
 
 def pca_starts(pred: np.ndarray, target: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     """The 24 PCA starts ``(R0, t0)``: ``R0 = A_T S A_P^T``, ``t0 = mu_T - R0 mu_P`` for every
-    ``S`` in :func:`aw.pose.cube_rotations` order."""
-    mu_p, a_p = pca_frame(pred)
-    mu_t, a_t = pca_frame(target)
+    ``S`` in :data:`aw_eval.starts.CUBE` order, frames by :func:`aw_eval.starts.start_frame`
+    (the official scorer's order and frames)."""
+    from aw_eval.starts import CUBE, start_frame
+
+    mu_p, a_p = start_frame(pred)
+    mu_t, a_t = start_frame(target)
     out = []
-    for s in cube_rotations():
+    for s in CUBE:
         r0 = a_t @ s @ a_p.T
         out.append((r0, mu_t - r0 @ mu_p))
     return out
