@@ -189,8 +189,10 @@ def test_report_and_plots(study):
     assert "Protocol overrides" in md
     doc = study["doc"]
     assert set(doc["plots"]) == {"quality_normalized", "quality_budget", "thresholds", "activity", "magnitudes", "reference"}
+    page = (out / "report.html").read_text()  # the same report as a page (tests/aw_eval/report/)
+    assert 'Table 1: benchmark results</h2>' in page and "beta / partnet-box000-image" in page
     for rel in doc["plots"].values():
-        assert f"]({rel})" in md
+        assert f"]({rel})" in md and f'<img src="{rel}"' in page
         with Image.open(out / rel) as im:
             assert im.format == "PNG" and im.width > 300 and im.height > 200
 

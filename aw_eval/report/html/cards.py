@@ -12,13 +12,13 @@ from typing import Any
 import numpy as np
 import orjson
 
-from aw.formats import FormatError, read_trajectory
+from aw.formats import FormatError, read_final, read_trajectory
 from aw_eval.analyses.curves import NORMALIZED_POINTS, normalized_states
 from aw_eval.report.fmt import DASH, fixed
 from aw_eval.report.html.markup import slug
 from aw_eval.report.html.scenes import TaskScene, aligned_poses
 from aw_eval.report.html.svg import Series, step_chart
-from aw_eval.study.episode import RunUnreadable, read_episode
+from aw_eval.study.episode import poses_array
 from aw_eval.study.model import RunScore
 from aw_eval.study.table import Study
 
@@ -29,7 +29,7 @@ CARD_SIZE = (320, 240)  # target and final-state pictures
 FRAME_SIZE = (160, 120)  # filmstrip frames
 MAX_VIEWER_STATES = 200  # recorded states per run in the 3D viewer (evenly spaced; first and last kept)
 MAX_VIEWER_FACES = 1500  # triangles per part in the 3D viewer (vertex clustering above it)
-MAX_LISTED_CALLS = 400  # tool calls listed per run
+MAX_LISTED_CALLS = 2000  # tool calls listed per run
 _SYSTEM_PALETTE = ("#4C72B0", "#DD8452", "#55A868", "#C44E52", "#8172B3", "#937860", "#DA8BC3", "#8C8C8C",
                    "#CCB974", "#64B5CD")
 
@@ -51,36 +51,49 @@ class RunView:
     note: str = ""
 
 
-def load_run_view(study: Study, system: str, task_id: str, scene: TaskScene, all_part_ids: list[str]) -> RunView | None:
-    """The run's recorded states, aligned; None when it was not scored or cannot be read again."""
+def _recorded_states(run_dir: Path, task_id: str, part_ids: list[str]):
+    """``(checkpoint poses (N, P, 7) or None, calls)`` of a run's trajectory, read once."""
+    tpath = run_dir / "trajectory.jsonl"
+    if not tpath.is_file():
+        return None, []
+    try:
+        traj = read_trajectory(tpath)
+    except FormatError:
+        return None, []
+    if traj.header.task_id != task_id or not set(part_ids) <= set(traj.header.part_ids):
+        return None, []
+    return np.stack([poses_array(c.poses, part_ids) for c in traj.checkpoints()]), traj.calls
+
+
+def load_run_view(study: Study, system: str, task_id: str, scene: TaskScene) -> RunView | None:
+    """The run's recorded states, aligned; None when it was not scored or its states cannot be
+    read again. The final state comes from where its scoring took it (``final_from``)."""
     rec = study.record(system, task_id)
     r = rec.score
     if not r.scored or rec.run_dir is None:
         return None
-    # centroids only feed the edit magnitudes, which the card does not use
+    run_dir = Path(rec.run_dir)
+    ck_poses, calls = _recorded_states(run_dir, task_id, scene.part_ids)
     try:
-        ep = read_episode(rec.run_dir, task_id, all_part_ids, scene.part_ids, np.zeros((len(all_part_ids), 3)),
-                          scene.divisor)
-    except RunUnreadable:
+        if r.final_from == "final.json":
+            final = poses_array(read_final(run_dir / "final.json").poses, scene.part_ids)
+        elif ck_poses is not None:
+            final = ck_poses[-1]
+        else:
+            return None
+    except (FormatError, KeyError):
         return None
     note = ""
     if len(r.reg_rotation) == 0:
         note = "drawn unregistered: the cached scores predate saved registrations (rescore with a fresh --out)"
-    final = aligned_poses(ep.final_poses, r.reg_rotation, r.reg_translation, scene.divisor)
+    final = aligned_poses(final, r.reg_rotation, r.reg_translation, scene.divisor)
     states = np.zeros((0, len(scene.part_ids), 7))
-    if len(r.ck_pa) and len(ep.ck_poses) == len(r.ck_pa):
-        regs = len(r.ck_reg_rotation) == len(r.ck_pa)
-        states = np.stack([aligned_poses(p, r.ck_reg_rotation[k], r.ck_reg_translation[k], scene.divisor) if regs else p
-                           for k, p in enumerate(ep.ck_poses)])
+    if len(r.ck_pa) and ck_poses is not None and len(ck_poses) == len(r.ck_pa):
+        states = ck_poses
+        if len(r.ck_reg_rotation) == len(r.ck_pa):
+            states = aligned_poses(ck_poses, r.ck_reg_rotation, r.ck_reg_translation, scene.divisor)
     elif len(r.ck_pa):
         note = "the trajectory changed since it was scored: checkpoints not shown"
-    calls = []
-    tpath = Path(rec.run_dir) / "trajectory.jsonl"
-    if tpath.is_file():
-        try:
-            calls = read_trajectory(tpath).calls
-        except FormatError:
-            calls = []
     return RunView(system, r, states, final, calls, note)
 
 
@@ -172,7 +185,7 @@ def _curves(study: Study, task_id: str, views: dict[str, RunView], colors: dict[
     legend = "".join(f'<span class="key"><span class="sw" style="background:{colors[s.label]}"></span>{html.escape(s.label)}</span>'
                      for s in pa)
     return (f'<div class="curves">{step_chart(pa, "PA (%) over normalized time", (0, 100), fmt=lambda v: f"{v:.0f}")}'
-            f'{step_chart(scd, "SCD ×1000 over normalized time", fmt=lambda v: f"{v:.3g}")}'
+            f'{step_chart(scd, "SCD ×1000 over normalized time", fmt=lambda v: fixed(v, 0 if v >= 100 else 2))}'
             f'<div class="legend">{legend}</div></div>')
 
 
@@ -189,20 +202,27 @@ def _filmstrip(view: RunView, scene: TaskScene, camera, folder: Path, rel: str) 
     return f'<div class="filmstrip">{"".join(frames)}</div>'
 
 
-def _calls(view: RunView) -> str:
-    items = []
+def _calls(view: RunView, task_id: str, data_src: str | None) -> str:
+    """A collapsed list of the run's tool calls, filled from the task's data file when opened
+    (a paper-scale study has ~10^5 calls: listing them inline would make the page slow to open)."""
+    if not view.calls:
+        return '<p class="note">No trajectory: no tool calls.</p>'
+    if data_src is None:
+        return f'<p class="note">{len(view.calls)} tool calls (trajectory.jsonl).</p>'
+    return (f'<details class="calls" data-task="{html.escape(task_id)}" data-src="{html.escape(data_src)}" '
+            f'data-system="{html.escape(view.system)}"><summary>Tool calls ({len(view.calls)})</summary>'
+            '<ol class="calls"></ol></details>')
+
+
+def _call_rows(view: RunView) -> list[list[Any]]:
+    """``[seq, t, tool, arguments (JSON, cut at 160 characters), ok, error]`` per call, at most
+    :data:`MAX_LISTED_CALLS`."""
+    rows = []
     for c in view.calls[:MAX_LISTED_CALLS]:
         args = orjson.dumps(c.args).decode()
-        if len(args) > 160:
-            args = args[:157] + "..."
-        status = "ok" if c.ok else f"error: {c.error or ''}"
-        items.append(f'<li class="{"ok" if c.ok else "err"}"><code>{c.seq}</code> {c.t:.1f} s <b>{html.escape(c.tool)}</b> '
-                     f"<code>{html.escape(args)}</code> {html.escape(status)}</li>")
-    more = len(view.calls) - MAX_LISTED_CALLS
-    if more > 0:
-        items.append(f"<li>... and {more} more (trajectory.jsonl)</li>")
-    return (f"<details><summary>Tool calls ({len(view.calls)})</summary><ol class=\"calls\">{''.join(items)}</ol>"
-            "</details>") if view.calls else '<p class="note">No trajectory: no tool calls.</p>'
+        rows.append([c.seq, round(float(c.t), 2), c.tool, args if len(args) <= 160 else args[:157] + "...", bool(c.ok),
+                     c.error or ""])
+    return rows
 
 
 NO_MESHES = "The suite has no meshes for this task (an official package): no pictures."
@@ -232,7 +252,7 @@ def task_card(study: Study, task: dict[str, Any], doc_runs: dict, scene: TaskSce
         parts.append(f'<div class="run"><h4>{html.escape(s)}</h4>')
         if scene is not None:
             parts.append(_filmstrip(v, scene, camera, folder, rel))
-        parts.append(_calls(v) + "</div>")
+        parts.append(_calls(v, tid, viewer_src) + "</div>")
     if viewer_src is not None:
         parts.append(f'<button class="open3d" data-task="{html.escape(tid)}" data-src="{html.escape(viewer_src)}">'
                      "Open the 3D view</button><div class=\"viewer\" hidden></div>")
@@ -265,9 +285,9 @@ def _pick(n: int, k: int) -> list[int]:
 
 
 def viewer_data(scene: TaskScene, views: dict[str, RunView]) -> dict[str, Any]:
-    """The 3D viewer's document of one task: decimated part meshes (baked frame), the target
+    """The data file of one task: for the 3D view, decimated part meshes (baked frame), the target
     poses, and per system its recorded states (aligned poses, PA, SCD), at most
-    :data:`MAX_VIEWER_STATES` of them plus the final state."""
+    :data:`MAX_VIEWER_STATES` of them plus the final state; per system its tool calls."""
     parts = []
     for pid, m, c in zip(scene.part_ids, scene.meshes, scene.colors):
         v, f = _cluster(np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64), MAX_VIEWER_FACES)
@@ -283,6 +303,7 @@ def viewer_data(scene: TaskScene, views: dict[str, RunView]) -> dict[str, Any]:
                            "poses": np.round(view.states[k], 6).tolist()})
         states.append({"label": "final state", "pa": 100 * r.pa, "scd": 1000 * r.scd if np.isfinite(r.scd) else None,
                        "poses": np.round(view.final, 6).tolist()})
-        systems[s] = {"states": states, "n_recorded": int(len(view.states))}
+        systems[s] = {"states": states, "n_recorded": int(len(view.states)), "calls": _call_rows(view),
+                      "n_calls": len(view.calls)}
     return {"task_id": scene.task_id, "parts": parts, "target": np.round(scene.target_poses, 6).tolist(),
             "systems": systems}

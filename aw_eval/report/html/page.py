@@ -22,8 +22,7 @@ from typing import Any, Callable
 
 import orjson
 
-from aw.formats import FormatError, read_task
-from aw.formats.suite import suite_paths
+from aw.formats import FormatError
 from aw.render_platform import RenderError
 from aw_eval.report.fmt import fixed
 from aw_eval.report.html.cards import load_run_view, system_colors, task_card, viewer_data
@@ -127,13 +126,12 @@ def write_html(study: Study, doc: dict[str, Any], markdown: str, out_dir: str | 
         if suite_dir is not None and facts is not None:
             try:
                 scene = TaskScene.load(Path(suite_dir), tid, list(facts.part_ids), facts.divisor)
-                all_ids = read_task(suite_paths(suite_dir, tid)[0]).part_ids
             except (FormatError, OSError, ValueError, KeyError):
                 scene = None
         try:
             if scene is not None:
                 for s in study.systems:
-                    v = load_run_view(study, s, tid, scene, all_ids)
+                    v = load_run_view(study, s, tid, scene)
                     if v is not None:
                         views[s] = v
                 if views:

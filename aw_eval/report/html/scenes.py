@@ -31,14 +31,18 @@ _QUALITY = 85
 
 
 def aligned_poses(poses: np.ndarray, rotation: np.ndarray, translation: np.ndarray, divisor: float) -> np.ndarray:
-    """``(P, 7)`` wire-form poses of a state moved by the saved registration ``rotation (3, 3)``,
-    ``translation (3,)`` (normalized units) into the target's frame; unchanged when the
-    registration is missing (empty arrays, caches written before it was kept)."""
-    if np.shape(rotation) != (3, 3) or np.shape(translation) != (3,):
-        return np.asarray(poses, dtype=np.float64)
-    reg = np.eye(4)
-    reg[:3, :3] = rotation
-    reg[:3, 3] = divisor * np.asarray(translation)
+    """Wire-form poses ``(P, 7)`` of a state, or ``(N, P, 7)`` of N states, moved by their saved
+    registrations ``rotation (3, 3)`` / ``(N, 3, 3)`` and ``translation (3,)`` / ``(N, 3)``
+    (normalized units) into the target's frame; unchanged when the registration is missing
+    (empty arrays: caches written before it was kept)."""
+    poses = np.asarray(poses, dtype=np.float64)
+    rotation, translation = np.asarray(rotation, np.float64), np.asarray(translation, np.float64)
+    if rotation.shape != poses.shape[:-2] + (3, 3) or translation.shape != poses.shape[:-2] + (3,):
+        return poses
+    reg = np.zeros(poses.shape[:-2] + (1, 4, 4))
+    reg[..., 0, :3, :3] = rotation
+    reg[..., 0, :3, 3] = divisor * translation
+    reg[..., 0, 3, 3] = 1.0
     return matrices_to_poses(reg @ poses_to_matrices(poses))
 
 

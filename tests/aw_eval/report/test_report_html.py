@@ -1,11 +1,12 @@
 """report.html end to end: a tiny study scored by ``aw-score``, its page opened in Debian's
 Chromium (playwright, ``/usr/bin/chromium``, installed by scripts/install.sh) from the file system
 with the network cut: no console error, sortable tables, the 3D view's slider and system switcher,
-cards with real pictures; renders reused on a second call; ``--no-html``."""
+cards with real pictures, tool-call lists; renders reused on a second call; ``--no-html``."""
 
 from __future__ import annotations
 
 import io
+import re
 import shutil
 from pathlib import Path
 
@@ -116,6 +117,13 @@ def test_page_in_chromium(report, browser):
         .every(i => i.complete && i.naturalWidth > 0)""")
     shot = np.asarray(Image.open(io.BytesIO(card.locator(".finals").screenshot())).convert("RGB"))
     assert len(np.unique(shot.reshape(-1, 3), axis=0)) > 200 and shot.std() > 10
+
+    # the tool calls of a run, listed when opened
+    calls = card.locator("details.calls").first
+    n_calls = int(re.search(r"\((\d+)\)", calls.locator("summary").text_content()).group(1))
+    calls.locator("summary").click()
+    page.wait_for_selector(f"#task-{TASK} details.calls[data-ready='1']")
+    assert n_calls > 0 and calls.locator("li").count() == n_calls
 
     # the 3D view: the slider steps through recorded states, the switcher changes system
     card.locator("button.open3d").click()

@@ -53,6 +53,10 @@ def test_aligned_poses_apply_the_saved_registration_in_world_units():
     # the evaluator's map: normalized points x / d go to R (x / d) + t
     expected = divisor * ((apply_pose(poses, pts) / divisor) @ rot.T + trans)
     np.testing.assert_allclose(moved, expected, atol=1e-9)
+    # N states at once, each with its own registration
+    batch = aligned_poses(np.stack([poses, poses]), np.stack([rot, np.eye(3)]), np.stack([trans, np.zeros(3)]), divisor)
+    np.testing.assert_allclose(batch[0], aligned_poses(poses, rot, trans, divisor), atol=1e-12)
+    np.testing.assert_allclose(apply_pose(batch[1], pts), apply_pose(poses, pts), atol=1e-12)
     # without a saved registration the state is drawn as recorded
     np.testing.assert_array_equal(aligned_poses(poses, np.zeros((0, 3, 3)), np.zeros((0, 3)), divisor), poses)
 

@@ -1,6 +1,7 @@
 // The 3D view of a task's runs (plotly mesh3d, loaded on first use from the report's folder):
-// each system's recorded states over the target, a slider over the states, a system switcher.
-// A task's data file calls AWViewer.register(taskId, data); poses are [x, y, z, qw, qx, qy, qz].
+// each system's recorded states over the target, a slider over the states, a system switcher;
+// and the runs' tool-call lists. A task's data file, loaded when one of them opens, calls
+// AWViewer.register(taskId, data); poses are [x, y, z, qw, qx, qy, qz].
 (function () {
   "use strict";
   const PLOTLY_SRC = document.currentScript.dataset.plotly;
@@ -115,6 +116,34 @@
       })
       .then(function () { box.dataset.ready = "1"; });
   }
+  function fillCalls(details, d) {
+    const sys = d.systems[details.dataset.system];
+    const ol = details.querySelector("ol");
+    sys.calls.forEach(function (c) {
+      const li = document.createElement("li");
+      li.className = c[4] ? "ok" : "err";
+      const code = document.createElement("code");
+      code.textContent = c[3];
+      const tool = document.createElement("b");
+      tool.textContent = c[2];
+      li.append(c[0] + " \u00b7 " + c[1].toFixed(1) + " s ", tool, " ", code, " " + (c[4] ? "ok" : "error: " + c[5]));
+      ol.appendChild(li);
+    });
+    if (sys.n_calls > sys.calls.length) {
+      const li = document.createElement("li");
+      li.textContent = "\u2026 and " + (sys.n_calls - sys.calls.length) + " more (trajectory.jsonl)";
+      ol.appendChild(li);
+    }
+    details.dataset.ready = "1";
+  }
+  // tool-call lists are filled from the task's data file the first time they open
+  document.addEventListener("toggle", function (e) {
+    const details = e.target;
+    if (!details.matches || !details.matches("details.calls") || !details.open || details.dataset.ready) return;
+    taskData(details.dataset.task, details.dataset.src)
+      .then(function (d) { if (!details.dataset.ready) fillCalls(details, d); })
+      .catch(function (err) { details.querySelector("ol").textContent = "could not load: " + err.message; });
+  }, true);
   document.addEventListener("click", function (e) {
     const btn = e.target.closest("button.open3d");
     if (!btn) return;
