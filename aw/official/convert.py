@@ -35,6 +35,7 @@ from aw.official.episode import PartEpisode, read_part_episode
 from aw.official.eval_points import EvalInputs, eval_points_path, write_eval_inputs
 from aw.official.ids import sample_id_from_slug, task_id_for_sample
 from aw.official.package import REFERENCE_CONDITIONS, OfficialPackage
+from aw.runlock import RunDirBusy, RunDirLock
 
 __all__ = ["initial_archive_path", "convert_package", "project_camera", "end_reason", "episode_records",
            "write_episode_run", "find_archives", "archive_sample", "run_log_archives", "convert"]
@@ -157,18 +158,24 @@ def write_episode_run(ep: PartEpisode, runs_out: str | Path, system: str, task_i
     traj = run_dir / "trajectory.jsonl"
     if traj.exists() and not force:
         raise FileExistsError(f"{traj}: already exists; pass force=True to replace it")
-    run_dir.mkdir(parents=True, exist_ok=True)
     header, calls, end = episode_records(ep, task_id, system)
-    tmp = traj.with_suffix(".jsonl.tmp")
-    with open(tmp, "wb") as fh:
-        for rec in [header, *calls, end]:
-            fh.write(_dump(rec) + b"\n")
-    os.replace(tmp, traj)
-    write_final(run_dir / "final.json", FinalState(task_id=task_id, reason=end.reason, poses=end.poses))
-    info = RunInfo(system=system, task_id=task_id, started_at=header.started_at, wall_seconds=end.t,
-                   mcp_calls=len(ep.archive.calls), ended="finished",
-                   extra={"official_archive": str(ep.path), "state_index": ep.final_index, **(extra or {})})
-    write_run_info(run_dir / "run.json", info)
+    try:  # never replace a recording that a live server is still writing
+        lock = RunDirLock(run_dir).acquire()
+    except RunDirBusy as exc:
+        raise FileExistsError(str(exc)) from None
+    try:
+        tmp = traj.with_suffix(".jsonl.tmp")
+        with open(tmp, "wb") as fh:
+            for rec in [header, *calls, end]:
+                fh.write(_dump(rec) + b"\n")
+        os.replace(tmp, traj)
+        write_final(run_dir / "final.json", FinalState(task_id=task_id, reason=end.reason, poses=end.poses))
+        info = RunInfo(system=system, task_id=task_id, started_at=header.started_at, wall_seconds=end.t,
+                       mcp_calls=len(ep.archive.calls), ended="finished",
+                       extra={"official_archive": str(ep.path), "state_index": ep.final_index, **(extra or {})})
+        write_run_info(run_dir / "run.json", info)
+    finally:
+        lock.release()
     return run_dir
 
 

@@ -87,3 +87,20 @@ def test_command_line(package, tmp_path, capsys):
     assert sorted(select_attempts([run.path])) == sorted(finals)
     assert main([str(package.root), str(tmp_path / "nowhere"), "--logs", str(tmp_path / "logs")]) == 2
     assert "nowhere: no recorded run" in capsys.readouterr().err
+
+
+def test_conversion_never_replaces_a_live_recording(package, tmp_path):
+    from aw.runlock import RunDirLock
+
+    block, sid = "partnet-none", "21905"
+    arc = write_active(package.initial_archive(block, sid), tmp_path / "a.episode.zip", FINAL.copy())
+    ep = read_part_episode(arc.path, package.initial_archive(block, sid), package.evaluation_inputs(block, sid).part_ids)
+    task_id = task_id_for_sample(block, sid)
+    run_dir = tmp_path / "runs" / "mysystem" / task_id
+    with RunDirLock(run_dir, command="aw-serve live"):
+        (run_dir / "trajectory.jsonl").write_text("live\n")
+        with pytest.raises(FileExistsError, match="being recorded by pid .*aw-serve live"):
+            write_episode_run(ep, tmp_path / "runs", "mysystem", task_id, force=True)
+        assert (run_dir / "trajectory.jsonl").read_text() == "live\n"
+    write_episode_run(ep, tmp_path / "runs", "mysystem", task_id, force=True)  # once it is released
+    assert (run_dir / "trajectory.jsonl").read_text() != "live\n"
