@@ -17,6 +17,7 @@ official names them.
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -41,14 +42,12 @@ OFFICIAL_DATASETS = {
 
 def official_sample(obj: AssembledObject) -> OfficialSample:
     """The official adapters' view of ``obj`` (see the module doc)."""
-    import re
-
     info = obj.meta.get("official", {}) if isinstance(obj.meta, dict) else {}
     frame = np.asarray(info.get("source_to_z_up", np.eye(3)), dtype=np.float64)
     faces, local, poses = info.get("faces", {}), info.get("local", {}), info.get("poses", {})
     parts = []
     for p in obj.parts:
-        if not re.fullmatch(PART_ID_PATTERN.strip("^$"), p.name):
+        if not re.fullmatch(PART_ID_PATTERN, p.name):
             raise ValueError(f"object {obj.object_id}: part id {p.name!r} cannot name a task part ({PART_ID_PATTERN})")
         if p.name in local:
             vertices = np.asarray(local[p.name], dtype=np.float64)

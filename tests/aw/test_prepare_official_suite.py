@@ -65,3 +65,15 @@ def test_cli_defaults_and_refusals(row_file, tmp_path, capsys):
     assert prepare_main(["compose", "--rehosted", str(path), "--per-source", "1", "--out", str(out), "--no-progress",
                          "--protocol", "native", "--force"]) == 0
     assert not (out / "eval_points").exists()  # a replaced suite keeps no stale evaluation points
+
+
+def test_a_source_part_id_that_cannot_name_a_task_part_is_refused_by_name():
+    import trimesh
+
+    from aw.assembly import AssembledObject, SourcePart
+    from aw.prepare.official_task import official_sample
+
+    box = trimesh.creation.box(extents=(0.2, 0.1, 0.05))
+    obj = AssembledObject("o", "partnet", "d", "", [SourcePart("leg.1", box), SourcePart("seat", box.copy())])
+    with pytest.raises(ValueError, match=r"part id 'leg.1'"):
+        official_sample(obj)
