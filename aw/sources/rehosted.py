@@ -4,7 +4,8 @@ One row is one object. Columns (names as published; alternatives in brackets)::
 
     object_id [sample_id, id, uid, name]  string (or integer) id of the object
     source [dataset]                optional: partnet, ikea_manual, assemblybench, fantastic_breaks, ...
-    category                        optional string
+    category                        optional string; without it, the part of an id like
+                                    ``Bench/applaro`` before the slash (the official ids)
     parts                           list of {part_id, vertices, faces}:
         part_id                     string or integer
         vertices                    list of [x, y, z] (or a flat list of 3n numbers)
@@ -248,7 +249,7 @@ def load_row(path: str | Path, row: int, source: str | None = None, up_axis: str
         object_id=object_id,
         source=src,
         dataset=f"rehosted:{src}",
-        category=str(rec.get("category") or "").lower(),
+        category=category_of(rec.get("category"), object_id),
         parts=parts,
         references=references,
         equivalence=equivalence,
@@ -257,6 +258,14 @@ def load_row(path: str | Path, row: int, source: str | None = None, up_axis: str
 
 
 Y_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # (x, y, z) -> (x, -z, y)
+
+
+def category_of(category: Any, object_id: str) -> str:
+    """The row's category in lower case; without one, the prefix of an id ``<Category>/<name>``."""
+    if category:
+        return str(category).lower()
+    head, sep, _ = str(object_id).partition("/")
+    return head.lower() if sep else ""
 
 
 def _final_poses(rec: dict[str, Any], path: Path, where: str) -> dict[str, list[float]] | None:
@@ -318,11 +327,11 @@ def catalog(path: str | Path, source: str | None = None):
             len(p or []) for p in read_table(f, ["parts"]).column("parts").to_pylist()]
         src_col = _column(names, SOURCE_COLUMNS)
         srcs = small.column(src_col).to_pylist() if src_col else [None] * small.num_rows
-        cats = small.column("category").to_pylist() if "category" in names else [""] * small.num_rows
+        cats = small.column("category").to_pylist() if "category" in names else [None] * small.num_rows
         for row, (oid, n, s, c) in enumerate(zip(small.column(id_col).to_pylist(), counts, srcs, cats)):
             n = _int(n, f, f"row {row}.parts_ct")
             named = source or s or source_of_download(f)
             src = normalize_source(named or "rehosted")
             args = (str(f), row) + ((src,) if named else ())
-            out.append(CatalogEntry(src, str(oid), str(c or "").lower(), n, "aw.sources.rehosted:load_row", args))
+            out.append(CatalogEntry(src, str(oid), category_of(c, str(oid)), n, "aw.sources.rehosted:load_row", args))
     return out

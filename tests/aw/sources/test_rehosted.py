@@ -145,4 +145,6 @@ def test_official_rows_source_from_path_poses_and_diagrams(tmp_path):
     assert np.array_equal(part_b.vertices, np.asarray(_official_assemblybench_row()["parts"][1]["vertices"], dtype=float))
     assert np.allclose(part_b.pose, [0.3, 0, 0, 0.9238795325112867, 0, 0, 0.3826834323650898])
     assert rehosted.source_of_download(tmp_path / "ikea-manual" / "x.parquet") == "ikea_manual"
+    assert rehosted.category_of(None, "Bench/applaro") == "bench" and rehosted.category_of("Chair", "x/y") == "chair"
+    assert rehosted.category_of(None, "688") == ""
     assert rehosted.source_of_download(tmp_path / "elsewhere" / "x.parquet") is None
