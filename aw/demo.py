@@ -1,10 +1,10 @@
-"""``aw-demo``: the whole loop of the paper on the embedded synthetic benchmark, in one command.
+"""aw-demo: the whole loop of the paper on the embedded synthetic benchmark, in one command.
 
-1. build the synthetic suite (``aw-prepare synthetic``);
-2. run ``idle``, ``heuristic`` and the ``oracle`` at two noise levels on every task, each
-   episode through its own ``aw-serve`` over MCP (parallel jobs = cores);
-3. rescore every trajectory (``aw-score``);
-4. print the Table-1-style summary with 95% intervals and where the report and plots are.
+    1. build the synthetic suite (aw-prepare synthetic);
+    2. run idle, heuristic and the oracle at two noise levels on every task, each episode
+       through its own aw-serve over MCP (--jobs at a time);
+    3. rescore every trajectory (aw-score: final states by the protocol, exact registration);
+    4. print the Table-1-style summary with 95% intervals and where the report and plots are.
 
 The oracle systems read the hidden targets: they are calibration upper bounds that give the
 analyses a controlled spread, never results.
@@ -13,7 +13,6 @@ analyses a controlled spread, never results.
 from __future__ import annotations
 
 import argparse
-import os
 import re
 import shutil
 import subprocess
@@ -21,9 +20,11 @@ import sys
 import time
 from pathlib import Path
 
+from aw.cli.common import add_jobs, add_overwrite, check_out_dir, new_parser, nonnegative_float, positive_int, run_main
+
 DEFAULT_PER_SOURCE = 5
 DEFAULT_NOISE = (0.5, 1.5)
-QUICK_SCORE_ARGS = ("--final", "fast", "--bootstrap", "1000", "--permutations", "10000")
+QUICK_DRAWS = ("--bootstrap", "1000", "--permutations", "10000")  # the paper: 10,000 and 100,000
 
 
 def _bin(name: str) -> list[str]:
@@ -67,32 +68,41 @@ def summary_from_report(report_md: Path, wanted: tuple[str, ...] = ("Table 1:", 
     return text.strip()[:4000]
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="aw-demo", description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=Path, default=Path("aw-demo"), help="working directory (default ./aw-demo)")
-    p.add_argument("--per-source", type=int, default=DEFAULT_PER_SOURCE,
+def build_parser() -> argparse.ArgumentParser:
+    p = new_parser("aw-demo", "The whole loop of the paper on the embedded synthetic benchmark, in one command.",
+                   epilog=__doc__.split("\n\n")[1] + "\n\nThe oracle systems read the hidden targets: calibration "
+                   "upper bounds, never results. A second call reuses the suite and every finished episode.")
+    p.add_argument("--out", type=Path, default=Path("aw-demo"), metavar="DIR", help="working directory (default ./aw-demo)")
+    p.add_argument("--per-source", type=positive_int("--per-source"), default=DEFAULT_PER_SOURCE, metavar="N",
                    help=f"objects per benchmark source (default {DEFAULT_PER_SOURCE}; the paper's suite has 20)")
-    p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="episodes in parallel (default: cores)")
-    p.add_argument("--noise", type=float, nargs="+", default=list(DEFAULT_NOISE), help="oracle noise levels")
-    p.add_argument("--blocks", help="comma-separated subset of the benchmark sources (default: all four)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--fresh", action="store_true", help="delete --out first (default: reuse what is there)")
-    p.add_argument("--protocol", action="store_true",
-                   help="score final states with the exact protocol and the paper's resample counts (aw-score's "
-                        f"defaults); without it the demo passes aw-score {' '.join(QUICK_SCORE_ARGS)} to fit its time")
-    args = p.parse_args(argv)
-    if args.per_source < 1 or args.jobs < 1:
-        p.error("--per-source and --jobs must be at least 1")
-    if any(not (n >= 0) for n in args.noise):
-        p.error("--noise levels must be >= 0")
+    add_jobs(p, "objects prepared, episodes and scoring workers")
+    p.add_argument("--noise", type=nonnegative_float("--noise"), nargs="+", default=list(DEFAULT_NOISE), metavar="LEVEL",
+                   help="oracle noise levels, one oracle system each (default " + " ".join(f"{n:g}" for n in DEFAULT_NOISE) + ")")
+    p.add_argument("--blocks", metavar="B1,B2", help="comma-separated subset of the benchmark sources (default: all four)")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="suite generation and agent seed (default 0)")
+    add_overwrite(p, "the suite, runs and report in --out (default: reuse the suite and the finished episodes)")
+    p.add_argument("--paper-draws", action="store_true",
+                   help="intervals and tests from the paper's 10,000 bootstrap draws and 100,000 relabellings "
+                   "(default: 1,000 and 10,000, to fit the demo's time; the scores themselves are the protocol's either way)")
+    return p
 
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return run_main("aw-demo", lambda: _demo(args))
+
+
+def _demo(args: argparse.Namespace) -> int:
     from aw.runner.batch import BatchConfig, run_batch
 
+    check_out_dir(args.out)
     t_all = time.monotonic()
     out = args.out.resolve()
-    if args.fresh and out.exists():
-        shutil.rmtree(out)
     suite, runs, report = out / "suite", out / "runs", out / "report"
+    if args.overwrite:  # the demo's own outputs only: --out may be a folder with other things in it
+        for own in (suite, runs, report):
+            shutil.rmtree(own, ignore_errors=True)
+        (out / ".suite-recipe").unlink(missing_ok=True)
     out.mkdir(parents=True, exist_ok=True)
     total = 4
     timings: dict[str, float] = {}
@@ -105,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
         print("  reusing the suite already there")
     else:
         cmd = _bin("aw-prepare") + ["synthetic", "--out", str(suite), "--per-source", str(args.per_source),
-                                    "--seed", str(args.seed), "--jobs", str(args.jobs), "--force"]
+                                    "--seed", str(args.seed), "--jobs", str(args.jobs), "--overwrite"]
         if args.blocks:
             cmd += ["--blocks", args.blocks]
         if runs.exists():  # runs of another suite must not be mixed in
@@ -128,14 +138,14 @@ def main(argv: list[str] | None = None) -> int:
     if problems:
         print("  episodes that did not finish (recorded in their run.json):", "; ".join(problems))
 
-    how = "the exact protocol for final states" if args.protocol else (
-        "fast registration for checkpoints and final states, 1,000 bootstrap draws, 10,000 relabellings; "
-        "--protocol for the paper's exact protocol")
-    _stage(3, total, f"rescoring every checkpoint of every trajectory (aw-score: {how}) into {report}")
+    draws = "the paper's 10,000 bootstrap draws" if args.paper_draws else "1,000 bootstrap draws (--paper-draws: 10,000)"
+    _stage(3, total, f"rescoring every checkpoint of every trajectory (aw-score: final states by the protocol, exact "
+           f"registration; intervals from {draws}) into {report}")
     t0 = time.monotonic()
-    score_cmd = _bin("aw-score") + [str(suite), str(runs), "--out", str(report), "--jobs", str(args.jobs)]
-    if not args.protocol:
-        score_cmd += list(QUICK_SCORE_ARGS)
+    score_cmd = _bin("aw-score") + [str(suite), str(runs), "--out", str(report), "--jobs", str(args.jobs),
+                                    "--final-mode", "exact"]
+    if not args.paper_draws:
+        score_cmd += list(QUICK_DRAWS)
     _run(score_cmd)
     timings["scoring"] = time.monotonic() - t0
 
@@ -143,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     report_md = report / "report.md"
     if report_md.is_file():
         print(summary_from_report(report_md))
+    print(f"\nscores: final states by the paper's protocol (exact registration); intervals from {draws}.")
     print("\noracle-* systems read the hidden targets: calibration upper bounds, never results.")
     print(f"\nreport: {report_md}")
     if (report / "report.html").is_file():

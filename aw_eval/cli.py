@@ -1,14 +1,14 @@
-"""``aw-score``: rescore whole studies and write the paper's tables, intervals, tests and plots.
+"""aw-score: rescore whole studies and write the paper's tables, intervals, tests and plots.
 
-    aw-score SUITE_DIR RUNS_DIR --out OUT_DIR [--final-only] [--final exact|fast]
-             [--mode fast|exact] [--backend auto|numba|jax] [--scheduler ADDRESS] [--jobs J] [--seed S]
+    aw-score SUITE RUNS --out DIR [--final-mode exact|fast] [--checkpoint-mode fast|exact]
+             [--final-only] [--backend auto|numba|jax] [--scheduler ADDRESS] [--jobs J] [--seed S]
              [--bootstrap 10000] [--permutations 100000] [--no-plots] [--no-html] [--no-progress]
 
-Runs are ``RUNS_DIR/<system>/<task_id>/`` (``trajectory.jsonl``, ``final.json``, optional
-``run.json``). When SUITE_DIR is an official benchmark package (``benchmark.json``), RUNS_DIR is
-an official run log, a ``logs/`` folder or a folder of episode archives, and the official
-``metrics.jsonl``/``summary.json`` are written (:mod:`aw_eval.official_runs`). Scores are
-cached under ``OUT_DIR/cache``; a second call recomputes only what changed. See ``docs/scoring.md``.
+Runs are RUNS/<system>/<task_id>/ (trajectory.jsonl, final.json, optional run.json). When SUITE
+is an official benchmark package (benchmark.json), RUNS is an official run log, a logs/ folder or
+a folder of episode archives, and the official metrics.jsonl/summary.json are written
+(aw_eval.official_runs). Scores are cached under DIR/cache; a second call recomputes only what
+changed. See docs/scoring.md.
 """
 
 from __future__ import annotations
@@ -18,70 +18,91 @@ import sys
 import time
 from collections.abc import Sequence
 
-__all__ = ["build_parser", "main"]
+from aw.cli.common import (
+    CliError, UsageError, add_hidden_alias, add_jobs, add_no_progress, check_out_dir, new_parser, positive_int, run_main,
+)
 
-
-def _positive(name: str):
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} must be an integer, got {text!r}") from None
-        if v < 1:
-            raise argparse.ArgumentTypeError(f"{name} must be >= 1, got {v}")
-        return v
-
-    return parse
+__all__ = ["build_parser", "main", "protocol_note"]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="aw-score", description="Rescore AssemblyWorld runs of any number of systems: "
-                                "every checkpoint, every final state, the paper's statistics, analyses and plots.")
-    p.add_argument("suite_dir", metavar="SUITE_DIR", help="suite directory (manifest.json, tasks/, targets/), "
+    p = new_parser("aw-score", "Rescore AssemblyWorld runs of any number of systems: every checkpoint, every final "
+                   "state, the paper's statistics, analyses and plots.", epilog="See docs/scoring.md.")
+    p.add_argument("suite_dir", metavar="SUITE", help="suite directory (manifest.json, tasks/, targets/), "
                    "or an official benchmark package (benchmark.json)")
-    p.add_argument("runs_dir", metavar="RUNS_DIR", help="runs directory: RUNS_DIR/<system>/<task_id>/; with a package, "
+    p.add_argument("runs_dir", metavar="RUNS", help="runs directory: RUNS/<system>/<task_id>/; with a package, "
                    "an official run log (run.json), a logs/ folder of runs or a folder of *.episode.zip")
-    p.add_argument("--out", required=True, metavar="OUT_DIR", help="output directory (also holds the cache)")
-    p.add_argument("--final-only", action="store_true", help="score final states only (no checkpoints)")
+    p.add_argument("--out", required=True, metavar="DIR", help="report directory to write (also holds the cache)")
+    modes = ("exact", "fast")
+    p.add_argument("--final-mode", choices=modes, default="exact", metavar="MODE",
+                   help="registration mode for final states, which the tables use: exact (default, the protocol: "
+                   "every start refined) or fast (not the protocol)")
+    p.add_argument("--checkpoint-mode", choices=modes, default="fast", metavar="MODE",
+                   help="registration mode for trajectory checkpoints, which the curves use: fast (default) or exact")
+    add_hidden_alias(p, "--final", dest="final_mode", choices=modes)  # old names
+    add_hidden_alias(p, "--mode", dest="checkpoint_mode", choices=modes)
+    p.add_argument("--final-only", action="store_true", help="score final states only (no checkpoints, no curves)")
     p.add_argument("--trust-final", action="store_true",
                    help="score final.json even where it contradicts the trajectory's last recorded state "
                    "(default: the trajectory wins; the contradiction is listed either way)")
-    p.add_argument("--final", choices=("exact", "fast"), default="exact",
-                   help="registration mode for final states (default exact: the protocol, every start refined)")
-    p.add_argument("--mode", choices=("fast", "exact"), default="fast",
-                   help="registration mode for trajectory checkpoints (default fast)")
     p.add_argument("--backend", choices=("auto", "numba", "jax"), default="auto",
                    help="where exact scoring runs: numba (compiled, CPU), jax (batched over checkpoints x starts, "
                    "any XLA device), auto (jax when JAX sees a GPU/TPU; default)")
     p.add_argument("--scheduler", metavar="ADDRESS", default=None,
                    help="Dask scheduler address (e.g. tcp://host:8786): one job per task on the cluster; "
-                   "workers must see SUITE_DIR and RUNS_DIR at the same paths")
-    p.add_argument("--jobs", type=_positive("--jobs"), default=None, metavar="J",
-                   help="local worker processes without --scheduler (default: the number of cores)")
+                   "workers must see SUITE and RUNS at the same paths")
+    add_jobs(p, "local worker processes (without --scheduler)")
     p.add_argument("--seed", type=int, default=0, help="seed of the bootstrap and randomization draws (default 0)")
-    p.add_argument("--bootstrap", type=_positive("--bootstrap"), default=10_000, metavar="B",
+    p.add_argument("--bootstrap", type=positive_int("--bootstrap"), default=10_000, metavar="B",
                    help="bootstrap draws (default 10000)")
-    p.add_argument("--permutations", type=_positive("--permutations"), default=100_000, metavar="R",
+    p.add_argument("--permutations", type=positive_int("--permutations"), default=100_000, metavar="R",
                    help="randomization-test relabellings (default 100000)")
-    p.add_argument("--protocol", action="append", default=[], metavar="NAME=VALUE",
+    p.add_argument("--protocol-setting", dest="protocol", action="append", default=[], metavar="NAME=VALUE",
                    help="override a number of the evaluation protocol (aw_eval.settings.ProtocolSettings, e.g. "
                    "n_fps=200): departs from the paper's protocol; recorded in scores.json (repeatable)")
+    add_hidden_alias(p, "--protocol", dest="protocol", action="append")  # old name
     p.add_argument("--geometry-cache", metavar="DIR", default=None,
-                   help="where the evaluator caches per-task geometry (default OUT_DIR/cache/geometry); "
+                   help="where the evaluator caches per-task geometry (default DIR/cache/geometry); "
                    "may be shared between studies")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--no-html", action="store_true", help="skip report.html and its folder report_files/ "
                    "(pictures of every run, 3D views)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_no_progress(p)
     return p
+
+
+def protocol_note(final_mode: str, overrides: Sequence[tuple[str, float]] = ()) -> str:
+    """"" when final states are scored by the paper's protocol, else why the numbers are not its."""
+    why = []
+    if final_mode != "exact":
+        why.append(f"final states in {final_mode} mode")
+    if overrides:
+        why.append("protocol overridden (" + ", ".join(f"{k}={v:g}" for k, v in overrides) + ")")
+    return f" [not the protocol's numbers: {'; '.join(why)}]" if why else ""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    from pathlib import Path
+    return run_main("aw-score", lambda: _score(args))
 
+
+def _parse_overrides(items: Sequence[str]) -> list[tuple[str, float]]:
+    overrides = []
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            if not sep:
+                raise ValueError("expected NAME=VALUE")
+            overrides.append((name.strip(), float(value)))
+        except ValueError as exc:
+            raise UsageError(f"--protocol-setting {item!r}: {exc}") from None
+    return overrides
+
+
+def _score(args: argparse.Namespace) -> int:
     from aw_eval import official_runs
 
+    out = check_out_dir(args.out)
     if official_runs.is_official_package(args.suite_dir):  # an official package and its run logs
         return official_runs.main(args.suite_dir, args.runs_dir, args.out, args.jobs)
 
@@ -91,37 +112,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     def log(msg: str) -> None:
         print(f"aw-score: {msg}", file=sys.stderr)
 
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        print(f"aw-score: error: {out} exists and is not a directory", file=sys.stderr)
-        return 2
-    overrides = []
-    for item in args.protocol:
-        name, sep, value = item.partition("=")
-        try:
-            if not sep:
-                raise ValueError("expected NAME=VALUE")
-            overrides.append((name.strip(), float(value)))
-        except ValueError as exc:
-            print(f"aw-score: error: --protocol {item!r}: {exc}", file=sys.stderr)
-            return 2
+    overrides = _parse_overrides(args.protocol)
     try:
-        settings = ScoreSettings(checkpoint_mode=args.mode, final_mode=args.final, final_only=args.final_only,
-                                 trust_final=args.trust_final, protocol=tuple(overrides), backend=args.backend)
+        settings = ScoreSettings(checkpoint_mode=args.checkpoint_mode, final_mode=args.final_mode,
+                                 final_only=args.final_only, trust_final=args.trust_final, protocol=tuple(overrides),
+                                 backend=args.backend)
     except (ValueError, TypeError) as exc:
-        print(f"aw-score: error: --protocol: {exc}", file=sys.stderr)
-        return 2
+        raise UsageError(f"--protocol-setting: {exc}") from None
     t0 = time.perf_counter()
     try:
         study, stats = score_study(args.suite_dir, args.runs_dir, out, settings, scheduler=args.scheduler,
-                                   n_jobs=args.jobs, progress=not args.no_progress and sys.stderr.isatty(), log=log,
+                                   n_jobs=args.jobs, progress=not args.no_progress, log=log,
                                    geometry_cache=args.geometry_cache)
     except ScoringFailed as exc:  # the tool failed, not the runs: no report of zeros
-        print(f"aw-score: error: {exc}", file=sys.stderr)
-        return 1
+        raise CliError(str(exc)) from None
     except StudyError as exc:
-        print(f"aw-score: error: {exc}", file=sys.stderr)
-        return 2
+        raise UsageError(str(exc)) from None
     t_score = time.perf_counter() - t0
     res = write_outputs(study, out, AnalysisSettings(seed=args.seed, n_draws=args.bootstrap, n_permutations=args.permutations),
                         suite_dir=str(args.suite_dir), runs_dir=str(args.runs_dir),
@@ -139,9 +145,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         (f", {len(study.unknown_runs)} runs for unknown tasks ignored" if study.unknown_runs else "") +
         f" ({time.perf_counter() - t0:.1f} s)")
     q = doc["quality"]["systems"]
+    note = protocol_note(args.final_mode, overrides)
     for s in doc["uncertainty"].get("order", study.systems):
         o = q[s]["overall"]
-        print(f"{s}: Overall SR {o['sr']:.2f}%  PA {o['pa']:.2f}%")
+        print(f"{s}: Overall SR {o['sr']:.2f}%  PA {o['pa']:.2f}%{note}")
     print(f"wrote {res['files']['report']}")
     if "html" in res["files"]:
         print(f"wrote {res['files']['html']}")

@@ -1,14 +1,15 @@
-"""``aw-serve``: serve one task's environment over MCP and record the episode.
+"""aw-serve: serve one task's environment over MCP and record the episode.
 
     aw-serve TASK_DIR --record RUN_DIR [--system LABEL] [--budget-minutes 60]
              [--transport stdio|http] [--host 127.0.0.1] [--port 8765] [--overwrite]
              [--surface default|official]
-    aw-serve TASK_DIR --print-prompt        # the task text, then exit
-    aw-serve TASK_DIR --print-references    # absolute paths of the reference images, in order
+    aw-serve TASK_DIR --record-under DIR [...]   one config, many sessions: DIR/attempt-N/<task_id>/
+    aw-serve TASK_DIR --print-prompt             the task text, then exit
+    aw-serve TASK_DIR --print-references         absolute paths of the reference images, in order
 
-The server is given the public task directory only. ``final.json`` and the closing trajectory
-line are written however the session ends: stdin closed by the client (``disconnect``),
-SIGINT/SIGTERM/SIGHUP (``interrupted``), a server crash (``error``); ``timeout`` wins if the
+The server is given the public task directory only. final.json and the closing trajectory
+line are written however the session ends: stdin closed by the client (disconnect),
+SIGINT/SIGTERM/SIGHUP (interrupted), a server crash (error); timeout wins if the
 execution budget ran out first.
 """
 
@@ -18,11 +19,14 @@ import argparse
 import logging
 import math
 import os
+import select
 import signal
 import sys
 from pathlib import Path
 
-EXIT_USAGE = 2
+from aw.cli.common import EXIT_USAGE, add_overwrite, new_parser
+
+REFUSAL_WAIT_S = 3.0  # how long a refused stdio start waits for the client's initialize request
 
 
 def _positive_minutes(text: str) -> float:
@@ -49,21 +53,25 @@ def _port(text: str) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="aw-serve",
-        description="Serve an AssemblyWorld task over MCP (stdio by default) and record the episode.",
-    )
-    p.add_argument("task_dir", type=Path, help="public task directory (task.json, parts/, references/)")
-    p.add_argument("--record", type=Path, metavar="RUN_DIR",
-                   help="run directory for trajectory.jsonl, final.json and captures/ (required to serve)")
-    p.add_argument("--system", default="", help="system label stored in the trajectory header")
-    p.add_argument("--budget-minutes", type=_positive_minutes, default=None,
+    p = new_parser("aw-serve", "Serve an AssemblyWorld task over MCP (stdio by default) and record the episode.",
+                   epilog="One MCP config for many sessions: --record-under DIR records session k of a task in "
+                   "DIR/attempt-k/<task_id>/ (the first attempt number free for that task), a layout aw-score "
+                   "reads with one system per attempt. See docs/harnesses.md.")
+    p.add_argument("task_dir", type=Path, metavar="TASK_DIR", help="public task directory (task.json, parts/, references/)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--record", type=Path, metavar="RUN_DIR",
+                       help="run directory for trajectory.jsonl, final.json and captures/")
+    where.add_argument("--record-under", type=Path, metavar="DIR",
+                       help="record in a new DIR/attempt-N/<task_id>/ (N: the first free for this task), so that "
+                       "one MCP config serves many sessions")
+    p.add_argument("--system", default="", metavar="LABEL", help="system label stored in the trajectory header")
+    p.add_argument("--budget-minutes", type=_positive_minutes, default=None, metavar="M",
                    help="execution budget from start_episode, in minutes (default: the task's, normally 60)")
     p.add_argument("--transport", choices=("stdio", "http"), default="stdio",
                    help="stdio (default; the harness launches the server) or streamable HTTP at /mcp")
-    p.add_argument("--host", default="127.0.0.1", help="HTTP bind address (default 127.0.0.1, loopback only)")
+    p.add_argument("--host", default="127.0.0.1", metavar="ADDR", help="HTTP bind address (default 127.0.0.1, loopback only)")
     p.add_argument("--port", type=_port, default=8765, help="HTTP port (default 8765)")
-    p.add_argument("--overwrite", action="store_true", help="replace an earlier recording in RUN_DIR")
+    add_overwrite(p, "an earlier recording in RUN_DIR")
     p.add_argument("--surface", choices=("default", "official"), default="default",
                    help="tools the agent sees: the project's scene tools (default), or the official benchmark's "
                         "list_pages / list_webmcp_tools / execute_webmcp_tool / read_manual_page")
@@ -75,19 +83,73 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _fail(msg: str) -> int:
-    print(f"aw-serve: error: {msg}", file=sys.stderr)
+def _fail(msg: str, *, tell_client: bool = False) -> int:
+    """Say why the server does not start (stderr, exit 2); with ``tell_client``, also answer the
+    MCP client's initialize request with that line, so the client shows it instead of only
+    "Connection closed"."""
+    line = f"aw-serve: error: {msg}"
+    print(line, file=sys.stderr, flush=True)
+    if tell_client:
+        _refuse_initialize(line)
     return EXIT_USAGE
+
+
+def _refuse_initialize(message: str, wait_s: float = REFUSAL_WAIT_S) -> None:
+    """Answer a stdio client's requests (initialize, or a newer client's discovery probe first)
+    with an error carrying ``message`` until it closes stdin; nothing when stdin is a terminal.
+    Gives up ``wait_s`` seconds after the last request (or after starting, if none comes)."""
+    import json
+
+    try:
+        if sys.stdin is None or sys.stdin.isatty():
+            return
+        while select.select([sys.stdin], [], [], wait_s)[0]:
+            line = sys.stdin.readline()
+            if not line:
+                return  # the client closed our stdin: it has read the replies
+            try:
+                request = json.loads(line)
+            except ValueError:
+                return
+            if isinstance(request, dict) and "id" in request and "method" in request:
+                reply = {"jsonrpc": "2.0", "id": request["id"], "error": {"code": -32603, "message": message}}
+                sys.stdout.write(json.dumps(reply) + "\n")
+                sys.stdout.flush()
+    except (OSError, ValueError):
+        return
+
+
+def _remove_empty(run_dir: Path) -> None:
+    try:
+        run_dir.rmdir()
+    except OSError:
+        pass
+
+
+def next_attempt_dir(parent: Path, task_id: str) -> Path:
+    """Create and return ``parent/attempt-N/task_id`` for the smallest N whose directory does not
+    exist yet (mkdir is atomic: two sessions starting together get different N)."""
+    n = 1
+    while True:
+        run_dir = parent / f"attempt-{n}" / task_id
+        run_dir.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            run_dir.mkdir()
+            return run_dir
+        except FileExistsError:
+            n += 1
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from aw.formats import FormatError, read_task
 
+    serving = not (args.print_prompt or args.print_references)
+    stdio = serving and args.transport == "stdio"
     try:
         task = read_task(args.task_dir)
     except FormatError as exc:
-        return _fail(str(exc))
+        return _fail(str(exc), tell_client=stdio)
     if args.print_prompt or args.print_references:
         if args.print_prompt:
             print(task.prompt)
@@ -95,8 +157,16 @@ def main(argv: list[str] | None = None) -> int:
             for path in task.reference_paths():
                 print(path.resolve())
         return 0
-    if args.record is None:
-        return _fail("--record RUN_DIR is required to serve (or use --print-prompt / --print-references)")
+    if args.record is None and args.record_under is None:
+        return _fail("--record RUN_DIR or --record-under DIR is required to serve "
+                     "(or use --print-prompt / --print-references)", tell_client=stdio)
+    run_dir = args.record
+    if args.record_under is not None:
+        try:
+            run_dir = next_attempt_dir(args.record_under, task.task_id)
+        except OSError as exc:
+            return _fail(f"--record-under {args.record_under}: {exc.strerror or exc}", tell_client=stdio)
+        print(f"aw-serve: recording in {run_dir}", file=sys.stderr, flush=True)
 
     logging.basicConfig(level=args.log_level, stream=sys.stderr, format="aw-serve %(levelname)s %(name)s: %(message)s")
     from aw.episode import Episode, RunDirError
@@ -104,10 +174,12 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         meshes = load_task_meshes(task)
-        episode = Episode(task, meshes, args.record, system=args.system, budget_minutes=args.budget_minutes,
+        episode = Episode(task, meshes, run_dir, system=args.system, budget_minutes=args.budget_minutes,
                           overwrite=args.overwrite)
     except (FormatError, RunDirError, ValueError) as exc:
-        return _fail(str(exc))
+        if args.record_under is not None:
+            _remove_empty(run_dir)
+        return _fail(str(exc), tell_client=stdio)
 
     def on_signal(signum, _frame):
         # Runs in the main thread between bytecodes; tool calls run in worker threads, so the

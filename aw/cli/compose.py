@@ -12,6 +12,8 @@ import json
 import sys
 from pathlib import Path
 
+from aw.cli.common import add_overwrite
+
 __all__ = ["register_compose", "register_official", "register_official_export", "catalogs_from_args"]
 
 
@@ -68,14 +70,15 @@ def catalogs_from_args(args: argparse.Namespace) -> dict:
 
 
 def _cmd_compose(args: argparse.Namespace) -> int:
-    from aw.cli.suite import CliError, run_suite
+    from aw.cli.common import CliError, UsageError
+    from aw.cli.suite import run_suite
     from aw.sources.compose import compose, specs_for
 
     if args.per_source < 1:
-        raise CliError("--per-source must be >= 1")
+        raise UsageError("--per-source must be >= 1")
     cats = catalogs_from_args(args)
     if not cats:
-        raise CliError("no dataset given: pass at least one of --partnet, --ikea-manual, --assemblybench, "
+        raise UsageError("no dataset given: pass at least one of --partnet, --ikea-manual, --assemblybench, "
                        "--fantastic-breaks, --breaking-bad, --rehosted")
     try:
         comp = compose(cats, args.per_source, args.seed)
@@ -106,28 +109,32 @@ def register_official(sub) -> None:
     p.add_argument("--out", required=True, metavar="SUITE", help="scoring suite to write")
     p.add_argument("--runs", metavar="RUNS", default=None, help="runs folder to write (needed with --episodes)")
     p.add_argument("--system", default=None, help="system label for every archive (default: the run folder of each archive)")
-    p.add_argument("--force", action="store_true", help="replace an existing suite / runs")
+    add_overwrite(p, "an existing suite in --out and runs in --runs")
     p.set_defaults(func=_cmd_official)
 
 
 def _cmd_official(args: argparse.Namespace) -> int:
-    from aw.cli.suite import CliError
+    from aw.cli.common import UsageError, check_out_dir
     from aw.official.convert import convert, convert_package
+
+    check_out_dir(args.out)
+    if args.episodes is not None and not args.runs:
+        raise UsageError("--episodes needs --runs")
+    if args.runs:
+        check_out_dir(args.runs, "--runs")
 
     try:
         if args.episodes is None:
-            manifest = convert_package(args.package, args.out, force=args.force)
+            manifest = convert_package(args.package, args.out, force=args.overwrite)
             runs = []
         else:
-            if not args.runs:
-                raise CliError("--episodes needs --runs")
             skipped: list[str] = []
-            manifest, runs = convert(args.package, args.episodes, args.out, args.runs, system=args.system, force=args.force,
+            manifest, runs = convert(args.package, args.episodes, args.out, args.runs, system=args.system, force=args.overwrite,
                                      skipped=skipped)
             for line in skipped:
                 print(f"aw-prepare: not converted (the official scorer counts it as an error): {line}", file=sys.stderr)
     except FileExistsError as exc:
-        raise CliError(str(exc)) from None
+        raise UsageError(str(exc).replace("pass force=True", "pass --overwrite")) from None
     print(f"wrote {len(manifest.tasks)} tasks to {args.out}" + (f" and {len(runs)} runs to {args.runs}" if runs else ""))
     return 0
 
@@ -143,18 +150,19 @@ def register_official_export(sub) -> None:
     where = p.add_mutually_exclusive_group(required=True)
     where.add_argument("--suite", metavar="SUITE", help="the suite the run was recorded on")
     where.add_argument("--initial", metavar="ARCHIVE", help="the initial (setup) episode archive the run started from")
+    add_overwrite(p, "an existing archive at --out")
     p.set_defaults(func=_cmd_official_export)
 
 
 def _cmd_official_export(args: argparse.Namespace) -> int:
-    from aw.cli.suite import CliError
+    from aw.cli.common import CliError, UsageError
     from aw.formats import read_trajectory
     from aw.formats.suite import suite_paths
     from aw.official.convert import initial_archive_path
     from aw.official.export import export_run, export_task_run
 
-    if Path(args.out).exists():
-        raise CliError(f"{args.out}: already exists")
+    if Path(args.out).exists() and not args.overwrite:
+        raise UsageError(f"--out {args.out}: already exists; pass --overwrite to replace it")
     if args.initial:
         ep = export_run(args.run, args.initial, args.out)
     else:

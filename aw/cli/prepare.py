@@ -1,9 +1,9 @@
-"""``aw-prepare``: build task suites (``manifest.json``, ``tasks/``, ``targets/``).
+"""aw-prepare: build task suites (manifest.json, tasks/, targets/).
 
-Subcommands::
-
-    aw-prepare synthetic --out DIR [--per-source N] [--seed S]   the embedded procedural benchmark
-    aw-prepare folder SRC --out DIR [--source NAME]              a folder of one's own objects
+    aw-prepare synthetic --out SUITE [--per-source N] [--seed S]   the embedded procedural benchmark
+    aw-prepare folder SRC --out SUITE [--source NAME]              a folder of one's own objects
+    aw-prepare compose --out SUITE --partnet DIR ...                the paper's benchmark from datasets
+    aw-prepare official PKG --out SUITE [--episodes DIR --runs RUNS]
 
 Each subcommand is a ``register_*(subparsers)`` function in :data:`REGISTRARS`; it adds its
 parser (with :func:`add_suite_options`) and sets ``func`` to a handler that turns its arguments
@@ -18,7 +18,8 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from aw.cli.suite import CliError, check_unique_task_ids, add_suite_options, run_suite
+from aw.cli.common import CliError, UsageError, add_commands, new_parser, run_main
+from aw.cli.suite import add_suite_options, check_unique_task_ids, run_suite
 from aw.formats import FormatError
 from aw.prepare import ObjectError, ObjectSpec, SuiteExistsError
 
@@ -42,11 +43,11 @@ def _cmd_synthetic(args: argparse.Namespace) -> int:
     from aw.sources.synthetic import BLOCKS, plan
 
     if args.per_source < 1:
-        raise CliError("--per-source must be >= 1")
+        raise UsageError("--per-source must be >= 1")
     blocks = list(BLOCKS) if not args.blocks else [b.strip() for b in args.blocks.split(",") if b.strip()]
     unknown = [b for b in blocks if b not in BLOCKS]
     if unknown or not blocks:
-        raise CliError(f"unknown block(s) {unknown}; choose from {', '.join(BLOCKS)}")
+        raise UsageError(f"unknown block(s) {unknown}; choose from {', '.join(BLOCKS)}")
     loader = "aw.sources.synthetic:generate_object"
     specs, sources, ids = [], [], []
     n = args.per_source
@@ -76,6 +77,8 @@ def register_folder(sub) -> None:
 def _cmd_folder(args: argparse.Namespace) -> int:
     from aw.sources.folder import load_object, read_meta, scan_folder
 
+    if not Path(args.src).is_dir():
+        raise UsageError(f"SRC {args.src}: source folder not found")
     found = scan_folder(args.src)
     loader = "aw.sources.folder:load_object"
     sources = []
@@ -103,9 +106,9 @@ REGISTRARS: list[Callable] = [register_synthetic, register_folder, register_comp
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="aw-prepare", description="Build AssemblyWorld task suites "
-                                     "(SUITE/manifest.json, SUITE/tasks/<id>/, SUITE/targets/<id>.json).")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    parser = new_parser("aw-prepare", "Build AssemblyWorld task suites (SUITE/manifest.json, SUITE/tasks/<id>/, "
+                        "SUITE/targets/<id>.json).", epilog="Run 'aw-prepare COMMAND --help' for a command's options.")
+    sub = add_commands(parser)
     for register in REGISTRARS:
         register(sub)
     return parser
@@ -119,16 +122,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     import warnings
 
     args = build_parser().parse_args(argv)
-    try:
-        with warnings.catch_warnings():
-            warnings.showwarning = _warn_in_one_line
-            return args.func(args)
-    except (CliError, FormatError, SuiteExistsError, NotADirectoryError, ObjectError) as exc:
-        print(f"aw-prepare: error: {exc}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print("aw-prepare: interrupted", file=sys.stderr)
-        return 130
+
+    def body() -> int:
+        try:
+            with warnings.catch_warnings():
+                warnings.showwarning = _warn_in_one_line
+                return args.func(args)
+        except SuiteExistsError as exc:
+            raise UsageError(str(exc)) from None
+        except (FormatError, ObjectError) as exc:
+            raise CliError(str(exc)) from None
+
+    return run_main("aw-prepare", body)
 
 
 if __name__ == "__main__":

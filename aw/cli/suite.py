@@ -1,6 +1,6 @@
 """What every suite-building subcommand of ``aw-prepare`` shares: its options
 (:func:`add_suite_options`), the build and its summary (:func:`run_suite`) and the one-line
-error (:class:`CliError`). Beneath :mod:`aw.cli.prepare` and :mod:`aw.cli.compose`, which both use it."""
+error (:class:`aw.cli.common.CliError`, re-exported). Beneath :mod:`aw.cli.prepare` and :mod:`aw.cli.compose`, which both use it."""
 
 from __future__ import annotations
 
@@ -8,18 +8,15 @@ import argparse
 import time
 from collections.abc import Sequence
 
+from aw.cli.common import CliError, UsageError, add_jobs, add_no_progress, add_overwrite, check_out_dir
 from aw.prepare import ObjectSpec, VariantPlan, build_suite, format_summary, summarize, task_id_for
 
 __all__ = ["CliError", "add_suite_options", "check_unique_task_ids", "run_suite", "variant_plans"]
 
 
-class CliError(Exception):
-    """A problem to report in one line (exit status 1)."""
-
-
 def add_suite_options(p: argparse.ArgumentParser, protocol: str = "official") -> None:
     """Options every suite-building subcommand shares; ``protocol`` is its default preparation."""
-    p.add_argument("--out", required=True, metavar="DIR", help="suite directory to write")
+    p.add_argument("--out", required=True, metavar="SUITE", help="suite directory to write")
     p.add_argument("--protocol", choices=("official", "native"), default=protocol,
                    help="official: the official benchmark's preparation (its layout, part ids and evaluation points "
                    "in eval_points/); native: this project's standardization, needed for --variants "
@@ -28,9 +25,9 @@ def add_suite_options(p: argparse.ArgumentParser, protocol: str = "official") ->
     p.add_argument("--variants", type=int, default=0, metavar="K",
                    help="also build the Appendix E robustness variants (two layouts, one removed part, "
                    "one distractor) for the first K objects of each source (default 0)")
-    p.add_argument("--jobs", type=int, default=None, metavar="J", help="worker processes (default: CPUs, at most 4)")
-    p.add_argument("--force", action="store_true", help="replace a suite already in --out")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_jobs(p, "objects prepared")
+    add_overwrite(p, "a suite already in --out (only its manifest.json, tasks/ and targets/)")
+    add_no_progress(p)
 
 
 def check_unique_task_ids(specs: Sequence[tuple[str, str, Sequence[str]]]) -> None:
@@ -39,7 +36,7 @@ def check_unique_task_ids(specs: Sequence[tuple[str, str, Sequence[str]]]) -> No
         for c in conditions:
             tid = task_id_for(source, object_id, c)
             if tid in seen and seen[tid] != object_id:
-                raise CliError(f"objects {seen[tid]!r} and {object_id!r} map to the same task id {tid!r}; rename one")
+                raise UsageError(f"objects {seen[tid]!r} and {object_id!r} map to the same task id {tid!r}; rename one")
             seen[tid] = object_id
 
 
@@ -65,16 +62,15 @@ def variant_plans(specs: Sequence[ObjectSpec], sources: Sequence[str], k: int, s
 def run_suite(args: argparse.Namespace, specs: list[ObjectSpec], sources: list[str], *, name: str, generator: str) -> int:
     """Build the suite of ``specs`` (``sources[i]`` is spec i's source) and print its summary."""
     if args.variants < 0:
-        raise CliError("--variants must be >= 0")
-    if args.jobs is not None and args.jobs < 1:
-        raise CliError("--jobs must be >= 1")
+        raise UsageError("--variants must be >= 0")
+    check_out_dir(args.out)
     if args.variants and args.protocol != "native":
-        raise CliError("--variants needs --protocol native (the official preparation has no robustness variants)")
+        raise UsageError("--variants needs --protocol native (the official preparation has no robustness variants)")
     plans = variant_plans(specs, sources, args.variants, args.seed) if args.variants else None
     start = time.perf_counter()
     manifest, results = build_suite(
         specs, args.out, name=name, generator=generator, seed=args.seed, variants=plans, jobs=args.jobs,
-        force=args.force, progress=not args.no_progress, protocol=args.protocol,
+        force=args.overwrite, progress=not args.no_progress, protocol=args.protocol,
     )
     elapsed = time.perf_counter() - start
     print(format_summary(summarize(manifest, results)))

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import importlib
 import multiprocessing
-import os
 import shutil
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -115,7 +114,7 @@ def prepare_output_dir(out: str | Path, force: bool = False) -> Path:
         raise NotADirectoryError(f"{out}: exists and is not a directory")
     existing = [out / n for n in ("manifest.json", "tasks", "targets", "eval_points") if (out / n).exists()]
     if existing and not force:
-        raise SuiteExistsError(f"{out}: already holds a suite ({', '.join(p.name for p in existing)}); pass --force to replace it")
+        raise SuiteExistsError(f"{out}: already holds a suite ({', '.join(p.name for p in existing)}); pass --overwrite to replace it")
     for p in existing:
         shutil.rmtree(p) if p.is_dir() else p.unlink()
     (out / "tasks").mkdir(parents=True, exist_ok=True)
@@ -124,12 +123,10 @@ def prepare_output_dir(out: str | Path, force: bool = False) -> Path:
 
 
 def default_jobs() -> int:
-    """Worker processes by default: the CPUs this process may use, at most 4."""
-    try:
-        n = len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        n = os.cpu_count() or 1
-    return max(1, min(4, n))
+    """Worker processes by default: the CPU cores this process may use (the CLI's one rule)."""
+    from aw.cli.common import default_jobs as cores
+
+    return cores()
 
 
 def build_suite(
@@ -197,9 +194,9 @@ def build_suite(
 
 
 def _progress(total: int, enabled: bool):
-    from tqdm import tqdm
+    from aw.progress import progress
 
-    return tqdm(total=total, desc="preparing objects", unit="obj", disable=not enabled, leave=False)
+    return progress(total, "preparing objects", "obj", enabled=enabled, leave=False)
 
 
 def _band(n: int) -> str:

@@ -101,7 +101,7 @@ class Episode:
     run_dir: Path
 
 
-def _check_config(cfg: BatchConfig) -> None:
+def check_config(cfg: BatchConfig) -> None:
     from aw.agents import AGENT_OPTIONS, AGENTS
     from aw.runner.harness import HARNESSES
 
@@ -437,7 +437,7 @@ class BatchResult:
 
 def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None) -> BatchResult:
     """Run every planned episode, ``cfg.jobs`` at a time, with a progress bar."""
-    _check_config(cfg)
+    check_config(cfg)
     episodes = plan_episodes(cfg)
     skipped = []
     if not cfg.overwrite:
@@ -455,9 +455,9 @@ def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None
     lock = threading.Lock()
     bar = None
     if cfg.progress:
-        from tqdm import tqdm
+        from aw.progress import progress
 
-        bar = tqdm(total=len(episodes), desc=cfg.system, unit="task", dynamic_ncols=True, file=sys.stderr)
+        bar = progress(len(episodes), cfg.system, "task")
     counts: Counter[str] = Counter()
     workers: list[WorkerProcess] = []
     local = threading.local()
@@ -482,7 +482,7 @@ def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None
                 runs.append(info)
                 counts[info.ended] += 1
                 if bar is not None:
-                    bar.set_postfix({k: v for k, v in sorted(counts.items())}, refresh=False)
+                    bar.set_postfix_str(", ".join(f"{k}={v}" for k, v in sorted(counts.items())), refresh=False)
                     bar.update(1)
             if on_done is not None:
                 on_done(info)

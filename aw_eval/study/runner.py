@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
@@ -56,7 +55,9 @@ class ScoreStats:
 
 
 def default_jobs() -> int:
-    return max(1, os.cpu_count() or 1)
+    from aw.cli.common import default_jobs as cores
+
+    return cores()
 
 
 def shape_family(task_dir: Path) -> str:
@@ -108,9 +109,9 @@ def discover_runs(runs_dir: Path, task_ids: set[str]) -> tuple[list[str], dict[t
 
 
 def _progress(total: int, enabled: bool, desc: str):
-    from tqdm import tqdm
+    from aw.progress import progress
 
-    return tqdm(total=total, desc=desc, unit="task", disable=not enabled, file=sys.stderr, dynamic_ncols=True)
+    return progress(total, desc, "task", enabled=enabled)
 
 
 def _worker_init() -> None:

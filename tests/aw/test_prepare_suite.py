@@ -32,7 +32,7 @@ def test_output_dir_rules(tmp_path):
     assert (out / "tasks").is_dir() and (out / "targets").is_dir()
     (out / "tasks" / "old").mkdir()
     (out / "keep.txt").write_text("x")
-    with pytest.raises(SuiteExistsError, match="--force"):
+    with pytest.raises(SuiteExistsError, match="--overwrite"):
         prepare_output_dir(out)
     prepare_output_dir(out, force=True)
     assert list((out / "tasks").iterdir()) == [] and (out / "keep.txt").exists()

@@ -226,7 +226,8 @@ async def test_http_transport(box_task, tmp_path):
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "aw_server.cli", *args], capture_output=True, text=True, timeout=60)
+    return subprocess.run([sys.executable, "-m", "aw_server.cli", *args], capture_output=True, text=True, timeout=60,
+                          stdin=subprocess.DEVNULL)
 
 
 def test_startup_refusals(box_task, tmp_path):
@@ -266,3 +267,42 @@ async def test_overwrite_of_a_live_recording_is_refused(box_task, tmp_path):
     assert [c.tool for c in traj.calls] == ["translate_objects", "set_object_pose"] and traj.end.reason == "disconnect"
     assert read_final(run / "final.json").poses["p03"] == [0, 0, 1, 1, 0, 0, 0]
     assert sorted(p.name for p in (run / "captures").iterdir()) == []
+
+
+async def test_record_under_numbers_the_sessions_of_one_config(box_task, tmp_path):
+    """One command line (as in a .mcp.json) for many sessions: each records in a new attempt dir."""
+    task_dir, _, _ = box_task
+    parent = tmp_path / "runs"
+    cmd = [sys.executable, "-m", "aw_server.cli", str(task_dir), "--record-under", str(parent)]
+    from mcp import StdioServerParameters
+
+    params = StdioServerParameters(command=cmd[0], args=cmd[1:], env=dict(os.environ))
+    for _ in range(2):
+        async with Client(params) as c:
+            await c.call_tool("start_episode", {})
+    for n in (1, 2):
+        run_dir = parent / f"attempt-{n}" / "box3_none"
+        assert read_trajectory(run_dir / "trajectory.jsonl").calls[0].tool == "start_episode"
+        assert read_final(run_dir / "final.json").reason == "disconnect"
+    assert sorted(p.name for p in parent.iterdir()) == ["attempt-1", "attempt-2"]
+
+
+async def test_a_refused_start_reaches_the_mcp_client_as_its_message(box_task, tmp_path):
+    task_dir, _, _ = box_task
+    from mcp import StdioServerParameters
+    from mcp.shared.exceptions import MCPError
+
+    run = tmp_path / "busy"
+    run.mkdir()
+    (run / "trajectory.jsonl").write_text("{}\n")
+    params = StdioServerParameters(command=sys.executable, args=["-m", "aw_server.cli", str(task_dir), "--record", str(run)],
+                                   env=dict(os.environ))
+    with pytest.raises(BaseException) as caught:
+        async with Client(params):
+            pass
+    errors = [caught.value]
+    while isinstance(errors[0], BaseExceptionGroup):
+        errors = list(errors[0].exceptions)
+    assert isinstance(errors[0], MCPError), caught.value
+    assert "already holds a recording" in str(errors[0]) and "--overwrite" in str(errors[0])
+    assert (run / "trajectory.jsonl").read_text() == "{}\n"

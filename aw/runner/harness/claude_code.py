@@ -109,7 +109,10 @@ class ClaudeCode:
             usage.report = result.get("result") if isinstance(result.get("result"), str) else None
             usage.is_error = bool(result.get("is_error")) or result.get("subtype") not in (None, "success")
             if usage.is_error:
-                usage.error = f"Claude Code ended with {result.get('subtype')}: {str(result.get('result') or '')[:500]}"
+                # "success" with is_error (e.g. "Not logged in") is an error all the same: do not echo the subtype
+                subtype = result.get("subtype")
+                how = "reported an error" if subtype in (None, "success") else f"ended with {subtype}"
+                usage.error = f"Claude Code {how}: {str(result.get('result') or '')[:500]}"
             cost = result.get("total_cost_usd")
             usage.cost_usd = float(cost) if isinstance(cost, (int, float)) else None
             u = result.get("usage")

@@ -71,25 +71,29 @@ def test_parallel_build_is_byte_identical(small_suite, tmp_path):
             assert (_tree(a) if a.is_dir() else a.read_bytes()) == (_tree(b) if b.is_dir() else b.read_bytes())
 
 
-def test_existing_suite_needs_force(small_suite, tmp_path, capsys):
+def test_existing_suite_needs_overwrite(small_suite, tmp_path, capsys):
     out = tmp_path / "again"
     args = ["synthetic", "--out", str(out), "--per-source", "1", "--blocks", "fantastic_breaks", "--jobs", "1", "--no-progress"]
     assert main(args) == 0
     (out / "notes.txt").write_text("mine")
-    assert main(args) == 1
-    assert "already holds a suite" in capsys.readouterr().err
-    assert main(args + ["--force"]) == 0
-    assert (out / "notes.txt").read_text() == "mine"  # --force removes only the suite's own files
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "already holds a suite" in err and "--overwrite" in err
+    assert main(args + ["--overwrite"]) == 0
+    assert (out / "notes.txt").read_text() == "mine"  # --overwrite removes only the suite's own files
+    assert main(args + ["--force"]) == 0  # the old name still works
 
 
 def test_bad_arguments_give_one_line_errors(tmp_path, capsys):
-    assert main(["synthetic", "--out", str(tmp_path / "a"), "--per-source", "0"]) == 1
+    assert main(["synthetic", "--out", str(tmp_path / "a"), "--per-source", "0"]) == 2
     assert "--per-source" in capsys.readouterr().err
-    assert main(["synthetic", "--out", str(tmp_path / "b"), "--blocks", "lego"]) == 1
+    assert main(["synthetic", "--out", str(tmp_path / "b"), "--blocks", "lego"]) == 2
     assert "unknown block" in capsys.readouterr().err
     (tmp_path / "file").write_text("x")
-    assert main(["synthetic", "--out", str(tmp_path / "file"), "--per-source", "1", "--blocks", "fantastic_breaks"]) == 1
+    assert main(["synthetic", "--out", str(tmp_path / "file"), "--per-source", "1", "--blocks", "fantastic_breaks"]) == 2
     assert "not a directory" in capsys.readouterr().err
+    assert main(["synthetic", "--out", str(tmp_path / "file" / "sub"), "--per-source", "1"]) == 2
+    assert "is a file" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["nonsense"])
 
@@ -127,7 +131,7 @@ def test_folder_errors_name_the_file(tmp_path, capsys):
     assert main(["folder", str(src), "--out", str(tmp_path / "o"), "--jobs", "1", "--no-progress"]) == 1
     err = capsys.readouterr().err
     assert "lamp/part1.obj" in err and "no triangles" in err
-    assert main(["folder", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 1
+    assert main(["folder", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
     assert "source folder not found" in capsys.readouterr().err
 
 

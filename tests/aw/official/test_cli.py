@@ -31,8 +31,9 @@ def test_convert_then_export(tmp_path, capsys):
     poses, index = pkg.final_state("partnet-none", "743", out)
     assert index == 3 and np.array_equal(poses, FINAL)
     assert [f.integration.tolist() for f in read_archive(out).states] == [f.integration.tolist() for f in original.states]
-    assert main(["official-export", str(run), "--suite", str(tmp_path / "suite"), "--out", str(out)]) == 1
+    assert main(["official-export", str(run), "--suite", str(tmp_path / "suite"), "--out", str(out)]) == 2
     assert "already exists" in capsys.readouterr().err
+    assert main(["official-export", str(run), "--suite", str(tmp_path / "suite"), "--out", str(out), "--overwrite"]) == 0
 
 
 def test_export_a_native_run(tmp_path, capsys):

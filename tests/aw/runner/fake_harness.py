@@ -9,7 +9,11 @@ the configured server itself over stdio with the real MCP SDK client, plays a sh
 harness's output format.
 
 ``FAKE_HARNESS_MODE``: ``play`` (default), ``hang`` (start the server, then sleep: tests the
-runner's wall-clock limit and clean-up), ``fail`` (report an error result and exit 1).
+runner's wall-clock limit and clean-up), ``fail`` (report an error result and exit 1),
+``nologin`` (Claude Code's answer without a login: an error result "Not logged in", exit 1).
+
+``--version`` prints a version line. The harness check's probe prompt (``aw.runner.check``) gets
+the real answer to it: the server's tool names, listed over MCP without calling any.
 """
 
 from __future__ import annotations
@@ -94,6 +98,28 @@ def parse_codex(argv: list[str]) -> dict:
     return {"name": name, "server": server, "prompt": sys.stdin.read(), "images": images, "model": model}
 
 
+async def list_tools(server: dict) -> list[str]:
+    from mcp import Client
+    from mcp.client.stdio import StdioServerParameters, stdio_client
+
+    params = StdioServerParameters(command=server["command"], args=server.get("args", []), env=server.get("env"))
+    async with Client(stdio_client(params, errlog=sys.stderr), read_timeout_seconds=120) as client:
+        return [t.name for t in (await client.list_tools()).tools]
+
+
+def answer_probe(spec: dict, codex: bool) -> int:
+    names = asyncio.run(list_tools(spec["server"]))
+    text = "TOOLS: " + " ".join(names)
+    if codex:
+        emit({"type": "thread.started", "thread_id": "fake-thread"})
+        emit({"type": "item.completed", "item": {"id": "final", "type": "agent_message", "text": text}})
+        emit({"type": "turn.completed", "usage": {"input_tokens": 10, "cached_input_tokens": 0, "output_tokens": 5}})
+    else:
+        emit({"type": "result", "subtype": "success", "is_error": False, "result": text, "num_turns": 1,
+              "total_cost_usd": 0.0001, "usage": {"input_tokens": 10, "output_tokens": 5}, "session_id": "fake"})
+    return 0
+
+
 async def play(server: dict, log) -> list[tuple[str, dict, bool]]:
     """A short real episode; returns (tool, args, ok) per call."""
     from mcp import Client
@@ -130,8 +156,16 @@ async def play(server: dict, log) -> list[tuple[str, dict, bool]]:
 
 def main() -> int:
     argv = sys.argv[1:]
+    if argv == ["--version"]:
+        print("0.0-fake (stand-in harness)")
+        return 0
     codex = argv[:1] == ["exec"]
     spec = parse_codex(argv) if codex else parse_claude(argv)
+    if os.environ.get("FAKE_HARNESS_MODE") == "nologin" and not codex:
+        emit({"type": "result", "subtype": "success", "is_error": True, "result": "Not logged in · Please run /login"})
+        return 1
+    if spec["prompt"].startswith("AssemblyWorld connection check."):
+        return answer_probe(spec, codex)
     if "Assemble the supplied parts into a coherent object." not in spec["prompt"]:
         sys.exit("fake harness: the prompt is not the AssemblyWorld task text")
     for img in spec["images"]:

@@ -118,7 +118,6 @@ def test_existing_runs_are_skipped_unless_overwrite(agent_runs, tiny_suite):
         (["--agent", "idle", "--noise", "0.5"], "--noise applies to the oracle"),
         (["--agent", "oracle", "--noise", "-1"], "--noise must be"),
         (["--agent", "idle", "--tasks", "no_such_task"], "tasks not in the suite"),
-        (["--agent", "idle", "--jobs", "0"], "--jobs must be at least 1"),
     ],
 )
 def test_cli_rejects_bad_arguments_before_running(tiny_suite, tmp_path, capsys, args, message):
@@ -126,6 +125,12 @@ def test_cli_rejects_bad_arguments_before_running(tiny_suite, tmp_path, capsys, 
     assert code == 2
     assert message in capsys.readouterr().err
     assert not any(tmp_path.iterdir())
+
+
+def test_cli_rejects_a_bad_jobs_count_as_a_usage_error(tiny_suite, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        aw_run([str(tiny_suite), "--out", str(tmp_path), "--agent", "idle", "--jobs", "0"])
+    assert exc.value.code == 2 and "--jobs must be >= 1" in capsys.readouterr().err
 
 
 def test_cli_rejects_a_missing_suite(tmp_path, capsys):
