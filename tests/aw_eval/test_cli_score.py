@@ -19,7 +19,7 @@ from aw_eval.study.fixtures import box_suite, write_scripted_run
 
 # Small clouds keep the test fast; the protocol's own numbers are exercised by the evaluator's tests.
 CK_MODE = "fast"
-PROTO = ["--protocol", "n_surface=256", "--protocol", "n_fps=64", "--mode", CK_MODE]
+PROTO = ["--protocol-setting", "n_surface=256", "--protocol-setting", "n_fps=64", "--checkpoint-mode", CK_MODE]
 FAST = ["--bootstrap", "200", "--permutations", "500", "--no-progress"]
 ORIGINALS = ["partnet-box000-none", "partnet-box000-image", "ikea_manual-box000-manual", "assemblybench-box000-manual",
              "fantastic_breaks-box000-none"]
