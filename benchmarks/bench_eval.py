@@ -1,14 +1,14 @@
 """Evaluator benchmark: checkpoints per second of the reference, ``exact`` and ``fast`` on the same
 checkpoints, compile time apart, peak memory, and the agreement of ``fast`` with ``exact``.
 
-Prints a table and writes JSON (default ``benchmarks/results/bench_eval.json``). Geometry is
+Prints a table and writes JSON to ``--out DIR`` (``DIR/bench_eval.json``, or ``--name``). Geometry is
 synthetic (:mod:`aw_eval.fixtures`): tables of 2-20 parts with identical legs and symmetric
 parts; checkpoints come from agent-like synthetic trajectories. Examples::
 
     # issue 3/8 throughput table (reference on few checkpoints: it takes minutes each)
-    .venv/bin/python benchmarks/bench_eval.py --parts 2 5 10 --ref 2 --fast-batches 1 100
+    .venv/bin/python benchmarks/bench_eval.py --parts 2 5 10 --ref 2 --fast-batches 1 100 --out OUT
     # agreement of fast against exact on many checkpoints at reduced resolution
-    .venv/bin/python benchmarks/bench_eval.py --parts 2 5 10 --ref 0 --exact 0 --agreement 1000 --agree-fps 64
+    .venv/bin/python benchmarks/bench_eval.py --parts 2 5 10 --ref 0 --exact 0 --agreement 1000 --agree-fps 64 --out OUT
 
 Every figure is measured in one process on this machine; ratios compare runs on identical
 checkpoints. ``--workers`` is not offered on purpose: throughput per process is reported, and a
@@ -205,11 +205,12 @@ def bench_agreement(parts: list[int], n: int, fps: int, seed: int = 0, workers: 
             "exact_over_fast_time": t_exact / max(t_fast, 1e-9), "disagreements": flips[:50]}
 
 
-def agreement_from_logs(logs: list[Path], fps: int, seed: int = 0) -> dict:
+def agreement_from_logs(logs: list[Path], fps: int, seed: int = 0, check_exact: bool = False) -> dict:
     """``fast`` (this process, current code) against the ``exact`` results recorded in ``logs``
     (``--agree-log`` files of earlier agreement runs, for example from a larger machine): the
     checkpoints are regenerated deterministically (their order is prefix-stable), so ``exact``,
-    the expensive side, is not run again."""
+    the expensive side, is not run again. ``check_exact``: run it again all the same and compare
+    its PA/SR decisions and SCD with the log (the labels still hold for the current code)."""
     exact: dict[int, dict[str, list]] = {}
     for log in logs:
         for line in Path(log).read_text().splitlines():
@@ -233,6 +234,13 @@ def agreement_from_logs(logs: list[Path], fps: int, seed: int = 0) -> dict:
         total += n
         same += int(ok.sum())
         rel += list(np.abs(f.scd - escd) / np.maximum(escd, 1e-12))
+        if check_exact:
+            t0 = time.perf_counter()
+            e = aw_eval.score_batch(geom, cks, mode="exact")
+            same_exact = (epa == e.pa) & (esr == e.sr)
+            by_parts[p]["exact_rerun"] = {"identical_pa_and_sr": int(same_exact.sum()), "seconds": time.perf_counter() - t0,
+                                          "scd_rel_diff_max": float(np.max(np.abs(e.scd - escd) / np.maximum(escd, 1e-300)))}
+            print(f"exact re-run vs logged exact, parts={p}: {int(same_exact.sum())}/{n} identical", flush=True)
         for i in np.flatnonzero(~ok):
             flips.append({"parts": p, "index": int(i), "pa_exact": float(epa[i]), "pa_fast": float(f.pa[i]),
                           "scd_exact": float(escd[i]), "scd_fast": float(f.scd[i]),
@@ -265,8 +273,14 @@ def main(argv=None) -> int:
     ap.add_argument("--fast-set", nargs="*", default=[], metavar="KEY=VALUE",
                     help="run fast with these FastSettings fields (e.g. coarse=16), in this process and the workers")
     ap.add_argument("--agree-seed", type=int, default=0, help="seed of the agreement trajectories (0: the recorded set)")
-    ap.add_argument("--out", default=str(Path(__file__).resolve().parent / "results" / "bench_eval.json"))
+    ap.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder to write the JSON to (a new file)")
+    ap.add_argument("--name", default="bench_eval", help="the JSON file's name in --out, without .json (default bench_eval)")
+    ap.add_argument("--agree-check-exact", action="store_true",
+                    help="with --agree-exact-log: also re-run exact on the logged checkpoints and compare it with the log")
     args = ap.parse_args(argv)
+    from _output import output_file
+
+    out = output_file(args.out, f"{args.name}.json")  # refused before the run, not after it
     fast_kw = _fast_settings(args.fast_set, args.exact_margin)
     _apply_fast_settings(fast_kw)
     rows: list = []
@@ -280,7 +294,8 @@ def main(argv=None) -> int:
                                               workers=args.agree_workers, log=args.agree_log, fast_kw=fast_kw)
         print(json.dumps({k: v for k, v in result["agreement"].items() if k != "disagreements"}), flush=True)
     if args.agree_exact_log:
-        result["agreement_vs_logged_exact"] = agreement_from_logs(args.agree_exact_log, args.agree_fps, seed=args.agree_seed)
+        result["agreement_vs_logged_exact"] = agreement_from_logs(args.agree_exact_log, args.agree_fps, seed=args.agree_seed,
+                                                                 check_exact=args.agree_check_exact)
         result["agreement_vs_logged_exact"]["fast_settings"] = fast_kw
         a = result["agreement_vs_logged_exact"]
         print(json.dumps({k: v for k, v in a.items() if k != "disagreements"}), flush=True)
@@ -288,8 +303,8 @@ def main(argv=None) -> int:
             print(json.dumps(d), flush=True)
     result["machine"]["load_avg_end"] = os.getloadavg()
     result["peak_mib"] = peak_mib()
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(result, indent=1))
+    out.write_text(json.dumps(result, indent=1))
+    print(f"wrote {out}")
     print("\n| parts | reference s/ck | exact s/ck | fast s/ck | exact x | fast x | compile s | peak MiB |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
@@ -305,7 +320,6 @@ def main(argv=None) -> int:
         a = result["agreement"]
         print(f"agreement fast vs exact: {a['checkpoints']} checkpoints at {a['points_per_part']} pts/part: "
               f"PA identical {a['identical_pa']:.4f}, SR identical {a['identical_sr']:.4f}, SCD rel err p99 {a['scd_rel_err_p99']:.2e}")
-    print(f"wrote {args.out}")
     return 0
 
 

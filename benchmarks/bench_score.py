@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_score.py [--stats-only] [--systems 8] [--draws 10000]
         [--permutations 100000] [--e2e-systems 2] [--e2e-tasks-per-source 1] [--parts 3]
-        [--jitter 500] [--jobs 1] [--json benchmarks/results/bench_score.json]
+        [--jitter 500] [--jobs 1] --out DIR
 
 1. Statistics: a synthetic study of ``--systems`` systems x 100 tasks (the paper's design: 20
    objects per source, PartNet in two paired conditions) with per-part errors; times the
@@ -145,8 +145,12 @@ def main() -> int:
     ap.add_argument("--jitter", type=int, default=500, help="small nudges per run (one new checkpoint each)")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--min-checkpoints", type=int, default=5000)
-    ap.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "bench_score.json")
+    ap.add_argument("--out", type=Path, required=True, metavar="DIR",
+                    help="folder to write bench_score.json to (a new file; never overwritten)")
     args = ap.parse_args()
+    from _output import output_file
+
+    out = output_file(args.out, "bench_score.json")  # refused before the run, not after it
     result = {"machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform()},
               "command": " ".join(sys.argv)}
     result["statistics"] = bench_stats(args.systems, args.draws, args.permutations)
@@ -165,9 +169,8 @@ def main() -> int:
               f"({e['checkpoints_per_second_cold']:.1f} checkpoints/s, {e['executor']}), "
               f"warm {e['warm_seconds']:.2f} s ({e['warm_cached_runs']} cached, {e['warm_scored_runs']} rescored), "
               f"outputs {e['outputs_seconds_incl_stats_and_plots']:.1f} s")
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {args.json}")
+    out.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {out}")
     return 0
 
 

@@ -1,7 +1,7 @@
 """aw-serve latency over stdio, measured with the official MCP client as a harness would see it.
 
     .venv/bin/python benchmarks/bench_server.py [--parts 10] [--faces 500] [--trivial 200]
-        [--edits 100] [--captures 20] [--json benchmarks/results/bench_server.json]
+        [--edits 100] [--captures 20] --out DIR
 
 Reports: server start to first tools/list answer; round trip of a trivial tool (``get_state``);
 an edit (``translate_objects``, which appends and fsyncs one trajectory line); ``capture_scene``
@@ -112,8 +112,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--trivial", type=int, default=200)
     p.add_argument("--edits", type=int, default=100)
     p.add_argument("--captures", type=int, default=20)
-    p.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "bench_server.json")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR",
+                   help="folder to write bench_server.json to (a new file; never overwritten)")
     args = p.parse_args(argv)
+    from _output import output_file
+
+    out = output_file(args.out, "bench_server.json")  # refused before the run, not after it
     with tempfile.TemporaryDirectory() as tmp:
         task_dir = make_task(Path(tmp), args.parts, args.faces)
         from aw.meshes import load_mesh
@@ -133,9 +137,8 @@ def main(argv: list[str] | None = None) -> int:
         s = res[name]
         print(f"  {name:<28}{s['median_ms']:>10.1f}{s['p90_ms']:>10.1f}{s['n']:>6}")
     print(f"  PNG size (median)            {res['png_kib_median']:8.0f} KiB")
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(res, indent=2) + "\n")
-    print(f"wrote {args.json}")
+    out.write_text(json.dumps(res, indent=2) + "\n")
+    print(f"wrote {out}")
     return 0
 
 

@@ -100,8 +100,12 @@ def main() -> int:
     ap.add_argument("--tasks", type=int, default=2, help="box tasks (of the suite's 5)")
     ap.add_argument("--checkpoints", type=int, default=100, help="consecutive checkpoints for the fast part")
     ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--json", type=Path, default=Path(__file__).resolve().parent / "results" / "profile_study.json")
+    ap.add_argument("--out", type=Path, required=True, metavar="DIR",
+                    help="folder to write profile_study.json to (a new file; never overwritten)")
     args = ap.parse_args()
+    from _output import output_file
+
+    out = output_file(args.out, "profile_study.json")  # refused before the run, not after it
     from aw.formats import read_manifest, suite_paths
     from aw_eval.study.fixtures import box_suite, write_scripted_run
 
@@ -131,9 +135,8 @@ def main() -> int:
             s = x["seconds"]
             print(f"  exact final state: first start {x['first_start_walks_per_search']:.2f} part walks per search; "
                   + ", ".join(f"{k} {v:.2f} s" for k, v in s.items()) + f"; SCD within {x['scd_max_rel_diff']:.1e}", flush=True)
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(result, indent=2) + "\n")
-    print(f"wrote {args.json}")
+    out.write_text(json.dumps(result, indent=2) + "\n")
+    print(f"wrote {out}")
     return 0
 
 
