@@ -11,7 +11,7 @@ parts; checkpoints come from agent-like synthetic trajectories. Examples::
     .venv/bin/python benchmarks/bench_eval.py --parts 2 5 10 --ref 0 --exact 0 --agreement 1000 --agree-fps 64 --out OUT
 
 Every figure is measured in one process on this machine; ratios compare runs on identical
-checkpoints. ``--workers`` is not offered on purpose: throughput per process is reported, and a
+checkpoints, the reference and ``exact`` alternating checkpoint by checkpoint. ``--workers`` is not offered on purpose: throughput per process is reported, and a
 pool of ``k`` processes (``aw-score`` does that) multiplies it by about ``k`` on ``k`` free cores.
 """
 
@@ -63,13 +63,25 @@ def bench_parts(p: int, args, rows: list, agree: list) -> None:
     row = {"parts": p, "points_per_part": args.n_fps, "geometry_s": t_geom, "fast_first_call_s": first_fast,
            "fast_warm_call_s": warm_fast, "compile_s": max(0.0, first_fast - warm_fast)}
     same = cks[: max(args.ref, args.exact)]
+    ref_score = lambda c: ref.score(geom.clouds, geom.target_poses, geom.divisor, geom.groups, c, geom.settings)  # noqa: E731
+    exact_score = lambda c: aw_eval.score(geom, c, mode="exact")  # noqa: E731
+    # reference and exact alternate checkpoint by checkpoint, so that a shared machine's load
+    # changes weigh on both alike
+    t_ref = t_exact = 0.0
+    rres, eres = [], []
+    for i in range(max(args.ref, args.exact)):
+        for on, fn, out in ((i < args.ref, ref_score, rres), (i < args.exact, exact_score, eres)):
+            if on:
+                t, res = time_calls(fn, same[i: i + 1])
+                out += res
+                if fn is ref_score:
+                    t_ref += t
+                else:
+                    t_exact += t
     if args.ref:
-        t, rres = time_calls(lambda c: ref.score(geom.clouds, geom.target_poses, geom.divisor, geom.groups, c, geom.settings), same[: args.ref])
-        row["reference_s_per_ck"] = t / args.ref
-        row["peak_mib_after_reference"] = peak_mib()
+        row["reference_s_per_ck"] = t_ref / args.ref
     if args.exact:
-        t, eres = time_calls(lambda c: aw_eval.score(geom, c, mode="exact"), same[: args.exact])
-        row["exact_s_per_ck"] = t / args.exact
+        row["exact_s_per_ck"] = t_exact / args.exact
         row["peak_mib_after_exact"] = peak_mib()
         if args.ref:
             k = min(args.ref, args.exact)

@@ -36,8 +36,9 @@ def fit_tile(lanes: int, m: int, tile: int = DEFAULT_TILE) -> int:
     return tile
 
 
+@lru_cache(maxsize=1)
 def accelerator_present() -> bool:
-    """True when JAX sees a GPU or TPU (the ``auto`` backend then picks JAX)."""
+    """True when JAX sees a GPU or TPU (the ``auto`` backend then picks JAX); asked once per process."""
     try:
         jax, _ = jax_modules()
         return any(d.platform != "cpu" for d in jax.devices())
