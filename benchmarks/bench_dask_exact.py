@@ -1,8 +1,8 @@
-"""``aw-score --mode exact`` on a Dask LocalCluster: every checkpoint of a small study scored by the
+"""``aw-score --checkpoint-mode exact`` on a Dask LocalCluster: every checkpoint of a small study scored by the
 protocol (every start at full resolution), then extrapolated to a paper-scale study.
 
     .venv/bin/python benchmarks/bench_dask_exact.py [--workers 2] [--parts 8] [--systems 1]
-        [--jitter 0] [--json benchmarks/results/bench_dask_exact.json]
+        [--jitter 0] --out DIR [--name NAME]
 
 Builds a box suite (``aw_eval.study.fixtures``: one object per source, 5 tasks of ``--parts``
 parts), writes scripted runs (one placement per part, ``--jitter`` extra nudges), starts a
@@ -35,8 +35,13 @@ def main() -> None:
     ap.add_argument("--parts", type=int, default=8)
     ap.add_argument("--systems", type=int, default=1)
     ap.add_argument("--jitter", type=int, default=0, help="extra nudges per run (one new checkpoint each)")
-    ap.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "bench_dask_exact.json")
+    ap.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder to write the JSON to (a new file)")
+    ap.add_argument("--name", default="bench_dask_exact", help="the JSON file's name in --out, without .json")
     args = ap.parse_args()
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from _output import output_file
+
+    path = output_file(args.out, f"{args.name}.json")  # refused before the run, not after it
 
     from distributed import LocalCluster
 
@@ -57,7 +62,7 @@ def main() -> None:
                                        inspect_moves=False)
                 n_ck += r.n_checkpoints
         with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-            argv = [str(suite), str(tmp / "runs"), "--out", str(tmp / "out"), "--mode", "exact", "--final", "exact",
+            argv = [str(suite), str(tmp / "runs"), "--out", str(tmp / "out"), "--checkpoint-mode", "exact", "--final-mode", "exact",
                     "--scheduler", cluster.scheduler_address, "--no-plots", "--no-html", "--no-progress",
                     "--bootstrap", "100", "--permutations", "100"]
             t0 = time.perf_counter()
@@ -83,8 +88,7 @@ def main() -> None:
                                         "worker_hours": round(worker_hours, 2),
                                         "wall_hours_on_16_workers": round(worker_hours / CLUSTER_WORKERS, 2)},
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(out, indent=2) + "\n")
+    path.write_text(json.dumps(out, indent=2) + "\n")
     print(json.dumps(out, indent=2))
 
 

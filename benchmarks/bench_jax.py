@@ -1,9 +1,9 @@
 """The ``jax`` backend against ``numba`` in ``exact`` mode, on the same checkpoints in one process.
 
     # the issue's target measurement: 8 parts at paper resolution, on a GPU (not run here)
-    .venv/bin/python benchmarks/bench_jax.py --parts 8 --n-fps 1000 --checkpoints 256 --numba 8
+    .venv/bin/python benchmarks/bench_jax.py --parts 8 --n-fps 1000 --checkpoints 256 --numba 8 --out OUT
     # what this repository's CPU-only machine measured (reduced resolution)
-    JAX_PLATFORMS=cpu .venv/bin/python benchmarks/bench_jax.py --parts 2 --n-fps 100 --checkpoints 16 --numba 16
+    JAX_PLATFORMS=cpu .venv/bin/python benchmarks/bench_jax.py --parts 2 --n-fps 100 --checkpoints 16 --numba 16 --out OUT
 
 Synthetic geometry and agent-like trajectory checkpoints (:mod:`aw_eval.fixtures`). Times
 ``score_batch(mode="exact", backend="jax")`` cold (compilation included) and warm, and
@@ -38,8 +38,13 @@ def main() -> None:
     ap.add_argument("--checkpoints", type=int, default=64, help="checkpoints scored by jax (a multiple of --chunk)")
     ap.add_argument("--chunk", type=int, default=32, help="checkpoints per jax call (aw_eval.scoring.JAX_CHUNK)")
     ap.add_argument("--numba", type=int, default=4, help="of those, how many numba scores too (agreement, ratio)")
-    ap.add_argument("--json", type=Path, default=ROOT / "benchmarks" / "results" / "bench_jax.json")
+    ap.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder to write the JSON to (a new file)")
+    ap.add_argument("--name", default="bench_jax", help="the JSON file's name in --out, without .json")
     args = ap.parse_args()
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from _output import output_file
+
+    path = output_file(args.out, f"{args.name}.json")  # refused before the run, not after it
 
     import aw_eval
     import aw_eval.scoring
@@ -79,8 +84,7 @@ def main() -> None:
         "projected_minutes_for_60000_checkpoints (from the measured rate)": jax_per_ck * STUDY_CHECKPOINTS / 60,
         "load_average_after": os.getloadavg(),
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(out, indent=2) + "\n")
+    path.write_text(json.dumps(out, indent=2) + "\n")
     print(json.dumps(out, indent=2))
 
 
