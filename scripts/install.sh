@@ -39,12 +39,20 @@ if [ ! -x .venv/bin/python ]; then
 fi
 stamp=.venv/.aw-installed
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
-  echo "[install] installing AssemblyWorld and its dependencies into .venv (first time: a few minutes)"
-  .venv/bin/python -m pip install -q --upgrade pip >/dev/null
-  .venv/bin/python -m pip install -q -e ".[test]"
+  # pip's own output (150+ lines) goes to a log; the terminal gets a summary, or the log's tail on failure
+  log=.venv/install.log
+  echo "[install] installing AssemblyWorld and its dependencies into .venv (first time: a few minutes; log: $log)"
+  if ! { .venv/bin/python -m pip install --upgrade pip && .venv/bin/python -m pip install -e ".[test]"; } >"$log" 2>&1; then
+    tail -n 30 "$log" >&2
+    echo "[install] ERROR: pip failed; the whole output is in $log" >&2
+    exit 1
+  fi
+  warnings=$(grep -ci 'warning' "$log" || true)
+  echo "[install] $(grep '^Successfully installed' "$log" | tail -n 1 | wc -w | awk '{print ($1>2)?$1-2:0}') packages installed or updated; $warnings warning line(s) in $log"
   touch "$stamp"
 fi
 # numba caches compiled kernels beside their modules; compile them once here, not in every process
-.venv/bin/python -c "from aw_eval.kernels import compile_kernels; compile_kernels()" || {
-  echo "[install] ERROR: compiling the evaluator's kernels (numba) failed; see the message above" >&2; exit 1; }
+.venv/bin/python -W ignore -c "from aw_eval.kernels import compile_kernels; compile_kernels()" >>.venv/install.log 2>&1 || {
+  tail -n 30 .venv/install.log >&2
+  echo "[install] ERROR: compiling the evaluator's kernels (numba) failed; see .venv/install.log" >&2; exit 1; }
 echo "[install] ready: $(.venv/bin/python --version), .venv/bin/aw-*"
