@@ -20,7 +20,7 @@ from aw_eval.study import ScoreSettings, StudyError, score_study
 from aw_eval.study.fixtures import box_suite, write_scripted_run
 from score_helpers import make_study, paper_entries, run_from_errors
 
-PROTO = ["--protocol", "n_surface=256", "--protocol", "n_fps=64"]
+PROTO = ["--protocol", "n_surface=256", "--protocol", "n_fps=64", "--final", "fast"]
 FAST = ["--bootstrap", "50", "--permutations", "50", "--no-progress", "--no-plots", "--jobs", "1"]
 
 
