@@ -211,7 +211,7 @@ def _calls(view: RunView, task_id: str, data_src: str | None) -> str:
         return f'<p class="note">{len(view.calls)} tool calls (trajectory.jsonl).</p>'
     return (f'<details class="calls" data-task="{html.escape(task_id)}" data-src="{html.escape(data_src)}" '
             f'data-system="{html.escape(view.system)}"><summary>Tool calls ({len(view.calls)})</summary>'
-            '<ol class="calls"></ol></details>')
+            '<ul class="calls"></ul></details>')
 
 
 def _call_rows(view: RunView) -> list[list[Any]]:

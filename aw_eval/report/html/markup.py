@@ -28,7 +28,7 @@ def sort_value(cell: str) -> str:
 
 def _inline(text: str) -> str:
     out = html.escape(text, quote=False)
-    out = re.sub(r"`([^`]+)`", r"<code>\1</code>", out)
+    out = re.sub(r"`([^`]*)`", r"<code>\1</code>", out)  # an empty span still pairs its two backticks
     out = re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", out)
     return out
 

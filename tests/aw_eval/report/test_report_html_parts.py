@@ -30,6 +30,7 @@ def test_markdown_tables_become_sortable_with_the_same_cells():
     assert "<ul><li><strong>missing</strong> (1):<ul><li>a / t1: no run</li></ul></li><li>next</li></ul>" in out
     assert '<img src="plots/q.png" alt="quality" loading="lazy">' in out
     assert markdown_to_html("a <b> & c") == "<p>a &lt;b&gt; &amp; c</p>"
+    assert markdown_to_html("runs ``; mode `fast`") == "<p>runs <code></code>; mode <code>fast</code></p>"
 
 
 def test_sort_value_reads_the_first_number():

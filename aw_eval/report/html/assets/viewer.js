@@ -118,7 +118,7 @@
   }
   function fillCalls(details, d) {
     const sys = d.systems[details.dataset.system];
-    const ol = details.querySelector("ol");
+    const ol = details.querySelector("ul.calls");
     sys.calls.forEach(function (c) {
       const li = document.createElement("li");
       li.className = c[4] ? "ok" : "err";
@@ -142,7 +142,7 @@
     if (!details.matches || !details.matches("details.calls") || !details.open || details.dataset.ready) return;
     taskData(details.dataset.task, details.dataset.src)
       .then(function (d) { if (!details.dataset.ready) fillCalls(details, d); })
-      .catch(function (err) { details.querySelector("ol").textContent = "could not load: " + err.message; });
+      .catch(function (err) { details.querySelector("ul.calls").textContent = "could not load: " + err.message; });
   }, true);
   document.addEventListener("click", function (e) {
     const btn = e.target.closest("button.open3d");
