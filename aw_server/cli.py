@@ -151,11 +151,15 @@ def main(argv: list[str] | None = None) -> int:
     except FormatError as exc:
         return _fail(str(exc), tell_client=stdio)
     if args.print_prompt or args.print_references:
-        if args.print_prompt:
-            print(task.prompt)
-        if args.print_references:
-            for path in task.reference_paths():
-                print(path.resolve())
+        try:
+            if args.print_prompt:
+                print(task.prompt)
+            if args.print_references:
+                for path in task.reference_paths():
+                    print(path.resolve())
+            sys.stdout.flush()
+        except BrokenPipeError:  # the reader stopped early (| head): not an error
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     if args.record is None and args.record_under is None:
         return _fail("--record RUN_DIR or --record-under DIR is required to serve "

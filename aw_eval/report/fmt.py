@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import math
+from decimal import ROUND_HALF_UP, Decimal
 
-__all__ = ["paper", "fixed", "ci", "pval", "signed", "md_table", "bold_best"]
+__all__ = ["paper", "fixed", "ci", "pval", "signed", "md_table", "bold_best", "threshold_label"]
 
 DASH = "–"
 
@@ -14,14 +15,12 @@ def _missing(x) -> bool:
 
 
 def paper(x) -> str:
-    """Table 1 style: rounded to one decimal, shown with four significant digits
-    (59.375 -> ``59.40``, 7.5 -> ``7.500``, 0 -> ``0.000``, 100 -> ``100.0``)."""
+    """A percentage as the paper's tables print PA and SR: two decimals, one value everywhere
+    (59.375 -> ``59.38``, 7.5 -> ``7.50``, 0 -> ``0.00``, 100 -> ``100.00``), halves rounded up
+    after dropping float noise beyond 12 significant digits (a mean of 59.375 may be 59.37499999...)."""
     if _missing(x):
         return DASH
-    r = round(float(x), 1)
-    if r == 0:
-        return "0.000"
-    return f"{r:#.4g}"
+    return str(Decimal(f"{float(x):.12g}").quantize(Decimal("0.01"), rounding=ROUND_HALF_UP))
 
 
 def fixed(x, digits: int = 1) -> str:
@@ -53,10 +52,17 @@ def md_table(header: list[str], rows: list[list[str]], align: str | None = None)
     return "\n".join(lines)
 
 
-def bold_best(cells: list[str], values: list, higher: bool = True) -> list[str]:
-    """Bold the best numeric entries (ties included)."""
-    vals = [v for v in values if not _missing(v)]
-    if not vals:
+def bold_best(cells: list[str], values: list, higher: bool = True, eligible: list[bool] | None = None) -> list[str]:
+    """Bold the best numeric entries (ties included) among the ``eligible`` ones (default all),
+    only when it is a real best: at least two eligible values, and not all equal."""
+    ok = [not _missing(v) and (eligible is None or eligible[i]) for i, v in enumerate(values)]
+    vals = [float(v) for v, o in zip(values, ok) if o]
+    if len(vals) < 2 or max(vals) - min(vals) < 1e-9:
         return cells
     best = max(vals) if higher else min(vals)
-    return [f"**{c}**" if not _missing(v) and abs(v - best) < 1e-9 else c for c, v in zip(cells, values)]
+    return [f"**{c}**" if o and abs(float(v) - best) < 1e-9 else c for c, v, o in zip(cells, values, ok)]
+
+
+def threshold_label(t: float) -> str:
+    """A correctness threshold for a header: two significant digits (0.00316228 -> ``0.0032``)."""
+    return f"{t:.2g}"

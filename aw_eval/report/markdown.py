@@ -10,7 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 from aw_eval.analyses.failures import CLASSES
-from aw_eval.report.fmt import DASH, bold_best, ci, fixed, md_table, paper, pval, signed
+from aw_eval.report.fmt import DASH, bold_best, ci, fixed, md_table, paper, pval, signed, threshold_label
 
 __all__ = ["render_markdown"]
 
@@ -39,6 +39,9 @@ def _table1(doc: dict[str, Any]) -> str:
     res_keys = ("time_min", "mcp_calls", "tokens_m", "cost_usd")
     for k in res_keys:
         cols.append([res[s][k]["mean"] for s in systems])
+    # Lowest resource use is only "best" for a system that achieved something (an idle system's
+    # few calls are not an achievement).
+    achieved = [float(q["systems"][s]["overall"]["pa"] or 0) > 0 for s in systems]
     text_cols = []
     for j, col in enumerate(cols):
         if j <= len(cells):
@@ -46,16 +49,17 @@ def _table1(doc: dict[str, Any]) -> str:
             text_cols.append(bold_best(txt, col, higher=True))
         else:
             k = res_keys[j - len(cells) - 1]
-            digits = {"time_min": 1, "mcp_calls": 0, "tokens_m": 2, "cost_usd": 2}[k]
+            digits = {"time_min": 2, "mcp_calls": 0, "tokens_m": 2, "cost_usd": 2}[k]
             txt = [fixed(v, digits) for v in col]
-            text_cols.append(bold_best(txt, col, higher=False))
+            text_cols.append(bold_best(txt, col, higher=False, eligible=achieved))
     rows = [[s] + [tc[i] for tc in text_cols] for i, s in enumerate(systems)]
     note = ("SR (%) per source and condition (NR: no reference, IR: assembled-object image, M: manual); Overall by "
             "eq. 3 (PartNet conditions averaged first, sources weighted equally). Resource columns are arithmetic "
             "per-evaluation means over available records (records: "
             + "; ".join(f"{s}: time {res[s]['time_min']['n']}, calls {res[s]['mcp_calls']['n']}, tokens "
                         f"{res[s]['tokens_m']['n']}, cost {res[s]['cost_usd']['n']}" for s in systems)
-            + "). Bold marks the highest SR or lowest resource use.")
+            + "). Bold marks the highest SR, or the lowest resource use among systems with PA > 0, where "
+            "systems differ.")
     return md_table(header, rows) + "\n\n" + note
 
 
@@ -89,7 +93,7 @@ def _overview(doc: dict[str, Any]) -> str:
             continue
         rows.append([s, paper(o["sr"]["value"]), ci(o["sr"]["ci"]), paper(o["pa"]["value"]), ci(o["pa"]["ci"]),
                      str(oc[s]["errors_timeouts"])])
-    return (md_table(["System", "SR", "95% CI", "PA", "95% CI", "Errors/timeouts"], rows) +
+    return (md_table(["System", "SR (%)", "95% CI", "PA (%)", "95% CI", "Errors/timeouts"], rows) +
             f"\n\nSource-weighted quality with pointwise percentile bootstrap intervals ({u['n_draws']:,} draws, seed "
             f"{u['seed']}; objects resampled within sources, PartNet conditions paired). Errors/timeouts count runs "
             "that did not finish normally, including missing and unreadable runs.")
@@ -103,7 +107,7 @@ def _pairs(doc: dict[str, Any]) -> str:
         return "Only one system: no pairwise comparisons."
     rows = [[p["a"], p["b"], f"{signed(p['sr']['diff'])} {ci(p['sr']['ci'])}", pval(p["sr"]["p_holm"]),
              f"{signed(p['pa']['diff'])} {ci(p['pa']['ci'])}", pval(p["pa"]["p_holm"])] for p in u["pairs"]]
-    return (md_table(["A", "B", "ΔSR [95% CI]", "p_Holm", "ΔPA [95% CI]", "p_Holm"], rows, "llrrrr") +
+    return (md_table(["A", "B", "ΔSR (pp) [95% CI]", "p_Holm", "ΔPA (pp) [95% CI]", "p_Holm"], rows, "llrrrr") +
             f"\n\nA minus B in percentage points. Two-sided randomization tests ({u['n_permutations']:,} relabellings, "
             f"add-one correction, labels exchanged within objects), Holm correction over all {u.get('family_size', 0)} "
             "system-pair/metric comparisons; intervals are pointwise.")
@@ -179,13 +183,14 @@ def _thresholds(doc: dict[str, Any]) -> str:
     th = doc["thresholds"]
     ts = th["thresholds"]
     show = [i for i, t in enumerate(ts) if any(abs(t - x) < 1e-12 for x in (1e-4, 1e-3, 0.00316228, 0.01, 0.0316228, 0.1))]
-    header = ["System"] + [f"PA@{ts[i]:g}" for i in show] + [f"SR@{ts[i]:g}" for i in show]
+    header = (["System"] + [f"PA@{threshold_label(ts[i])} (%)" for i in show] +
+              [f"SR@{threshold_label(ts[i])} (%)" for i in show])
     rows = []
     for s in _order(doc):
         v = th["systems"].get(s)
         if v is None:
             continue
-        rows.append([s] + [fixed(v["pa"][i]) for i in show] + [fixed(v["sr"][i]) for i in show])
+        rows.append([s] + [paper(v["pa"][i]) for i in show] + [paper(v["sr"][i]) for i in show])
     return md_table(header, rows) + ("\n\nPA/SR (%, eq. 3) at correctness thresholds, with the saved registration and "
                                     "Hungarian correspondence fixed; the full sweep is in scores.json and thresholds.png.")
 
@@ -198,7 +203,7 @@ def _stages(doc: dict[str, Any]) -> str:
             continue
         rows.append([s, fixed(st["translation_early"], 3), fixed(st["translation_late"], 3), fixed(st["rotation_early"], 1),
                      fixed(st["rotation_late"], 1), fixed(st["revisit"], 1)])
-    return (md_table(["System", "Trans. early", "Late", "Rot. early", "Late", "Revisit (%)"], rows) +
+    return (md_table(["System", "Trans. early (diag.)", "Late (diag.)", "Rot. early (deg)", "Late (deg)", "Revisit (%)"], rows) +
             "\n\nSource-weighted medians of per-evaluation medians in the first and last third of the interaction "
             "interval. Translation is normalized by the largest-part diagonal; rotation is in degrees; operations "
             "below 0.5 degrees count as translations. Revisit: weighted median fraction of edits touching a part "
@@ -234,16 +239,17 @@ def _curves(doc: dict[str, Any]) -> str:
         v = cv["systems"].get(s)
         if v is None:
             continue
-        rows.append([s] + [f"{fixed(a)}/{fixed(b)}" for a, b in zip(v["pa"]["normalized"], v["sr"]["normalized"])])
-    t1 = md_table(["System"] + [f"{p:g}" for p in pts], rows)
+        rows.append([s] + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["normalized"], v["sr"]["normalized"])])
+    t1 = md_table(["System"] + [f"PA/SR (%) at {p:g}" for p in pts], rows)
     rows = []
     for s in _order(doc):
         v = cv["systems"].get(s)
         if v is None:
             continue
-        rows.append([s] + [f"{fixed(a)}/{fixed(b)}" for a, b in zip(v["pa"]["budget"], v["sr"]["budget"])] +
-                    [f"{fixed(v['pa']['final'])}/{fixed(v['sr']['final'])}", str(v["edits_after_last_budget"])])
-    t2 = md_table(["System"] + [f"{m:g} min" for m in cv["budget_minutes"]] + ["Final", "Edits after last budget"], rows)
+        rows.append([s] + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["budget"], v["sr"]["budget"])] +
+                    [f"{paper(v['pa']['final'])}/{paper(v['sr']['final'])}", str(v["edits_after_last_budget"])])
+    t2 = md_table(["System"] + [f"PA/SR (%) at {m:g} min" for m in cv["budget_minutes"]] + ["Final PA/SR (%)",
+                  "Edits after last budget"], rows)
     dec = doc["pa_decreases"]
     t3 = md_table(["System", "PA decreases", "with an assignment change", "persist, alignment fixed",
                    "persist, alignment and matching fixed"],

@@ -33,10 +33,10 @@ def test_table1_is_printed_like_the_paper():
     astra = next(line for line in table.splitlines() if line.startswith("| Astra"))
     qwen = next(line for line in table.splitlines() if line.startswith("| Qwen"))
     cells = [c.strip().strip("*") for c in astra.split("|")[1:-1]]
-    assert cells[:7] == ["Astra", "15.00", "40.00", "65.00", "55.00", "90.00", "59.40"]
+    assert cells[:7] == ["Astra", "15.00", "40.00", "65.00", "55.00", "90.00", "59.38"]
     cells = [c.strip().strip("*") for c in qwen.split("|")[1:-1]]
-    assert cells[:7] == ["Qwen", "5.000", "0.000", "0.000", "10.00", "35.00", "11.90"]
-    assert cells[7:9] == ["6.0", "90"]  # time (min) and MCP calls from run.json
+    assert cells[:7] == ["Qwen", "5.00", "0.00", "0.00", "10.00", "35.00", "11.88"]  # one value, two decimals
+    assert cells[7:9] == ["6.00", "90"]  # time (min) and MCP calls from run.json
 
 
 def test_missing_runs_count_zero_and_scd_uses_scored_attempts_only():
@@ -81,3 +81,15 @@ def test_a_suite_of_variants_only_still_reports():
     md = render_markdown(doc)
     assert "no original (non-variant) tasks" in md
     assert doc["quality"]["systems"] == {}
+
+
+def test_bold_marks_only_a_real_best_among_systems_that_achieved_something():
+    from aw_eval.report.fmt import bold_best, paper, threshold_label
+
+    assert bold_best(["1", "1"], [1.0, 1.0]) == ["1", "1"]  # all tied: no best
+    assert bold_best(["5"], [5.0]) == ["5"]  # one system: no best
+    assert bold_best(["2", "9"], [2.0, 9.0], higher=True) == ["2", "**9**"]
+    # the idle system's 18 calls are fewest, but it achieved nothing
+    assert bold_best(["18", "40", "55"], [18, 40, 55], higher=False, eligible=[False, True, True]) == ["18", "**40**", "55"]
+    assert paper(85.35) == "85.35" and paper(0) == "0.00" and paper(80) == "80.00"
+    assert threshold_label(0.00316228) == "0.0032" and threshold_label(0.01) == "0.01"
