@@ -228,7 +228,7 @@ def test_dask_local_cluster_gives_identical_results(study, tmp_path):
     ref = json.loads((study["out"] / "scores.json").read_text())  # after the resumption test, if it ran
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
         rc = main([str(study["suite"]), str(study["runs"]), "--out", str(tmp_path / "dask"), "--scheduler",
-                   cluster.scheduler_address, *study["opts"], *FAST, "--seed", "3", "--no-plots"])
+                   cluster.scheduler_address, *study["opts"], *FAST, "--seed", "3", "--no-plots", "--no-html"])
     assert rc == 0
     doc = json.loads((tmp_path / "dask" / "scores.json").read_text())
     assert doc["scoring"]["executor"].startswith("dask:")

@@ -21,7 +21,7 @@ from aw_eval.study.fixtures import box_suite, write_scripted_run
 from score_helpers import make_study, paper_entries, run_from_errors
 
 PROTO = ["--protocol", "n_surface=256", "--protocol", "n_fps=64", "--final", "fast"]
-FAST = ["--bootstrap", "50", "--permutations", "50", "--no-progress", "--no-plots", "--jobs", "1"]
+FAST = ["--bootstrap", "50", "--permutations", "50", "--no-progress", "--no-plots", "--no-html", "--jobs", "1"]
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +78,7 @@ SCRIPT = textwrap.dedent("""
     from aw_eval.report import AnalysisSettings, write_outputs
     settings = ScoreSettings(protocol=(("n_surface", 256.0), ("n_fps", 64.0)))
     study, stats = score_study(sys.argv[1], sys.argv[2], sys.argv[3], settings, n_jobs=2, progress=False)
-    write_outputs(study, sys.argv[3], AnalysisSettings(n_draws=50, n_permutations=50), plots=False)
+    write_outputs(study, sys.argv[3], AnalysisSettings(n_draws=50, n_permutations=50), plots=False, html=False)
 """)
 
 

@@ -18,7 +18,7 @@ from aw_eval.cli import main
 from aw_eval.study.fixtures import box_suite, write_scripted_run
 
 CHROMIUM = "/usr/bin/chromium"
-OPTS = ["--protocol", "n_surface=256", "--protocol", "n_fps=64", "--bootstrap", "200", "--permutations", "500",
+OPTS = ["--protocol-setting", "n_surface=256", "--protocol-setting", "n_fps=64", "--bootstrap", "200", "--permutations", "500",
         "--no-progress", "--no-plots", "--jobs", "1"]
 TASK = "partnet-box000-none"
 
