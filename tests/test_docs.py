@@ -1,0 +1,107 @@
+"""Every ```bash and ```python block of README.md and docs/*.md runs as written.
+
+Blocks run in order (README.md, then docs/*.md by name) in one scratch directory (``.venv`` there
+links to the installed environment, whose bin/ is first on PATH), as for a user who follows the
+README after its install and then the docs: the README's quickstart builds the small suite
+(``suite/``) and runs (``runs/``) that later pages use. Python blocks run each in a fresh interpreter
+(a block must import what it uses); bash blocks with ``set -e`` and ``pipefail``. Blocks that
+cannot run here (real datasets, Claude Code, Codex, a GPU, the install itself) are fenced
+```bash notest; output and layouts are ```text. Other shell fences (sh, console, shell) are
+refused, so that no command escapes the test by its fence.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+RUN = {"bash", "python"}
+NOT_RUN = {"text", "json", "jsonl", "toml", "yaml", "csv", "ini", "diff", "markdown", "md"}
+REFUSED = {"sh", "shell", "console", "zsh", "py", "python3", "shell-session", "bash-session"}
+BLOCK_TIMEOUT_S = 600
+FENCE = re.compile(r"^(`{3,})(.*)$")
+
+
+@dataclass
+class Block:
+    page: Path
+    line: int
+    lang: str
+    notest: bool
+    code: str
+
+    @property
+    def where(self) -> str:
+        return f"{self.page.relative_to(ROOT)}:{self.line}"
+
+
+def blocks(page: Path) -> list[Block]:
+    """The fenced blocks of ``page`` in order (nested fences are not used in the docs)."""
+    out: list[Block] = []
+    lines = page.read_text().splitlines()
+    i = 0
+    while i < len(lines):
+        m = FENCE.match(lines[i].strip()) if not lines[i].startswith("    ") else None
+        if not m:
+            i += 1
+            continue
+        ticks, info = m.group(1), m.group(2).strip().split()
+        start, body = i + 1, []
+        i += 1
+        while i < len(lines) and lines[i].strip() != ticks:
+            body.append(lines[i])
+            i += 1
+        i += 1
+        lang = info[0].lower() if info else ""
+        out.append(Block(page, start, lang, "notest" in info[1:], "\n".join(body) + "\n"))
+    return out
+
+
+def test_every_fence_is_run_or_marked():
+    bad = [f"{b.where}: ```{b.lang}" for p in PAGES for b in blocks(p)
+           if b.lang in REFUSED or (b.lang not in RUN and b.lang not in NOT_RUN)]
+    assert not bad, "fence these as ```bash / ```python (run), ```bash notest (cannot run here) or ```text:\n" + "\n".join(bad)
+
+
+def _env(scratch: Path) -> dict[str, str]:
+    venv_bin = Path(sys.executable).parent
+    env = dict(os.environ)
+    env["PATH"] = f"{venv_bin}{os.pathsep}{env.get('PATH', '')}"
+    env["PYTHONPATH"] = str(ROOT)  # the tree under test, also where the venv's editable install points elsewhere
+    env["HOME"] = str(scratch / "home")  # caches and logins of the docs' commands stay in the scratch dir
+    env["AW_CACHE_DIR"] = str(scratch / "home" / "aw-cache")
+    env.pop("PYTEST_XDIST_WORKER", None)
+    env["MPLBACKEND"] = "Agg"
+    return env
+
+
+def _scratch(tmp_path: Path) -> Path:
+    (tmp_path / "home").mkdir()
+    venv = Path(sys.executable).parent.parent
+    (tmp_path / ".venv").symlink_to(venv)
+    return tmp_path
+
+
+def test_blocks_run_in_order(tmp_path):
+    scratch = _scratch(tmp_path)
+    env = _env(scratch)
+    for page in PAGES:
+        for b in blocks(page):
+            if b.lang not in RUN or b.notest:
+                continue
+            if b.lang == "bash":
+                cmd = ["bash", "-c", "set -eo pipefail\n" + b.code]
+            else:
+                cmd = [sys.executable, "-c", b.code]
+            proc = subprocess.run(cmd, cwd=scratch, env=env, capture_output=True, text=True, timeout=BLOCK_TIMEOUT_S,
+                                  stdin=subprocess.DEVNULL)
+            assert proc.returncode == 0, (f"{b.where}: the ```{b.lang} block failed (exit {proc.returncode})\n{b.code}\n"
+                                          f"--- stdout ---\n{proc.stdout[-3000:]}\n--- stderr ---\n{proc.stderr[-3000:]}")
