@@ -58,12 +58,12 @@ def test_cli_defaults_and_refusals(row_file, tmp_path, capsys):
     path, _ = row_file
     out = tmp_path / "s"
     assert prepare_main(["compose", "--rehosted", str(path), "--per-source", "1", "--out", str(out),
-                         "--variants", "1", "--no-progress"]) == 1
+                         "--variants", "1", "--no-progress"]) == 2  # a usage error
     assert "--variants needs --protocol native" in capsys.readouterr().err
     assert prepare_main(["compose", "--rehosted", str(path), "--per-source", "1", "--out", str(out), "--no-progress"]) == 0
     assert len(list((out / "eval_points").glob("*.npz"))) == 2  # official by default: one per condition
     assert prepare_main(["compose", "--rehosted", str(path), "--per-source", "1", "--out", str(out), "--no-progress",
-                         "--protocol", "native", "--force"]) == 0
+                         "--protocol", "native", "--overwrite"]) == 0
     assert not (out / "eval_points").exists()  # a replaced suite keeps no stale evaluation points
 
 
