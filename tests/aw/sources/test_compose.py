@@ -153,7 +153,7 @@ def test_compose_cli_dry_run_and_errors(datasets, tmp_path, capsys):
     assert main(_args(datasets, tmp_path / "dry", "--dry-run")) == 0
     assert not (tmp_path / "dry" / "manifest.json").exists()
     assert '"per_source": 2' in capsys.readouterr().out
-    assert main(["compose", "--out", str(tmp_path / "x")]) == 1
+    assert main(["compose", "--out", str(tmp_path / "x")]) == 2  # a usage error
     assert "no dataset given" in capsys.readouterr().err
     (datasets / "ik" / "main_data.json").write_text("[{\"name\": \"a\"}]")
     assert main(_args(datasets, tmp_path / "y")) == 1
