@@ -51,7 +51,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", metavar="ADDRESS", default=None,
                    help="Dask scheduler address (e.g. tcp://host:8786): one job per task on the cluster; "
                    "workers must see SUITE and RUNS at the same paths")
-    add_jobs(p, "local worker processes (without --scheduler)")
+    add_jobs(p, "local worker processes (without --scheduler; also for report.html's pictures)")
     p.add_argument("--seed", type=int, default=0, help="seed of the bootstrap and randomization draws (default 0)")
     p.add_argument("--bootstrap", type=positive_int("--bootstrap"), default=10_000, metavar="B",
                    help="bootstrap draws (default 10000)")
@@ -137,7 +137,7 @@ def _score(args: argparse.Namespace) -> int:
                                      "worker_seconds": {"geometry": round(stats.seconds_geometry, 3),
                                                         "checkpoints": round(stats.seconds_checkpoints, 3),
                                                         "final_states": round(stats.seconds_final, 3)}},
-                        plots=not args.no_plots, html=not args.no_html, log=log)
+                        plots=not args.no_plots, html=not args.no_html, log=log, jobs=args.jobs)
     doc = res["doc"]
     unscored = {k: len(v) for k, v in doc["unscored_runs"].items()}
     log(f"{len(study.systems)} systems x {len(study.entries)} tasks: {stats.cached} runs from the cache, "

@@ -55,6 +55,7 @@ def main(argv=None) -> int:
     ap.add_argument("--checkpoints", type=int, default=100, help="recorded states per run")
     ap.add_argument("--parts", type=int, default=4)
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--jobs", type=int, default=1, help="processes building the cards")
     args = ap.parse_args(argv)
 
     from aw.formats import read_manifest, read_task
@@ -92,7 +93,7 @@ def main(argv=None) -> int:
           f"(built in {time.perf_counter() - t0:.0f} s)")
     report = args.out / "report"
     for label in ("cold", "warm"):
-        stats = write_html(study, doc, markdown, report, suite)
+        stats = write_html(study, doc, markdown, report, suite, jobs=args.jobs)
         files = report / "report_files"
         bundle = sum(p.stat().st_size for p in files.glob("plotly-*.min.js"))
         print(f"{label}: {stats.seconds:.1f} s; report.html {stats.html_bytes / 1e6:.2f} MB; report_files "

@@ -29,8 +29,9 @@ def write_json(path: Path, doc: Any) -> None:
 
 def write_outputs(study: Study, out_dir: str | Path, settings: AnalysisSettings, *, suite_dir: str = "",
                   runs_dir: str = "", score_stats: dict[str, Any] | None = None, plots: bool = True,
-                  html: bool = True, log: Callable[[str], None] | None = None) -> dict[str, Any]:
-    """Write every output; returns ``{"doc": scores document, "files": {name: path}}``."""
+                  html: bool = True, log: Callable[[str], None] | None = None, jobs: int = 1) -> dict[str, Any]:
+    """Write every output; returns ``{"doc": scores document, "files": {name: path}}``. ``jobs``:
+    processes that build report.html's cards."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     doc = build_results(study, settings, suite_dir=suite_dir, runs_dir=runs_dir, score_stats=score_stats)
@@ -46,7 +47,7 @@ def write_outputs(study: Study, out_dir: str | Path, settings: AnalysisSettings,
     if html:
         from aw_eval.report.html import write_html  # imports plotly only when asked
 
-        files["html"] = write_html(study, doc, markdown, out, suite_dir or None, log=log).path
+        files["html"] = write_html(study, doc, markdown, out, suite_dir or None, log=log, jobs=jobs).path
     for k, v in made.items():
         files[f"plot_{k}"] = out / "plots" / v
     return {"doc": doc, "files": files}

@@ -19,10 +19,10 @@ from aw_eval.report.html.markup import slug
 from aw_eval.report.html.scenes import TaskScene, aligned_poses
 from aw_eval.report.html.svg import Series, step_chart
 from aw_eval.study.episode import poses_array
-from aw_eval.study.model import RunScore
-from aw_eval.study.table import Study
+from aw_eval.study.model import RunScore, TaskFacts
+from aw_eval.study.table import RunRecord, Study
 
-__all__ = ["RunView", "load_run_view", "task_card", "viewer_data", "system_colors", "CARD_SIZE", "FRAME_SIZE",
+__all__ = ["TaskRuns", "RunView", "load_run_view", "task_card", "viewer_data", "system_colors", "CARD_SIZE", "FRAME_SIZE",
            "MAX_VIEWER_STATES", "MAX_LISTED_CALLS"]
 
 CARD_SIZE = (320, 240)  # target and final-state pictures
@@ -36,6 +36,27 @@ _SYSTEM_PALETTE = ("#4C72B0", "#DD8452", "#55A868", "#C44E52", "#8172B3", "#9378
 
 def system_colors(systems: list[str]) -> dict[str, str]:
     return {s: _SYSTEM_PALETTE[i % len(_SYSTEM_PALETTE)] for i, s in enumerate(systems)}
+
+
+@dataclass
+class TaskRuns:
+    """One task's slice of a :class:`~aw_eval.study.table.Study` (what a card needs; small enough
+    to send to a worker process): every system's run record and the task's facts."""
+
+    systems: list[str]
+    records: dict[tuple[str, str], RunRecord]
+    facts: dict[str, TaskFacts]
+
+    @classmethod
+    def of(cls, study: Study, task_id: str) -> "TaskRuns":
+        facts = {task_id: study.facts[task_id]} if task_id in study.facts else {}
+        return cls(list(study.systems), {(s, task_id): study.record(s, task_id) for s in study.systems}, facts)
+
+    def record(self, system: str, task_id: str) -> RunRecord:
+        return self.records[(system, task_id)]
+
+    def score(self, system: str, task_id: str) -> RunScore:
+        return self.records[(system, task_id)].score
 
 
 @dataclass
@@ -65,7 +86,7 @@ def _recorded_states(run_dir: Path, task_id: str, part_ids: list[str]):
     return np.stack([poses_array(c.poses, part_ids) for c in traj.checkpoints()]), traj.calls
 
 
-def load_run_view(study: Study, system: str, task_id: str, scene: TaskScene) -> RunView | None:
+def load_run_view(study: TaskRuns, system: str, task_id: str, scene: TaskScene) -> RunView | None:
     """The run's recorded states, aligned; None when it was not scored or its states cannot be
     read again. The final state comes from where its scoring took it (``final_from``)."""
     rec = study.record(system, task_id)
@@ -123,7 +144,7 @@ def _x_of(r: RunScore) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- card parts
-def _finals(scene: TaskScene | None, views: dict[str, RunView], study: Study, task_id: str, camera, folder: Path,
+def _finals(scene: TaskScene | None, views: dict[str, RunView], study: TaskRuns, task_id: str, camera, folder: Path,
             rel: str) -> str:
     figs = []
     if scene is not None:
@@ -143,7 +164,7 @@ def _finals(scene: TaskScene | None, views: dict[str, RunView], study: Study, ta
     return f'<div class="finals">{"".join(figs)}</div>'
 
 
-def _part_table(scene_ids: list[str], colors: np.ndarray | None, study: Study, doc_runs: dict, task_id: str) -> str:
+def _part_table(scene_ids: list[str], colors: np.ndarray | None, study: TaskRuns, doc_runs: dict, task_id: str) -> str:
     systems = [s for s in study.systems if study.score(s, task_id).scored]
     if not systems:
         return ""
@@ -167,7 +188,7 @@ def _part_table(scene_ids: list[str], colors: np.ndarray | None, study: Study, d
             "correct at or below 10. Classes: the geometric failure classes of Table A-11.</p>")
 
 
-def _curves(study: Study, task_id: str, views: dict[str, RunView], colors: dict[str, str]) -> str:
+def _curves(study: TaskRuns, task_id: str, views: dict[str, RunView], colors: dict[str, str]) -> str:
     pa, scd = [], []
     for s in study.systems:
         r = study.score(s, task_id)
@@ -228,7 +249,7 @@ def _call_rows(view: RunView) -> list[list[Any]]:
 NO_MESHES = "The suite has no meshes for this task (an official package): no pictures."
 
 
-def task_card(study: Study, task: dict[str, Any], doc_runs: dict, scene: TaskScene | None, views: dict[str, RunView],
+def task_card(study: TaskRuns, task: dict[str, Any], doc_runs: dict, scene: TaskScene | None, views: dict[str, RunView],
               folder: Path, rel: str, viewer_src: str | None, colors: dict[str, str], no_pictures: str = NO_MESHES) -> str:
     """HTML of one task's card; pictures are rendered into ``folder`` (``rel``: its path from the
     page); without a ``scene`` the card says ``no_pictures`` instead."""

@@ -25,14 +25,15 @@ import orjson
 from aw.formats import FormatError
 from aw.render_platform import RenderError
 from aw_eval.report.fmt import fixed
-from aw_eval.report.html.cards import load_run_view, system_colors, task_card, viewer_data
+from aw_eval.report.html.cards import TaskRuns, load_run_view, system_colors, task_card, viewer_data
 from aw_eval.report.html.markup import markdown_to_html, slug
 from aw_eval.report.html.scenes import TaskScene
 from aw_eval.study.table import Study
 
-__all__ = ["write_html", "HtmlStats", "ASSETS_DIR"]
+__all__ = ["write_html", "build_card", "CardJob", "CardResult", "HtmlStats", "ASSETS_DIR"]
 
 ASSETS_DIR = "report_files"
+MIN_POOL_TASKS = 4  # fewer tasks: cards are built in this process whatever ``jobs`` says
 _STATIC = ("report.css", "report.js", "viewer.js")
 
 
@@ -98,11 +99,84 @@ def _toc(body: str) -> str:
     return "<nav><b>Contents</b>" + "".join(links) + "</nav>"
 
 
+@dataclass(frozen=True)
+class CardJob:
+    """Everything one task's card needs; picklable, so cards are built in worker processes."""
+
+    task: dict[str, Any]
+    runs: TaskRuns
+    doc_runs: dict[tuple[str, str], dict[str, Any]]
+    suite_dir: str | None
+    files: str
+    colors: dict[str, str]
+
+
+@dataclass
+class CardResult:
+    html: str
+    viewer_file: str | None
+    render_files: list[str]
+    no_render: str | None  # why the card has no pictures, when rendering failed
+
+
+def build_card(job: CardJob) -> CardResult:
+    """One task's card: its pictures rendered (or reused) and its data file written."""
+    tid = job.task["task_id"]
+    files, rel = Path(job.files), f"{ASSETS_DIR}/renders/"
+    scene, views, viewer_src, viewer_file, no_render = None, {}, None, None, None
+    facts = job.runs.facts.get(tid)
+    if job.suite_dir is not None and facts is not None:
+        try:
+            scene = TaskScene.load(Path(job.suite_dir), tid, list(facts.part_ids), facts.divisor)
+        except (FormatError, OSError, ValueError, KeyError):
+            scene = None
+    try:
+        if scene is not None:
+            for s in job.runs.systems:
+                v = load_run_view(job.runs, s, tid, scene)
+                if v is not None:
+                    views[s] = v
+            if views:
+                vd = orjson.dumps(viewer_data(scene, views), option=orjson.OPT_SERIALIZE_NUMPY)
+                viewer_file = f"{slug(tid)[:60]}-{hashlib.sha1(vd).hexdigest()[:12]}.js"
+                path = files / "viewer" / viewer_file
+                if not path.is_file():
+                    path.write_bytes(b"AWViewer.register(" + orjson.dumps(tid) + b"," + vd + b");\n")
+                viewer_src = f"{ASSETS_DIR}/viewer/{viewer_file}"
+        card = None
+        if scene is not None:
+            try:
+                card = task_card(job.runs, job.task, job.doc_runs, scene, views, files / "renders", rel, viewer_src,
+                                 job.colors)
+            except RenderError as exc:
+                no_render = f"No pictures: offscreen rendering is unavailable ({exc})."
+        if card is None:
+            card = task_card(job.runs, job.task, job.doc_runs, None, views, files / "renders", rel, viewer_src,
+                             job.colors, **({"no_pictures": no_render} if no_render else {}))
+    finally:
+        if scene is not None:
+            scene.close()
+    return CardResult(card, viewer_file, [p.split("/")[-1] for p in _srcs(card, rel)], no_render)
+
+
+def _cards(jobs: list[CardJob], n_jobs: int):
+    """Build the cards in order, in ``n_jobs`` worker processes (spawned: each opens its own GL
+    contexts) or in this process."""
+    if n_jobs <= 1 or len(jobs) <= 1:
+        yield from map(build_card, jobs)
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=min(n_jobs, len(jobs)), mp_context=multiprocessing.get_context("spawn")) as ex:
+        yield from ex.map(build_card, jobs)
+
+
 def write_html(study: Study, doc: dict[str, Any], markdown: str, out_dir: str | Path, suite_dir: str | Path | None,
-               log: Callable[[str], None] | None = None) -> HtmlStats:
+               log: Callable[[str], None] | None = None, jobs: int = 1) -> HtmlStats:
     """Write ``out_dir/report.html`` and ``out_dir/report_files/``; ``markdown`` is report.md's text
-    (its image links are relative to ``out_dir``). Tasks whose meshes cannot be read (no
-    ``suite_dir``, official packages) get cards without pictures."""
+    (its image links are relative to ``out_dir``). Cards are built in ``jobs`` processes. Tasks
+    whose meshes cannot be read (no ``suite_dir``, official packages) get cards without pictures."""
     t0 = time.perf_counter()
     out = Path(out_dir)
     files = out / ASSETS_DIR
@@ -114,50 +188,22 @@ def write_html(study: Study, doc: dict[str, Any], markdown: str, out_dir: str | 
     before = {p.name for p in renders.iterdir()}
     colors = system_colors(list(study.systems))
     doc_runs = {(r["system"], r["task_id"]): r for r in doc["runs"]}
+    card_jobs = [CardJob(t, TaskRuns.of(study, t["task_id"]),
+                         {(s, t["task_id"]): doc_runs[(s, t["task_id"])] for s in study.systems},
+                         None if suite_dir is None else str(suite_dir), str(files), colors) for t in doc["tasks"]]
     used_renders: set[str] = set()
     used_viewer: set[str] = set()
-    cards = []
-    rel = f"{ASSETS_DIR}/renders/"
-    no_render: str | None = None  # set when the renderer failed once: the other cards go without pictures
-    for task in doc["tasks"]:
-        tid = task["task_id"]
-        scene, views, viewer_src = None, {}, None
-        facts = study.facts.get(tid)
-        if suite_dir is not None and facts is not None:
-            try:
-                scene = TaskScene.load(Path(suite_dir), tid, list(facts.part_ids), facts.divisor)
-            except (FormatError, OSError, ValueError, KeyError):
-                scene = None
-        try:
-            if scene is not None:
-                for s in study.systems:
-                    v = load_run_view(study, s, tid, scene)
-                    if v is not None:
-                        views[s] = v
-                if views:
-                    vd = orjson.dumps(viewer_data(scene, views), option=orjson.OPT_SERIALIZE_NUMPY)
-                    name = f"{slug(tid)[:60]}-{hashlib.sha1(vd).hexdigest()[:12]}.js"
-                    path = viewer / name
-                    if not path.is_file():
-                        path.write_bytes(b"AWViewer.register(" + orjson.dumps(tid) + b"," + vd + b");\n")
-                    used_viewer.add(name)
-                    viewer_src = f"{ASSETS_DIR}/viewer/{name}"
-            card = None
-            if scene is not None and no_render is None:
-                try:
-                    card = task_card(study, task, doc_runs, scene, views, renders, rel, viewer_src, colors)
-                except RenderError as exc:
-                    no_render = f"No pictures: offscreen rendering is unavailable ({exc})."
-                    if log is not None:
-                        log(f"report.html without pictures: {exc}")
-            if card is None:
-                card = task_card(study, task, doc_runs, None, views, renders, rel, viewer_src, colors,
-                                 **({"no_pictures": no_render} if scene is not None and no_render else {}))
-        finally:
-            if scene is not None:
-                scene.close()
-        used_renders.update(p.split("/")[-1] for p in _srcs(card, rel))
-        cards.append(card)
+    cards, no_render = [], None
+    # spawned workers take seconds to start: not worth it for a handful of cards
+    for res in _cards(card_jobs, jobs if len(card_jobs) >= MIN_POOL_TASKS else 1):
+        cards.append(res.html)
+        used_renders.update(res.render_files)
+        if res.viewer_file:
+            used_viewer.add(res.viewer_file)
+        if res.no_render and no_render is None:
+            no_render = res.no_render
+            if log is not None:
+                log(f"report.html without pictures: {res.no_render}")
     for folder, used in ((renders, used_renders), (viewer, used_viewer)):
         for p in folder.iterdir():
             if p.name not in used:

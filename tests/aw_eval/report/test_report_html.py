@@ -68,6 +68,18 @@ def test_second_call_reuses_every_picture_and_no_html_writes_none(report, capsys
     assert not (other / "report.html").exists() and not (other / "report_files").exists()
 
 
+def test_cards_built_by_worker_processes_are_the_same(report):
+    out = report["out"]
+
+    def cards() -> str:
+        return (out / "report.html").read_text().split('<h2 id="tasks">')[1]
+
+    serial = cards()
+    args = [str(report["suite"]), str(report["runs"]), "--out", str(out), *OPTS]
+    assert main([*args, "--jobs", "2"]) == 0  # five tasks: two spawned workers build the cards
+    assert cards() == serial
+
+
 @pytest.fixture(scope="module")
 def browser():
     if not Path(CHROMIUM).is_file():
