@@ -15,7 +15,7 @@ of the same run.
 from __future__ import annotations
 
 import os
-import re
+
 import sys
 from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import ProcessPoolExecutor
@@ -29,9 +29,10 @@ from aw.formats import FormatError
 from aw.official.evaluation_output import error_row, row_base, scored_row, sort_rows, summarize, write_evaluation
 from aw.official.evaluation_cache import EvaluationInputs
 from aw.official.package import OfficialPackage, file_sha256
-from aw.official.runlog import RunLog, SampleAttempt, is_run_dir, read_attempts, read_run, select_attempts
+from aw.official.runlog import (RunLog, SampleAttempt, archive_system, is_run_dir, read_attempts, read_run,
+                                select_attempts, systems)
 
-__all__ = ["is_official_package", "system_name", "systems_of_runs", "archive_attempts",
+__all__ = ["is_official_package", "archive_attempts",
            "score_state", "score_attempt", "evaluate_system", "evaluate", "main"]
 
 SCD_SCALE = 1000.0  # the official SCD is 1000 x the aligned squared Chamfer (geometry.py)
@@ -42,28 +43,6 @@ def is_official_package(path: str | Path) -> bool:
 
 
 # --- systems -----------------------------------------------------------------------------------
-
-
-def system_name(run: RunLog) -> str:
-    """``<agent>-<model>[-<effort>]`` from a run's options (file-safe), else the run id."""
-    opts = run.options
-    parts = [str(opts[k]) for k in ("agent", "model", "effort") if opts.get(k)]
-    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", "-".join(parts)).strip("._")
-    return name or run.run_id
-
-
-def systems_of_runs(runs: Iterable[Path]) -> dict[str, list[Path]]:
-    """Run folders grouped by the system of their chain's first run (a resume keeps the options
-    of the run it continues)."""
-    out: dict[str, list[Path]] = {}
-    for path in runs:
-        run = read_run(path)
-        root, seen = run, {run.path}
-        while root.source_run is not None and root.source_run not in seen and is_run_dir(root.source_run):
-            seen.add(root.source_run)
-            root = read_run(root.source_run)
-        out.setdefault(system_name(root), []).append(run.path)
-    return dict(sorted(out.items()))
 
 
 def archive_attempts(folder: str | Path, package: OfficialPackage) -> dict[tuple[str, str], SampleAttempt]:
@@ -178,28 +157,27 @@ def evaluate(sources: OfficialPackage, runs_dir: str | Path, out_dir: str | Path
             raise ValueError(f"--out {out_dir}: the evaluation must be written outside {inside}")
     runs = _runs_or_none(root)
     if runs is None:
-        systems = {root.resolve().name: archive_attempts(root, sources)}
+        by_system = {archive_system(root): archive_attempts(root, sources)}
     else:
-        systems = {}
-        for name, paths in systems_of_runs(runs).items():
-            chosen = select_attempts(paths)
-            for run in _chain_runs(paths):  # every run and sample of the chains, pending ones included
+        by_system = {}
+        for name, logs in systems(runs).items():
+            chosen = select_attempts(logs)
+            for run in _chain_runs(logs):  # every run and sample of the chains, pending ones included
                 sources.check_run(run)
                 for attempt in read_attempts(run):
                     sources.check_attempt(attempt)
-            systems[name] = chosen
+            by_system[name] = chosen
     summaries = {}
-    for name, attempts in systems.items():
+    for name, attempts in by_system.items():
         log(f"{name}: scoring {len(attempts)} attempts")
         summaries[name] = evaluate_system(attempts, sources, out / name, jobs)
     return summaries
 
 
-def _chain_runs(paths: Iterable[Path]) -> list[RunLog]:
+def _chain_runs(logs: Iterable[RunLog]) -> list[RunLog]:
     """The given runs and every run they resume, each once."""
     seen: dict[Path, RunLog] = {}
-    for path in paths:
-        run = read_run(path)
+    for run in logs:
         while run.path not in seen:
             seen[run.path] = run
             if run.source_run is None:

@@ -225,30 +225,23 @@ def _result_beside(archive: Path) -> dict:
 
 def run_log_archives(folder: str | Path, pkg: OfficialPackage, skipped: list[str] | None = None) -> list[tuple[str, str, str, Path, dict]]:
     """``(system, block, sample id, final archive, extra)`` for every attempt that counts in the
-    run logs of ``folder`` (a run folder or a ``logs/`` folder): runs are grouped by the first
-    run of their resume chain (the system is that run's folder name) and each group's attempts
+    run logs of ``folder`` (a run folder or a ``logs/`` folder): runs are grouped by system
+    (``aw.official.runlog.system_name``, as ``aw-score`` names them) and each group's attempts
     are selected as the official evaluation selects them (``aw.official.runlog.select_attempts``:
     a later attempt replaces an earlier one). Attempts the official scorer would not score (still
     running, no saved archive, archive digest differing from ``result.json``) are listed in
     ``skipped``."""
     from aw.official.package import file_sha256
-    from aw.official.runlog import find_runs, is_run_dir, read_run, select_attempts
+    from aw.official.runlog import find_runs, select_attempts, systems
 
-    chains: dict[Path, list] = {}
-    for path in find_runs(folder):
-        run = read_run(path)
-        pkg.check_run(run)
-        root, seen = run, {run.path}
-        while root.source_run is not None and root.source_run not in seen and is_run_dir(root.source_run):
-            seen.add(root.source_run)
-            root = read_run(root.source_run)
-        chains.setdefault(root.path, []).append(run)
     out = []
-    for root, runs in sorted(chains.items()):
+    for name, runs in systems(find_runs(folder)).items():
+        for run in runs:
+            pkg.check_run(run)
         try:
             attempts = select_attempts(runs)
         except ValueError as exc:
-            raise FormatError(root, str(exc)) from None
+            raise FormatError(Path(folder), f"system {name}: {exc}") from None
         for (block, sid), attempt in sorted(attempts.items()):
             pkg.check_attempt(attempt)
             why = ("the attempt is still running" if not attempt.finished else
@@ -260,7 +253,7 @@ def run_log_archives(folder: str | Path, pkg: OfficialPackage, skipped: list[str
                     skipped.append(f"{attempt.directory}: {why}")
                 continue
             extra = {"block": block, "sample_id": sid, "official_run": str(attempt.run), **_official_result(attempt.result)}
-            out.append((root.name, block, sid, attempt.final_archive, extra))
+            out.append((name, block, sid, attempt.final_archive, extra))
     return out
 
 
@@ -268,9 +261,10 @@ def convert(package: str | Path, episodes: str | Path | Iterable[str | Path], su
             system: str | None = None, force: bool = False, skipped: list[str] | None = None) -> tuple[SuiteManifest, list[Path]]:
     """Convert a package and its episode archives: the counted attempts of run logs (when
     ``episodes`` is a run folder or holds run folders), else every ``*.episode.zip`` below it
-    (``<block>/<slug>.episode.zip``). A run's system is ``system``, else the first run of its
-    resume chain, else ``official``; attempts that are not scored are listed in ``skipped``."""
-    from aw.official.runlog import is_run_dir
+    (``<block>/<slug>.episode.zip``). A run's system is ``system``, else the run log's system
+    (``aw.official.runlog.system_name``), else the archive folder's name (``official`` for a list
+    of archives); attempts that are not scored are listed in ``skipped``."""
+    from aw.official.runlog import archive_system, is_run_dir
 
     pkg = OfficialPackage(package, strict=False)
     manifest = convert_package(pkg, suite_out, force=force)
@@ -279,10 +273,11 @@ def convert(package: str | Path, episodes: str | Path | Iterable[str | Path], su
         items = run_log_archives(folder, pkg, skipped)
     else:
         archives = find_archives(episodes) if folder is not None else [Path(p) for p in episodes]
+        name = archive_system(folder) if folder is not None and folder.is_dir() else "official"
         items = []
         for arc in archives:
             block, sid = archive_sample(arc, pkg)
-            items.append(("official", block, sid, arc, {"block": block, "sample_id": sid, **_result_beside(arc)}))
+            items.append((name, block, sid, arc, {"block": block, "sample_id": sid, **_result_beside(arc)}))
     runs = []
     for name, block, sid, arc, extra in items:
         inputs = pkg.evaluation_inputs(block, sid)

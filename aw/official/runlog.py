@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import uuid
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -35,6 +36,7 @@ from aw.official.ids import sample_slug
 
 __all__ = ["RUN_KIND", "RUN_FILE", "FINAL_ARCHIVE", "RunLog", "SampleAttempt", "sample_slug", "new_run_id", "utc_now",
            "read_run", "is_run_dir", "find_runs", "read_attempts", "select_attempts", "count_tool_calls",
+           "chain_root", "system_name", "systems", "archive_system",
            "write_json", "create_run", "write_result"]
 
 RUN_KIND = "assembly-world-bench"
@@ -238,6 +240,33 @@ def _chain(run: RunLog, cache: dict[Path, RunLog]) -> list[RunLog]:
         chain.append(cache[src])
         seen.add(src)
     return chain
+
+
+def chain_root(run: RunLog) -> RunLog:
+    """The first run of ``run``'s resume chain (``run`` itself when it resumes nothing)."""
+    return _chain(run, {})[-1]
+
+
+def system_name(run: RunLog) -> str:
+    """The system a chain of runs stands for: ``<agent>-<model>[-<effort>]`` from the options of
+    the chain's first run (a resume keeps them), made file-safe, else that run's id."""
+    opts = chain_root(run).options
+    name = "-".join(str(opts[k]) for k in ("agent", "model", "effort") if opts.get(k))
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or chain_root(run).run_id
+
+
+def archive_system(folder: str | Path) -> str:
+    """The system of a plain folder of episode archives (no run log): the folder's name."""
+    return Path(folder).resolve().name
+
+
+def systems(runs: Iterable[str | Path | RunLog]) -> dict[str, list[RunLog]]:
+    """Runs grouped by :func:`system_name`, in name order."""
+    out: dict[str, list[RunLog]] = {}
+    for r in runs:
+        log = r if isinstance(r, RunLog) else read_run(r)
+        out.setdefault(system_name(log), []).append(log)
+    return dict(sorted(out.items()))
 
 
 def select_attempts(runs: Iterable[str | Path | RunLog]) -> dict[tuple[str, str], SampleAttempt]:

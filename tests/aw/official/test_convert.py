@@ -19,6 +19,7 @@ from tests.aw.official.builders import FINAL, PART_IDS, write_package, write_run
 
 
 RUN = "2026-01-02T030405.123456+0000-1a2b3c4d"
+SYSTEM = "fixture-m"  # <agent>-<model> of the fixture run log's options
 
 
 @pytest.fixture(scope="module")
@@ -54,7 +55,7 @@ def test_suite_of_the_package(converted):
 
 def test_runs_of_the_archives(converted):
     root, _, _, runs = converted
-    system = RUN
+    system = SYSTEM
     assert sorted(p.name for p in runs) == ["ikea-manualbook--Chair--reidar", "partnet-final-image--21905", "partnet-none--21905"]
     run = root / "runs" / system / "partnet-final-image--21905"
     traj = read_trajectory(run / "trajectory.jsonl")
@@ -74,8 +75,8 @@ def test_runs_of_the_archives(converted):
 def test_round_trip_keeps_states(converted, tmp_path):
     """official -> project -> official: the same state indices and vectors, so the same scores."""
     root, pkg, _, _ = converted
-    system = RUN
-    original = read_archive(root / "logs" / system / "blocks" / "ikea-manualbook" / "samples" / "Chair--reidar" / "final.episode.zip")
+    system = SYSTEM
+    original = read_archive(root / "logs" / RUN / "blocks" / "ikea-manualbook" / "samples" / "Chair--reidar" / "final.episode.zip")
     initial = pkg.initial_archive("ikea-manualbook", "Chair/reidar")
     again = export_run(root / "runs" / system / "ikea-manualbook--Chair--reidar", initial, tmp_path / "again.episode.zip")
     assert [f.index for f in again.states] == [f.index for f in original.states] == [1, 2, 3]
@@ -90,7 +91,7 @@ def test_round_trip_keeps_states(converted, tmp_path):
 
 def test_export_refuses_another_tasks_archive(converted, tmp_path):
     root, pkg, _, _ = converted
-    run = root / "runs" / RUN / "partnet-none--21905"
+    run = root / "runs" / SYSTEM / "partnet-none--21905"
     other = tmp_path / "other.episode.zip"
     from tests.aw.official.builders import write_setup
 
@@ -100,7 +101,7 @@ def test_export_refuses_another_tasks_archive(converted, tmp_path):
 
 def test_resumed_chain_counts_its_latest_attempt(tmp_path):
     """A resumed run replaces its source run's attempt, even a failed one replacing a saved
-    export (which is then not converted), and both stay one system: the chain's first run."""
+    export (which is then not converted), and both stay one system, named from the chain's first run's options."""
     pkg = OfficialPackage(write_package(tmp_path / "benchmark", {"partnet-none": ["21905", "743"]}), strict=False)
     first = write_run_log(tmp_path / "logs", pkg, {("partnet-none", "21905"): FINAL, ("partnet-none", "743"): FINAL}, "run-a")
     moved = FINAL.copy()
@@ -108,7 +109,7 @@ def test_resumed_chain_counts_its_latest_attempt(tmp_path):
     write_run_log(tmp_path / "logs", pkg, {("partnet-none", "21905"): moved, ("partnet-none", "743"): None}, "run-b", source_run=first)
     skipped = []
     _, runs = convert(pkg.root, tmp_path / "logs", tmp_path / "suite", tmp_path / "runs", skipped=skipped)
-    assert [p.relative_to(tmp_path / "runs").as_posix() for p in runs] == ["run-a/partnet-none--21905"]
+    assert [p.relative_to(tmp_path / "runs").as_posix() for p in runs] == [f"{SYSTEM}/partnet-none--21905"]
     final = read_final(runs[0] / "final.json").poses
     assert np.array_equal([final[p] for p in PART_IDS], moved)
     assert len(skipped) == 1 and "run-b" in skipped[0] and "no saved final archive" in skipped[0]
