@@ -14,6 +14,7 @@ and identical states (consecutive filmstrip frames, systems that ended alike) re
 from __future__ import annotations
 
 import hashlib
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -118,7 +119,7 @@ class TaskScene:
             im = self._renderer.render(poses, camera)
             if im.size != (w, h):  # smaller pictures (filmstrip frames) are scaled down
                 im = im.resize((w, h), Image.LANCZOS)
-            tmp = path.with_name(path.name + ".tmp.jpg")
+            tmp = path.with_name(f"{path.name}.tmp{os.getpid()}.jpg")  # workers may render the same picture
             im.save(tmp, quality=_QUALITY, optimize=True)
             tmp.replace(path)
         return name
