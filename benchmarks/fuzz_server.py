@@ -342,6 +342,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--max-seconds", type=float, default=math.inf,
                    help="stop the tool calls after this long (the summary says how many were made)")
     args = p.parse_args(argv)
+    if args.out is not None and args.out.exists():
+        p.error(f"--out {args.out} already exists (results are never overwritten)")
     with tempfile.TemporaryDirectory(prefix="aw-fuzz-") as tmp:
         root = Path(tmp)
         suite = box_suite(root / "suite", objects_per_source=1, n_parts=3, blocks=(("partnet", ("none",)),))
