@@ -32,7 +32,7 @@ from aw.formats.suite import suite_paths
 from aw.formats.trajectory import CameraState, TrajectoryCall, TrajectoryEnd, TrajectoryHeader
 from aw.official.archive import EpisodeArchive, iso_timestamp, parse_timestamp
 from aw.official.episode import PartEpisode, read_part_episode
-from aw.official.eval_points import EvalInputs, eval_points_path, write_eval_inputs
+from aw.official.eval_points import eval_points_path, write_eval_inputs
 from aw.official.ids import sample_id_from_slug, task_id_for_sample
 from aw.official.package import REFERENCE_CONDITIONS, OfficialPackage
 from aw.runlock import RunDirBusy, RunDirLock
@@ -63,8 +63,7 @@ def convert_package(package: str | Path | OfficialPackage, suite_out: str | Path
     for block, sid in pkg.samples():
         tid = task_id_for_sample(block, sid)
         inputs = pkg.evaluation_inputs(block, sid)
-        write_eval_inputs(eval_points_path(out, tid), EvalInputs(tid, inputs.part_ids, inputs.points, inputs.target_poses,
-                                                                   inputs.divisor, inputs.groups))
+        write_eval_inputs(eval_points_path(out, tid), inputs)
         shutil.copyfile(pkg.sample(block, sid).initial_path, initial_archive_path(out, tid))
         hint = [g for g in inputs.groups if len(g) > 1] or None
         targets = Targets(task_id=tid, parts={p: PartTarget(pose=[float(x) for x in pose])

@@ -15,12 +15,12 @@ Scoring takes a task's geometry from this file whenever it exists.
 from __future__ import annotations
 
 import zipfile
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from aw.formats import FormatError
+from aw.official.evaluation_cache import EvaluationInputs
 
 __all__ = ["N_POINTS", "EvalInputs", "read_eval_inputs", "write_eval_inputs", "eval_points_path", "suite_eval_inputs"]
 
@@ -28,28 +28,9 @@ N_POINTS = 1000
 _KEYS = ("part_ids", "points", "target_poses", "scale_divisor", "equivalence_groups")
 
 
-@dataclass
-class EvalInputs:
-    """One task's checked evaluation points; ``groups`` lists part ids per group, sorted."""
-
-    sample_id: str
-    part_ids: list[str]
-    points: np.ndarray  # (P, 1000, 3)
-    target_poses: np.ndarray  # (P, 7) as published (the evaluator normalizes quaternions)
-    divisor: float
-    groups: list[list[str]]
-
-    @property
-    def n_parts(self) -> int:
-        return len(self.part_ids)
-
-    def group_labels(self) -> np.ndarray:
-        """``(P,)`` int: the index of each part's group."""
-        index = {p: i for i, p in enumerate(self.part_ids)}
-        labels = np.empty(self.n_parts, dtype=np.int64)
-        for g, members in enumerate(self.groups):
-            labels[[index[m] for m in members]] = g
-        return labels
+class EvalInputs(EvaluationInputs):
+    """One task's checked evaluation points (the official inputs' fields; ``groups`` lists part
+    ids per group, sorted), with the measures the preparation reads off them."""
 
     def centroids(self) -> np.ndarray:
         """``(P, 3)`` mean of each part's points (area-weighted surface samples, so close to the
@@ -105,7 +86,7 @@ def read_eval_inputs(path: str | Path, sample_id: str = "") -> EvalInputs:
     return EvalInputs(sample_id or path.stem, part_ids, points, targets, divisor, groups)
 
 
-def write_eval_inputs(path: str | Path, inputs: EvalInputs) -> None:
+def write_eval_inputs(path: str | Path, inputs: EvaluationInputs) -> None:
     """Write ``inputs`` as an ``.npz`` of the layout above."""
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     np.savez(Path(path), part_ids=np.asarray(inputs.part_ids), points=np.asarray(inputs.points, dtype=np.float64),
