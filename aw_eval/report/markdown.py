@@ -152,7 +152,7 @@ def _part_count(doc: dict[str, Any]) -> str:
                 v = r["bands"].get(b)
                 cells.append(DASH if v is None else f"{v['n']}: {fixed(v['pa'], 2)}/{fixed(v['sr'], 2)}")
             rows.append([r["label"]] + cells)
-        out.append(f"**{s}**\n\n" + md_table(["Condition"] + [f"{b} parts" for b in used], rows))
+        out.append(f"**{s}**\n\n" + md_table(["Condition"] + [f"{b} parts (n: PA/SR %)" for b in used], rows))
     return "\n\n".join(out) + "\n\nEach cell: number of tasks and mean PA/SR in percent."
 
 
@@ -162,7 +162,8 @@ def _scd_tail(doc: dict[str, Any]) -> str:
         rows = [[r["label"], str(r["n"]), fixed(r["mean"], 2), fixed(r["median"], 2), str(r["k"]), fixed(r["contribution"], 2),
                  fixed(r["remaining_mean"], 2), str(r["tail_never_moved"])] for r in doc["scd_tail"]["systems"].get(s, [])]
         if rows:
-            out.append(f"**{s}**\n\n" + md_table(["Setting", "N", "Mean", "Median", "k", "Contribution (%)", "Remaining mean",
+            out.append(f"**{s}**\n\n" + md_table(["Setting", "N", "Mean SCD (x1000)", "Median SCD (x1000)", "k", "Contribution (%)",
+                                                 "Remaining mean SCD (x1000)",
                                                  "Tail never moved"], rows))
     if not out:
         return "No scored attempts."
