@@ -14,11 +14,12 @@ of the same run.
 
 from __future__ import annotations
 
+import multiprocessing
 import os
-
 import sys
 from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,6 +32,7 @@ from aw.official.evaluation_cache import EvaluationInputs
 from aw.official.package import OfficialPackage, file_sha256
 from aw.official.runlog import (RunLog, SampleAttempt, archive_system, is_run_dir, read_attempts, read_run,
                                 select_attempts, systems)
+from aw_eval.study.runner import ScoringFailed
 
 __all__ = ["is_official_package", "archive_attempts",
            "score_state", "score_attempt", "evaluate_system", "evaluate", "main"]
@@ -134,8 +136,13 @@ def evaluate_system(attempts: Mapping[tuple[str, str], SampleAttempt], sources: 
         raise ValueError("No final execution attempts to evaluate")
     items = [attempts[k] for k in sorted(attempts)]
     if jobs > 1 and len(items) > 1:
-        with ProcessPoolExecutor(max_workers=jobs) as pool:
-            rows = list(pool.map(_score_job, [(a, sources) for a in items]))
+        # spawn, as the study's pool: forking a process that has started JAX's threads can deadlock
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+            try:
+                rows = list(pool.map(_score_job, [(a, sources) for a in items]))
+            except BrokenProcessPool as exc:  # a worker died: the tool failed, not the runs
+                raise ScoringFailed(f"scoring failed: a scoring worker process died ({exc}); "
+                                    "no evaluation was written") from None
     else:
         rows = [score_attempt(a, sources) for a in items]
     rows = sort_rows(rows)
@@ -216,6 +223,9 @@ def main(package_dir: str, runs_dir: str, out_dir: str, jobs: int | None = None)
     try:
         sources = OfficialPackage(package_dir, strict=False)
         summaries = evaluate(sources, runs_dir, out_dir, jobs or os.cpu_count() or 1, log)
+    except ScoringFailed as exc:
+        print(f"aw-score: error: {exc}", file=sys.stderr)
+        return 1
     except (FormatError, ValueError, FileExistsError, OSError) as exc:
         print(f"aw-score: error: {exc}", file=sys.stderr)
         return 2
