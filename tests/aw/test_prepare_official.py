@@ -165,8 +165,15 @@ def layout(local, seed, sample_id, gap=0.02):
     return {p: (np.r_[xy[p] - mid, -turned[p][:, 2].min()], matrix_quat(turn[p])) for p in ids}
 
 
+def adapter_pose(t, q):
+    """The adapters' reading of a pose (``pose_from_values``, e4b7c9e): SciPy's matrix of the
+    quaternion, then that matrix's canonical quaternion."""
+    return np.asarray(t, dtype=np.float64), matrix_quat(quat_matrix(np.asarray(q, dtype=np.float64)))
+
+
 def official_by_hand(parts, sample_id, seed, up):
     """``parts``: (part id, vertices, faces, (position, wxyz)) in source order."""
+    parts = [(pid, v, faces, adapter_pose(*pose)) for pid, v, faces, pose in parts]
     placed = [v @ quat_matrix(q).T + t for _, v, _, (t, q) in parts]
     scale = 2 * max(float(np.linalg.norm(v - v.mean(0), axis=1).max()) for _, v, _, _ in parts)
     every = np.concatenate(placed) @ up.T
@@ -235,7 +242,7 @@ def sample_parts():
     a = slab(0.5, 0.25, 0.08)
     b = slab(0.06, 0.3, 0.11, quads=False)
     c = wedge()
-    turn = matrix_quat(Rotation.from_euler("xyz", [0.3, -0.2, 1.1]).as_matrix())
+    turn = -1.3 * matrix_quat(Rotation.from_euler("xyz", [0.3, -0.2, 1.1]).as_matrix())  # neither unit nor w >= 0
     post = slab(0.1, 0.1, 0.4, quads=False)  # square section: two equal eigenvalues
     return [("post", post[0], post[1], (np.array([0.3, -0.1, 0.0]), np.array([1.0, 0, 0, 0]))),
             ("seat", a[0], a[1], (np.zeros(3), np.array([1.0, 0, 0, 0]))),
@@ -320,3 +327,11 @@ def test_the_concave_face_is_cut_differently_under_the_older_frame_rule():
     older = np.column_stack([first, second, np.cross(first, second)])
     assert not np.array_equal(older, basis)
     assert not np.array_equal(triangles((v - c) @ older, faces), triangles((v - c) @ basis, faces))
+
+
+def test_a_pose_needs_seven_finite_numbers_and_a_nonzero_quaternion():
+    v, faces = slab(0.5, 0.25, 0.08)
+    for pose, message in (((0, 0, 0, 0, 0, 0, 0), "non-zero"), ((0, 0, np.nan, 1, 0, 0, 0), "7 finite numbers")):
+        bad = OfficialSample(DATASET, "s8", (OfficialPart("seat", v, faces, pose),))
+        with pytest.raises(ValueError, match=f"{DATASET}/s8: a pose.*{message}"):
+            prepare_official(bad, groups=False)
