@@ -12,6 +12,10 @@ AssemblyWorld/assembly-world-agent), number for number.
   any part's *source* mesh (source units, before any pose), ``s`` the task's scale (the norm of
   the first column of the source -> task matrix) (:func:`fracture_divisor`).
 - Each part's samples are centred on their own mean; a part's pose then moves that centre.
+  A predicted rotation is the one the official reads from the restored state
+  (``evaluation/inputs.py`` ``final_poses``: MuJoCo's ``xmat`` after ``mj_forward``), the pose's
+  quaternion being a free joint's (:func:`aw.official.episode.free_body_rotations`); a target
+  rotation is SciPy's matrix of the target quaternion, as the official takes it.
 - Anchor: the part with the most samples (first on ties). One shared transform puts the anchor's
   predicted pose exactly on its target; part identities stay fixed and the anchor counts in
   every average.
@@ -34,6 +38,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from aw.official.episode import free_body_rotations
 from aw.prepare.official_protocol import fracture_divisor, rotation_of, sample_surface, stream, triangulate
 
 __all__ = ["FractureMetrics", "SEED", "allocate_samples", "fracture_divisor", "fracture_metrics",
@@ -90,8 +95,9 @@ def _chamfer(a: np.ndarray, b: np.ndarray) -> float:
 def fracture_metrics_from_samples(samples, pred_poses, target_poses, scale: float = 1.0,
                                   pa_threshold: float = PA_THRESHOLD) -> FractureMetrics:
     """Fracture metrics from per-part samples (``(n_i, 3)`` each, in the frame the poses act on),
-    ``pred_poses (P, 7)`` and ``target_poses (P, 7)`` ``[tx, ty, tz, qw, qx, qy, qz]``;
-    coordinates are divided by ``scale`` (the divisor)."""
+    ``pred_poses (P, 7)`` (the free joints' coordinates of the state, as stored) and
+    ``target_poses (P, 7)``, both ``[tx, ty, tz, qw, qx, qy, qz]``; coordinates are divided by
+    ``scale`` (the divisor)."""
     samples = [np.asarray(s, dtype=np.float64) for s in samples]
     pred_poses = np.asarray(pred_poses, dtype=np.float64).reshape(-1, 7)
     target_poses = np.asarray(target_poses, dtype=np.float64).reshape(-1, 7)
@@ -103,10 +109,9 @@ def fracture_metrics_from_samples(samples, pred_poses, target_poses, scale: floa
     if not (np.isfinite(scale) and scale > 0):
         raise ValueError("scale must be positive")
     points, predicted, target = [], [], []
-    for s, pp, tp in zip(samples, pred_poses, target_poses):
+    for s, pp, r, tp in zip(samples, pred_poses, free_body_rotations(pred_poses[:, 3:]), target_poses):
         centre = s.mean(0)
         points.append((s - centre) / scale)
-        r = rotation_of(pp[3:])
         predicted.append((r, (r @ centre + pp[:3]) / scale))
         target.append((rotation_of(tp[3:]), (centre @ rotation_of(tp[3:]).T + tp[:3]) / scale))
     counts = np.array([len(s) for s in samples])

@@ -25,12 +25,12 @@ import itertools
 import numpy as np
 
 from aw.pose import pca_frame
+from aw.prepare.official_frame import DegenerateFrameError
+from aw.prepare.official_frame import pca_frame as official_pca_frame
 
-__all__ = ["N_PCA_STARTS", "CUBE", "EIGEN_TIE", "start_frame", "pca_starts", "same_id_starts"]
+__all__ = ["N_PCA_STARTS", "CUBE", "start_frame", "pca_starts", "same_id_starts"]
 
 N_PCA_STARTS = 24
-EIGEN_TIE = 1e-10  # eigenvalues within this fraction of the largest span one eigenspace (official)
-_MIN_AXIS = 1e-8  # a projected point shorter than this (of the farthest point's length) gives no axis
 
 
 def _cube() -> np.ndarray:
@@ -50,50 +50,18 @@ CUBE = _cube()
 
 
 def start_frame(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(mu (3,), A (3, 3))``: the frame of ``points (n, 3)`` the PCA starts align, by the official rule.
+    """``(mu (3,), A (3, 3))``: the frame of ``points (n, 3)`` the PCA starts align.
 
-    ``mu`` is the mean. Eigenvalues of the centred scatter matrix, largest first, that lie within
-    :data:`EIGEN_TIE` of the largest (relative) form one eigenspace; in each eigenspace, in
-    turn, the axes are the projections of the centred points (in point order, scaled by the
-    farthest point's distance) onto it, made orthogonal to the axes already taken there and
-    normalized, skipping those shorter than 1e-8: a point set's own order fixes every sign and
-    every direction inside a repeated eigenspace, so the frame moves with the points. The first
-    two axes are made orthonormal once more; the third is their cross product. A point set with
-    fewer than two such axes (collinear or coincident points, which the official scorer
-    refuses) gets :func:`aw.pose.pca_frame`.
+    The official PCA frame (:func:`aw.prepare.official_frame.pca_frame`, the rule the official
+    scorer and preparation share): the mean, and right-handed principal axes in descending
+    variance whose signs, and directions inside a repeated eigenspace, follow the points' own
+    order, so the frame moves with the points. A point set with fewer than two axes (collinear
+    or coincident points, which the official scorer refuses) gets :func:`aw.pose.pca_frame`.
     """
-    centred = points - points.mean(axis=0)
-    values, vectors = np.linalg.eigh(centred.T @ centred)
-    values, vectors = values[::-1], vectors[:, ::-1]
-    tie = max(float(values[0]), np.finfo(float).tiny) * EIGEN_TIE
-    rows = centred / max(np.linalg.norm(centred, axis=1).max(), np.finfo(float).tiny)
-    axes: list[np.ndarray] = []
-    lo = 0
-    while lo < 3 and len(axes) < 2:
-        hi = lo + 1
-        while hi < 3 and abs(values[hi] - values[lo]) <= tie:
-            hi += 1
-        span = vectors[:, lo:hi]
-        onto = span @ span.T
-        taken: list[np.ndarray] = []
-        for row in rows:
-            axis = onto @ row
-            for earlier in taken:
-                axis -= earlier * np.dot(earlier, axis)
-            size = np.linalg.norm(axis)
-            if size > _MIN_AXIS:
-                axis /= size
-                taken.append(axis)
-            if len(taken) == hi - lo:
-                break
-        axes += taken
-        lo = hi
-    if len(axes) < 2:
+    try:
+        return official_pca_frame(points)
+    except DegenerateFrameError:
         return pca_frame(points)
-    e1 = axes[0] / np.linalg.norm(axes[0])
-    e2 = axes[1] - e1 * np.dot(e1, axes[1])
-    e2 /= np.linalg.norm(e2)
-    return points.mean(axis=0), np.column_stack([e1, e2, np.cross(e1, e2)])
 
 
 def pca_starts(pred_frame: tuple[np.ndarray, np.ndarray], target_frame: tuple[np.ndarray, np.ndarray]):

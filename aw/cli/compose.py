@@ -105,7 +105,8 @@ def register_official(sub) -> None:
         description="Write a scoring suite (manifest, targets, eval_points/ with the official 1000 points per part) "
         "and RUNS/<system>/<task>/ trajectories with every recorded state of each final.episode.zip.")
     p.add_argument("package", metavar="PKG", help="official benchmark package folder (benchmark.json, <block>/.../config.json, cache/<slug>/evaluation.json)")
-    p.add_argument("--episodes", metavar="DIR", default=None, help="folder searched for *.episode.zip archives (a run log, or <block>/<slug>.episode.zip)")
+    p.add_argument("--episodes", metavar="DIR", default=None, help="folder searched for *.episode.zip archives (a run log, or <block>/<slug>.episode.zip); "
+                   "the suite then holds only the samples they attempted, so a partly downloaded package will do")
     p.add_argument("--out", required=True, metavar="SUITE", help="scoring suite to write")
     p.add_argument("--runs", metavar="RUNS", default=None, help="runs folder to write (needed with --episodes)")
     p.add_argument("--system", default=None, help="system label for every archive (default: the run folder of each archive)")

@@ -12,7 +12,10 @@
 
 The converted suite is for scoring: it has no ``tasks/`` folder (the package holds points, not
 meshes), and ``aw-score`` takes a task's geometry from its ``eval_points`` file. Every state of
-an episode becomes a checkpoint.
+an episode becomes a checkpoint. With episodes, the suite holds the samples they attempted
+(as the official evaluation rows them), so a partly downloaded package serves as long as it
+holds those samples; without, every sample of the package. Missing files are named all at
+once before anything is written.
 """
 
 from __future__ import annotations
@@ -48,9 +51,18 @@ def initial_archive_path(suite_dir: str | Path, task_id: str) -> Path:
     return Path(suite_dir) / "official" / f"{task_id}.episode.zip"
 
 
-def convert_package(package: str | Path | OfficialPackage, suite_out: str | Path, force: bool = False) -> SuiteManifest:
-    """Write the scoring suite of an official package (see the module doc)."""
+def convert_package(package: str | Path | OfficialPackage, suite_out: str | Path, force: bool = False,
+                    samples: Iterable[tuple[str, str]] | None = None) -> SuiteManifest:
+    """Write the scoring suite of an official package (see the module doc): its ``samples``
+    ((block, sample id) pairs, written in package order), by default every sample. Raises
+    :class:`aw.official.errors.MissingPackageFileError` naming every file those samples need
+    that the package lacks."""
     pkg = package if isinstance(package, OfficialPackage) else OfficialPackage(package, strict=False)
+    listed = pkg.listed_samples()
+    wanted = set(listed if samples is None else samples)
+    pkg.require([key for key in listed if key in wanted], "the suite")
+    blocks = {block for block, _ in wanted}
+    chosen = [(b, sid) for b in pkg.blocks if b in blocks for sid in pkg.sample_ids(b) if (b, sid) in wanted]
     out = Path(suite_out)
     existing = [out / n for n in ("manifest.json", "targets", "eval_points", "official", "tasks") if (out / n).exists()]
     if existing and not force:
@@ -60,7 +72,7 @@ def convert_package(package: str | Path | OfficialPackage, suite_out: str | Path
     for sub in ("targets", "eval_points", "official"):
         (out / sub).mkdir(parents=True, exist_ok=True)
     entries = []
-    for block, sid in pkg.samples():
+    for block, sid in chosen:
         tid = task_id_for_sample(block, sid)
         inputs = pkg.evaluation_inputs(block, sid)
         write_eval_inputs(eval_points_path(out, tid), inputs)
@@ -222,14 +234,16 @@ def _result_beside(archive: Path) -> dict:
     return _official_result(result)
 
 
-def run_log_archives(folder: str | Path, pkg: OfficialPackage, skipped: list[str] | None = None) -> list[tuple[str, str, str, Path, dict]]:
+def run_log_archives(folder: str | Path, pkg: OfficialPackage, skipped: list[str] | None = None,
+                     attempted: set[tuple[str, str]] | None = None) -> list[tuple[str, str, str, Path, dict]]:
     """``(system, block, sample id, final archive, extra)`` for every attempt that counts in the
     run logs of ``folder`` (a run folder or a ``logs/`` folder): runs are grouped by system
     (``aw.official.runlog.system_name``, as ``aw-score`` names them) and each group's attempts
     are selected as the official evaluation selects them (``aw.official.runlog.select_attempts``:
     a later attempt replaces an earlier one). Attempts the official scorer would not score (still
     running, no saved archive, archive digest differing from ``result.json``) are listed in
-    ``skipped``."""
+    ``skipped``; every selected attempt's (block, sample id), scored or not, is added to
+    ``attempted``."""
     from aw.official.package import file_sha256
     from aw.official.runlog import find_runs, select_attempts, systems
 
@@ -243,6 +257,8 @@ def run_log_archives(folder: str | Path, pkg: OfficialPackage, skipped: list[str
             raise FormatError(Path(folder), f"system {name}: {exc}") from None
         for (block, sid), attempt in sorted(attempts.items()):
             pkg.check_attempt(attempt)
+            if attempted is not None:
+                attempted.add((block, sid))
             why = ("the attempt is still running" if not attempt.finished else
                    "no saved final archive" if not attempt.archive_saved else
                    "final archive differs from result.json's sha256"
@@ -262,14 +278,16 @@ def convert(package: str | Path, episodes: str | Path | Iterable[str | Path], su
     ``episodes`` is a run folder or holds run folders), else every ``*.episode.zip`` below it
     (``<block>/<slug>.episode.zip``). A run's system is ``system``, else the run log's system
     (``aw.official.runlog.system_name``), else the archive folder's name (``official`` for a list
-    of archives); attempts that are not scored are listed in ``skipped``."""
+    of archives); attempts that are not scored are listed in ``skipped``. The suite holds the
+    samples attempted (those not scored too: ``aw-score`` counts them as missing, PA = SR = 0,
+    as the official evaluation rows them as errors), so the package needs only their files."""
     from aw.official.runlog import archive_system, is_run_dir
 
     pkg = OfficialPackage(package, strict=False)
-    manifest = convert_package(pkg, suite_out, force=force)
     folder = Path(episodes) if isinstance(episodes, (str, Path)) else None
+    attempted: set[tuple[str, str]] = set()
     if folder is not None and folder.is_dir() and (is_run_dir(folder) or any(is_run_dir(p) for p in folder.iterdir())):
-        items = run_log_archives(folder, pkg, skipped)
+        items = run_log_archives(folder, pkg, skipped, attempted)
     else:
         archives = find_archives(episodes) if folder is not None else [Path(p) for p in episodes]
         name = archive_system(folder) if folder is not None and folder.is_dir() else "official"
@@ -277,6 +295,10 @@ def convert(package: str | Path, episodes: str | Path | Iterable[str | Path], su
         for arc in archives:
             block, sid = archive_sample(arc, pkg)
             items.append((name, block, sid, arc, {"block": block, "sample_id": sid, **_result_beside(arc)}))
+    attempted.update((block, sid) for _, block, sid, _, _ in items)
+    if not attempted:
+        raise FormatError(folder if folder is not None else Path("."), "no attempt and no *.episode.zip archive to convert")
+    manifest = convert_package(pkg, suite_out, force=force, samples=attempted)
     runs = []
     for name, block, sid, arc, extra in items:
         inputs = pkg.evaluation_inputs(block, sid)

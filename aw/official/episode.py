@@ -26,7 +26,7 @@ from aw.official.errors import EngineVersionError, EpisodeMismatchError, WorldMo
 
 __all__ = [
     "PartEpisode", "body_name", "expected_objects", "catalogue_part_ids", "require_engine", "load_model",
-    "compare_compiled_models", "check_continuation", "state_poses", "read_part_episode",
+    "compare_compiled_models", "check_continuation", "state_poses", "free_body_rotations", "read_part_episode",
 ]
 
 _COMPILED_COUNTS = ("nbody", "njnt", "ngeom", "nmesh", "nq", "nv", "nu", "na", "neq", "ntendon", "nplugin", "nflex",
@@ -178,6 +178,25 @@ def state_poses(model, ep: EpisodeArchive, frames: list[Frame], names: list[str]
             else:
                 out[f, p] = data.qpos[adr:adr + 7]
     return out
+
+
+def free_body_rotations(quaternions: np.ndarray) -> np.ndarray:
+    """``(P, 3, 3)`` world rotations (MuJoCo's ``xmat``) of top-level bodies on a free joint whose
+    joint quaternions are ``quaternions: (P, 4)`` ``(w, x, y, z)`` as stored in a state.
+
+    Forward kinematics normalizes the quaternion as ``mju_normalize4`` does (not at all when
+    its norm is within MuJoCo's ``mjMINVAL`` of 1) and converts it with ``mju_quat2Mat``; these
+    are MuJoCo's own functions, so the matrices are the ones ``mj_forward`` leaves in ``xmat``
+    (which the official scorer and evaluation read, ``poses.py`` and ``evaluation/inputs.py``)
+    bit for bit, without building the world."""
+    import mujoco
+
+    quats = np.array(quaternions, dtype=np.float64).reshape(-1, 4)
+    out = np.empty((len(quats), 9))
+    for quat, mat in zip(quats, out):
+        mujoco.mju_normalize4(quat)
+        mujoco.mju_quat2Mat(mat, quat)
+    return out.reshape(-1, 3, 3)
 
 
 def _free_qpos_address(model, body: int) -> int | None:

@@ -20,6 +20,7 @@ __all__ = [
     "EpisodeMismatchError",
     "EvaluationCacheError",
     "PackageError",
+    "MissingPackageFileError",
     "SampleIdError",
     "ExportError",
 ]
@@ -76,6 +77,10 @@ class EvaluationCacheError(OfficialFormatError):
 class PackageError(OfficialFormatError):
     """A benchmark package file (``benchmark.json``, ``config.json``, ``pages.json``) is
     missing, malformed or inconsistent with the rest of the package."""
+
+
+class MissingPackageFileError(PackageError):
+    """A file the package lists is not there (a partly downloaded package)."""
 
 
 class SampleIdError(OfficialFormatError):

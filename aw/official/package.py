@@ -19,6 +19,7 @@ from __future__ import annotations
 import hashlib
 import json
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,7 +28,7 @@ import numpy as np
 
 from aw.official.archive import EpisodeArchive, read_archive
 from aw.official.episode import read_part_episode
-from aw.official.errors import PackageError
+from aw.official.errors import MissingPackageFileError, PackageError
 from aw.official.evaluation_cache import (CACHE_FILE, EVALUATION_PROTOCOL, SIMILARITY_POLICY, SIMILARITY_THRESHOLD,
                                           EvaluationInputs, read_evaluation)
 from aw.official.ids import sample_slug
@@ -127,7 +128,7 @@ class OfficialPackage:
         if not any(path.resolve().is_relative_to(a) for a in allowed):
             raise PackageError(path, "links outside the package")
         if not path.is_file():
-            raise PackageError(path, "package file not found")
+            raise MissingPackageFileError(path, "package file not found")
         return path
 
     def _json(self, relative: str) -> Any:
@@ -173,6 +174,43 @@ class OfficialPackage:
     def samples(self) -> list[tuple[str, str]]:
         """Every (block, sample id), blocks in benchmark order."""
         return [(block, sid) for block in self.blocks for sid in self.sample_ids(block)]
+
+    def missing_files(self, samples: Iterable[tuple[str, str]]) -> list[Path]:
+        """The files that the given (block, sample id) pairs need and the package lacks (a partly
+        downloaded package), in sample order: a block's ``config.json``, each sample's initial
+        archive (or the first missing reference page) and its ``evaluation.json``. Files that
+        are there are checked as :meth:`configuration` and :meth:`sample` check them."""
+        out: list[Path] = []
+        lacking: set[str] = set()  # blocks whose config.json is missing: their samples cannot be checked
+        for block, sid in samples:
+            if block in lacking:
+                continue
+            try:
+                folder, _, _ = self.configuration(block)
+            except MissingPackageFileError as exc:
+                out.append(exc.path)
+                lacking.add(block)
+                continue
+            try:
+                self.sample(block, sid)
+            except MissingPackageFileError as exc:
+                out.append(exc.path)
+            evaluation = self.root / folder / "cache" / sample_slug(sid) / CACHE_FILE
+            if not evaluation.is_file():
+                out.append(evaluation)
+        return out
+
+    def require(self, samples: Iterable[tuple[str, str]], what: str = "the conversion") -> None:
+        """:class:`MissingPackageFileError` naming every file of :meth:`missing_files`, if any."""
+        missing = self.missing_files(samples)
+        if missing:
+            names = ", ".join(str(p.relative_to(self.root)) if p.is_relative_to(self.root) else str(p) for p in missing)
+            raise MissingPackageFileError(self.root, f"{len(missing)} files {what} needs are not in the package "
+                                                     f"(partly downloaded?): {names}")
+
+    def listed_samples(self) -> list[tuple[str, str]]:
+        """Every (block, sample id) as ``benchmark.json`` lists them (no ``config.json`` read)."""
+        return [(name, sid) for name, block in self.blocks.items() for sid in block["samples"]]
 
     def task_text(self, block: str) -> str:
         return self.configuration(block)[2]

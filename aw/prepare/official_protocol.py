@@ -2,7 +2,8 @@
 official benchmark prepares them (``assembly_world_agent/preparation.py`` of
 AssemblyWorld/assembly-world-agent), number for number.
 
-From an object's parts (source-frame vertices, polygon faces, assembled poses):
+From an object's parts (source-frame vertices, polygon faces, assembled poses, each pose read
+as the official adapters read it, :func:`adapter_pose`):
 
 1. ``scale = 2 * max_i max_v |v - mean(V_i)|`` over all vertices of each part (source units).
 2. Normalization: the assembled object rotated to Z up, centred in XY on its box centre and
@@ -43,6 +44,7 @@ __all__ = [
     "OfficialPrepared",
     "stream",
     "pca_frame",
+    "adapter_pose",
     "triangulate",
     "sample_surface",
     "farthest_point_sample",
@@ -123,6 +125,19 @@ def pose_of(position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
         raise ValueError("rotation is not orthonormal and right-handed")
     quat = Rotation.from_matrix(rotation).as_quat(canonical=True)[[3, 0, 1, 2]]
     return np.concatenate([np.asarray(position, dtype=np.float64), quat])
+
+
+def adapter_pose(values: Sequence[float]) -> np.ndarray:
+    """``(7,)`` an assembled pose ``[tx, ty, tz, qw, qx, qy, qz]`` as the official adapters read
+    it (``utils/transforms.py`` ``pose_from_values``): the quaternion, of any non-zero length
+    and either sign, becomes SciPy's rotation matrix and then that matrix's canonical quaternion
+    (:func:`pose_of`, ``w >= 0``), so the preparation works from the same bits as the official."""
+    pose = np.asarray(values, dtype=np.float64)
+    if pose.shape != (7,) or not np.isfinite(pose).all():
+        raise ValueError(f"a pose needs 7 finite numbers [tx, ty, tz, qw, qx, qy, qz], got {pose.tolist()!r}")
+    if np.linalg.norm(pose[3:]) < 1e-12:
+        raise ValueError(f"a pose's quaternion must be non-zero, got {pose[3:].tolist()!r}")
+    return pose_of(pose[:3], rotation_of(pose[3:]))
 
 
 def moved(points: np.ndarray, pose: np.ndarray) -> np.ndarray:
@@ -300,7 +315,10 @@ def prepare_official(sample: OfficialSample, seed: int = 0, gap: float = MIN_GAP
     ids = [p.part_id for p in parts]
     if not parts or len(set(ids)) != len(ids):
         raise ValueError(f"{sample.sample_id}: expected non-empty, unique part ids")
-    poses = [np.asarray(p.pose, dtype=np.float64) for p in parts]
+    try:
+        poses = [adapter_pose(p.pose) for p in parts]
+    except ValueError as exc:
+        raise ValueError(f"{sample.dataset}/{sample.sample_id}: {exc}") from None
     assembled = [moved(p.vertices, q) for p, q in zip(parts, poses)]
     scale = 2 * max(float(np.linalg.norm(p.vertices - p.vertices.mean(0), axis=1).max()) for p in parts)
     to_task = _normalization(np.concatenate(assembled), np.asarray(sample.source_to_z_up, dtype=np.float64), scale)

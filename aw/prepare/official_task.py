@@ -25,7 +25,7 @@ import trimesh
 
 from aw.assembly import AssembledObject
 from aw.formats.common import PART_ID_PATTERN
-from aw.prepare.official_protocol import OfficialPart, OfficialPrepared, OfficialSample, pose_of, prepare_official, rotation_of
+from aw.prepare.official_protocol import OfficialPart, OfficialPrepared, OfficialSample, prepare_official
 from aw.prepare.standardize import PreparedObject, PreparedPart
 
 __all__ = ["OFFICIAL_DATASETS", "official_sample", "prepare_official_object", "write_eval_points"]
@@ -55,8 +55,7 @@ def official_sample(obj: AssembledObject) -> OfficialSample:
             vertices = np.asarray(p.mesh.vertices, dtype=np.float64) @ frame
         polygons = faces.get(p.name)
         polygons = tuple(tuple(int(i) for i in f) for f in (polygons if polygons is not None else p.mesh.faces))
-        given = np.asarray(poses.get(p.name, (0, 0, 0, 1, 0, 0, 0)), dtype=np.float64)
-        pose = tuple(float(x) for x in pose_of(given[:3], rotation_of(given[3:])))  # canonical, as the adapters read it
+        pose = tuple(float(x) for x in poses.get(p.name, (0, 0, 0, 1, 0, 0, 0)))  # prepare_official reads it as the adapters do
         parts.append(OfficialPart(p.name, vertices, polygons, pose))
     dataset = str(info.get("dataset") or OFFICIAL_DATASETS.get(obj.source, obj.dataset))
     return OfficialSample(dataset, str(info.get("sample_id", obj.object_id)), tuple(parts), frame)

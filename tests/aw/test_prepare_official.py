@@ -2,8 +2,10 @@
 
 The expected values are computed here by following the official procedure
 (``assembly_world_agent/preparation.py`` and ``utils/{random,geometry,placement,transforms,scale}.py``
-of AssemblyWorld/assembly-world-agent) step by step, written out plainly, and compared with
-:func:`aw.prepare.official_protocol.prepare_official` for exact equality.
+of AssemblyWorld/assembly-world-agent, as of commit e4b7c9e; docs/datasets.md lists the commit of
+each step) step by step, written out plainly, and compared with
+:func:`aw.prepare.official_protocol.prepare_official` for exact equality. When the official code
+moves, rewrite the step here from the new commit first, then follow it in the project.
 """
 
 from __future__ import annotations
@@ -41,8 +43,10 @@ def matrix_quat(m):
 
 
 def frame(v):
-    """PCA frame: eigenvalues within 1e-10 of the largest form one eigenspace, whose axes are the
-    first centred vertices (in order) with a part outside the axes already taken from it."""
+    """PCA frame (``utils/transforms.py`` at e4b7c9e): eigenvalues within 1e-10 of the largest
+    form one eigenspace, whose axes are the first centred vertices (in order) with a part outside
+    the axes already taken from it; the first two axes are made orthonormal again (Gram-Schmidt)
+    before the cross product gives the third."""
     c = v.mean(axis=0)
     d = v - v.mean(axis=0)
     w, e = np.linalg.eigh(d.T @ d)
@@ -72,7 +76,10 @@ def frame(v):
             if len(mine) == hi - lo:
                 break
         axes += mine
-    return c, np.column_stack([axes[0], axes[1], np.cross(axes[0], axes[1])])
+    x = axes[0] / np.linalg.norm(axes[0])
+    y = axes[1] - np.dot(x, axes[1]) * x
+    y = y / np.linalg.norm(y)
+    return c, np.column_stack([x, y, np.cross(x, y)])
 
 
 def triangles(v, faces):
@@ -158,8 +165,15 @@ def layout(local, seed, sample_id, gap=0.02):
     return {p: (np.r_[xy[p] - mid, -turned[p][:, 2].min()], matrix_quat(turn[p])) for p in ids}
 
 
+def adapter_pose(t, q):
+    """The adapters' reading of a pose (``pose_from_values``, e4b7c9e): SciPy's matrix of the
+    quaternion, then that matrix's canonical quaternion."""
+    return np.asarray(t, dtype=np.float64), matrix_quat(quat_matrix(np.asarray(q, dtype=np.float64)))
+
+
 def official_by_hand(parts, sample_id, seed, up):
     """``parts``: (part id, vertices, faces, (position, wxyz)) in source order."""
+    parts = [(pid, v, faces, adapter_pose(*pose)) for pid, v, faces, pose in parts]
     placed = [v @ quat_matrix(q).T + t for _, v, _, (t, q) in parts]
     scale = 2 * max(float(np.linalg.norm(v - v.mean(0), axis=1).max()) for _, v, _, _ in parts)
     every = np.concatenate(placed) @ up.T
@@ -210,16 +224,31 @@ def wedge():
     return v, ((0, 2, 1), (0, 1, 3), (1, 2, 3), (2, 0, 3))
 
 
+def ell_prism():
+    """A prism on a concave L-shaped polygon whose long edges hold collinear vertices (as CAD
+    meshes do), so that which ear the ear-clipping cuts first turns on the last bits of the
+    part frame; turned off the axes. Two polygon faces of 13 vertices, 13 quads."""
+    xs = np.linspace(0.0, 1.0, 6)
+    outline = [(x, 0.0) for x in xs] + [(1.0, 0.2), (0.8, 0.2), (0.6, 0.2), (0.4, 0.2), (0.4, 0.6), (0.0, 0.6), (0.0, 0.3)]
+    n = len(outline)
+    flat = np.array(outline)
+    v = np.vstack([np.c_[flat, np.zeros(n)], np.c_[flat, np.full(n, 0.07)]])
+    v = v @ Rotation.from_euler("zyx", [0.41, -0.73, 1.9]).as_matrix().T + [0.2, -0.3, 0.15]
+    faces = [tuple(range(n))[::-1], tuple(range(n, 2 * n))] + [(i, (i + 1) % n, n + (i + 1) % n, n + i) for i in range(n)]
+    return v, tuple(faces)
+
+
 def sample_parts():
     a = slab(0.5, 0.25, 0.08)
     b = slab(0.06, 0.3, 0.11, quads=False)
     c = wedge()
-    turn = matrix_quat(Rotation.from_euler("xyz", [0.3, -0.2, 1.1]).as_matrix())
+    turn = -1.3 * matrix_quat(Rotation.from_euler("xyz", [0.3, -0.2, 1.1]).as_matrix())  # neither unit nor w >= 0
     post = slab(0.1, 0.1, 0.4, quads=False)  # square section: two equal eigenvalues
     return [("post", post[0], post[1], (np.array([0.3, -0.1, 0.0]), np.array([1.0, 0, 0, 0]))),
             ("seat", a[0], a[1], (np.zeros(3), np.array([1.0, 0, 0, 0]))),
             ("back", b[0], b[1], (np.array([0.1, 0.2, -0.05]), turn)),
-            ("arm_2", c[0], c[1], (np.array([-0.2, 0.0, 0.3]), np.array([1.0, 0, 0, 0])))]
+            ("arm_2", c[0], c[1], (np.array([-0.2, 0.0, 0.3]), np.array([1.0, 0, 0, 0]))),
+            ("ell", *ell_prism(), (np.array([0.0, 0.4, 0.1]), np.array([1.0, 0, 0, 0])))]
 
 
 @pytest.mark.parametrize("seed", [7])
@@ -228,8 +257,8 @@ def test_prepare_official_equals_the_procedure_bit_for_bit(seed):
     sample = OfficialSample(DATASET, "chair-0042", tuple(OfficialPart(p, v, f, (*t, *q)) for p, v, f, (t, q) in raw), Y_UP)
     got = prepare_official(sample, seed, groups=False)
     ids, points, targets, divisor, baked = official_by_hand(raw, "chair-0042", seed, Y_UP)
-    assert got.part_ids == ids == ["arm_2", "back", "post", "seat"]
-    assert got.points.shape == (4, 1000, 3) and got.points.dtype == np.float64
+    assert got.part_ids == ids == ["arm_2", "back", "ell", "post", "seat"]
+    assert got.points.shape == (5, 1000, 3) and got.points.dtype == np.float64
     assert np.array_equal(got.points, points)
     assert np.array_equal(got.targets, targets)
     assert got.divisor == divisor
@@ -277,3 +306,32 @@ def test_geometry_groups_join_congruent_parts_only():
     clouds = np.stack([shape, other, moved])
     groups = geometry_groups(ids, clouds, list(clouds), 1.0)
     assert sorted(sorted(g) for g in groups) == [["a", "c"], ["b"]]
+
+
+def test_the_concave_face_is_cut_differently_under_the_older_frame_rule():
+    """Why the L-shaped prism is in the sample: under the frame of the earlier official commit
+    (6ddf7cf: third axis the cross product of the first two as found, no second Gram-Schmidt
+    step) its ear-clipping differs, so a project still on that rule samples other points."""
+    v, faces = ell_prism()
+    c, basis = frame(v)
+    # the older rule's first two axes are the newer's before the second step: rebuild them
+    d = v - v.mean(axis=0)
+    w, e = np.linalg.eigh(d.T @ d)
+    e = e[:, ::-1]
+    rows = d / np.linalg.norm(d, axis=1).max()
+    first = next(r for r in (e[:, :1] @ e[:, :1].T @ row for row in rows) if np.linalg.norm(r) > 1e-8)
+    first = first / np.linalg.norm(first)
+    second = next(r for r in (e[:, 1:2] @ e[:, 1:2].T @ row for row in rows) if np.linalg.norm(r) > 1e-8)
+    second = second / np.linalg.norm(second)
+    assert len(set(np.round(w, 12))) == 3  # distinct eigenvalues: one axis per eigenspace
+    older = np.column_stack([first, second, np.cross(first, second)])
+    assert not np.array_equal(older, basis)
+    assert not np.array_equal(triangles((v - c) @ older, faces), triangles((v - c) @ basis, faces))
+
+
+def test_a_pose_needs_seven_finite_numbers_and_a_nonzero_quaternion():
+    v, faces = slab(0.5, 0.25, 0.08)
+    for pose, message in (((0, 0, 0, 0, 0, 0, 0), "non-zero"), ((0, 0, np.nan, 1, 0, 0, 0), "7 finite numbers")):
+        bad = OfficialSample(DATASET, "s8", (OfficialPart("seat", v, faces, pose),))
+        with pytest.raises(ValueError, match=f"{DATASET}/s8: a pose.*{message}"):
+            prepare_official(bad, groups=False)

@@ -15,7 +15,7 @@ from aw.official.runlog import create_run, write_result
 from aw.pose import apply_pose
 from aw_eval.cli import main as cli_main
 from aw_eval.official_runs import score_state
-from tests.aw.official.builders import FINAL, write_active, write_package
+from tests.aw.official.builders import FINAL, Recorder, write_active, write_package
 
 
 @dataclass
@@ -142,6 +142,27 @@ def test_aw_score_takes_a_folder_of_archives(package, tmp_path):
     assert (row["block"], row["sample_id"]) == ("partnet-final-image", "743")
     assert (row["SCD"], row["PA"]) == (expected["SCD"], expected["PA"])
     assert cli_main([str(package.root), str(folder), "--out", str(out)]) == 2  # never overwrites an evaluation
+
+
+def test_a_cancelled_last_call_is_scored_from_the_last_state(package, tmp_path):
+    """An attempt whose last call was cancelled as the page was exported: physics traces that
+    carry a part away follow the last state, and events.jsonl has nothing for that call. The
+    official reader accepts it and the official scorer restores the last state: PA 1, SR 1."""
+    rec = Recorder(package.initial_archive("partnet-none", "743"))
+    rec.query("start_episode")
+    for k, pose in enumerate(FINAL):
+        rec.move(k, pose)
+    rec.cancel(2, OFF[2])
+    path = tmp_path / "episodes" / "partnet-none" / "743.episode.zip"
+    arc = rec.save(path)
+    last_call = arc.calls[-1]
+    assert last_call["error_code"] == "cancelled" and not [e for e in arc.events if e["call_id"] == last_call["id"]]
+    assert not np.array_equal(arc.traces[-1].integration, arc.final_state().integration)  # the last row moved
+    out = tmp_path / "out"
+    assert cli_main([str(package.root), str(path.parent.parent), "--out", str(out), "--jobs", "1"]) == 0
+    (row,) = read_metrics(out / "official" / "episodes" / "metrics.jsonl")
+    assert row["status"] == "scored" and row["state_index"] == 3
+    assert (row["PA"], row["SR"]) == (1.0, 1) and row["SCD"] < 1e-12
 
 
 def test_run_logs_that_differ_from_the_package_are_refused(package, tmp_path, capsys):

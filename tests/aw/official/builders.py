@@ -91,6 +91,18 @@ class Recorder:
         self._trace(call, "rollback", self.ep.final_state())
         self._events(call)
 
+    def cancel(self, k: int, pose: np.ndarray, steps: int = 3) -> None:
+        """A last call cancelled as the page was exported: ``steps`` physics traces moving part
+        ``k`` towards ``pose`` after the last state, no new state, and no events for it."""
+        call = self._call("advance_simulation", {"duration": 1.0})
+        call.update(status="error", error="Operation cancelled.", error_code="cancelled",
+                    cancellation={"phase": "physics", "step": steps}, steps=steps)
+        moving = append_state(self.model, self.ep, {k: np.asarray(pose, float)})
+        self.ep.states.pop()  # the motion only reaches the trace rows
+        for step in range(1, steps + 1):
+            self._trace(call, "physics", moving)
+            self.ep.traces[-1].record["step"] = step
+
     def save(self, path: Path) -> EpisodeArchive:
         return write_archive(self.ep, path)
 

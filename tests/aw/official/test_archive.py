@@ -196,8 +196,8 @@ def _bad_timestamp(files):
     return edit_jsonl(files, "calls.jsonl", lambda rows: rows[0].update(timestamp="yesterday"))
 
 
-def _event_missing(files):
-    return edit_jsonl(files, "events.jsonl", lambda rows: rows.pop())
+def _event_kind_unknown(files):
+    return edit_jsonl(files, "events.jsonl", lambda rows: rows[0].update(kind="cancel"))
 
 
 def _trace_outside_call(files):
@@ -234,7 +234,7 @@ def _mjb_declared_missing(files):
 
 @pytest.mark.parametrize("damage,message", [
     (_frames_bin_short, "frames.bin"), (_frames_bin_nan, "non-finite"), (_state_gap, "state indices"),
-    (_call_beyond_states, "state_index"), (_bad_timestamp, "ISO-8601"), (_event_missing, "request then a complete"),
+    (_call_beyond_states, "state_index"), (_bad_timestamp, "ISO-8601"), (_event_kind_unknown, "kind request or complete"),
     (_trace_outside_call, "trace range"), (_ended_without_end, "end is present"), (_unknown_manifest_key, "unknown keys"),
     (_error_without_message, "error message"), (_setup_with_history, "setup"), (_stray_member, "notes.txt"),
     (_bad_group, "group member"), (_mjb_declared_missing, "model.mjb"),
@@ -244,3 +244,20 @@ def test_inconsistent_episodes(active, tmp_path, damage, message):
     with pytest.raises(InconsistentEpisodeError, match=message) as info:
         read_archive(out)
     assert str(out) in str(info.value)
+
+
+def _drop_events_of(call_id):
+    return lambda rows: rows.__setitem__(slice(None), [r for r in rows if r["call_id"] != call_id])
+
+
+@pytest.mark.parametrize("edit", [
+    _drop_events_of("call-6"),  # the last call has none (cancelled at export)
+    lambda rows: rows.pop(),  # request only
+    lambda rows: rows.reverse(),  # complete before request, indices out of order
+    lambda rows: rows.append({**rows[0], "index": 99, "call_id": "call-77"}),  # a call the archive lacks
+])
+def test_events_are_checked_as_the_official_scorer_checks_them(active, tmp_path, edit):
+    """assembly-world-bench ``episode_io.py`` applies only the episode schema to events, so
+    no sequence of schema-valid events makes an episode unreadable."""
+    out = rezip(active.path, tmp_path / "events.zip", edit_jsonl(members(active.path), "events.jsonl", edit))
+    assert read_archive(out).final_state().index == 3

@@ -94,3 +94,49 @@ def test_one_line_errors(tmp_path, capsys):
     assert main(["official-export", str(tmp_path / "run"), "--initial", str(tmp_path / "bad.episode.zip"),
                  "--out", str(tmp_path / "x.episode.zip")]) == 1
     assert len(capsys.readouterr().err.splitlines()) == 1
+
+
+def _partly_downloaded(tmp_path):
+    """A package of which only what a run of partnet-none/743 needs was downloaded (another
+    block's config.json, another sample's initial archive and evaluation.json are absent), and
+    that run."""
+    from aw.official.package import OfficialPackage
+
+    pkg_root = write_package(tmp_path / "benchmark")
+    pkg = OfficialPackage(pkg_root, strict=False)
+    write_run_log(tmp_path / "logs", pkg, {("partnet-none", "743"): FINAL}, "run-1")
+    sample = pkg.sample("partnet-none", "21905")
+    sample.initial_path.unlink()
+    sample.evaluation_path.unlink()
+    folder = pkg.configuration("ikea-manualbook")[0]
+    (pkg_root / folder / "config.json").unlink()
+    return pkg_root, pkg
+
+
+def test_a_partly_downloaded_package_converts_what_the_runs_need(tmp_path, capsys):
+    pkg_root, _ = _partly_downloaded(tmp_path)
+    assert main(["official", str(pkg_root), "--episodes", str(tmp_path / "logs"), "--out", str(tmp_path / "suite"),
+                 "--runs", str(tmp_path / "runs")]) == 0
+    assert "wrote 1 tasks" in capsys.readouterr().out
+    assert (tmp_path / "runs" / "fixture-m" / "partnet-none--743" / "trajectory.jsonl").is_file()
+
+
+def test_what_the_runs_need_and_the_package_lacks_is_named(tmp_path, capsys):
+    """Every missing file in one line, before anything is written; without --episodes the
+    whole package is needed."""
+    pkg_root, pkg = _partly_downloaded(tmp_path)
+    sample = pkg.sample("partnet-none", "743")
+    sample.evaluation_path.unlink()
+    assert main(["official", str(pkg_root), "--episodes", str(tmp_path / "logs"), "--out", str(tmp_path / "suite"),
+                 "--runs", str(tmp_path / "runs")]) == 1
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "1 files the suite needs are not in the package" in err
+    assert str(sample.evaluation_path.relative_to(pkg_root)) in err
+    assert not (tmp_path / "suite" / "manifest.json").exists() and not (tmp_path / "runs").exists()
+    assert main(["official", str(pkg_root), "--out", str(tmp_path / "suite")]) == 1
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "4 files the suite needs are not in the package" in err
+    gone = pkg.sample("partnet-none", "21905")
+    for path in (sample.evaluation_path, gone.initial_path, gone.evaluation_path):
+        assert str(path.relative_to(pkg_root)) in err
+    assert "ikea-manualbook/ikea-manual/prep-v1-s0-i0-fixture/config.json" in err

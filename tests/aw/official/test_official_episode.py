@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from aw.official.archive import EpisodeArchive, Frame, write_archive
-from aw.official.episode import catalogue_part_ids, check_continuation, load_model, read_part_episode
+from aw.official.episode import catalogue_part_ids, check_continuation, free_body_rotations, load_model, read_part_episode
 from aw.official.errors import EpisodeMismatchError, WorldModelError
 from tests.aw.official.builders import FINAL, INITIAL, PART_IDS, write_active, write_setup
 
@@ -93,3 +93,28 @@ def test_world_problems(tmp_path):
     broken.files["world/model.xml"] = b"<mujoco><worldbody><body name='part-0001'/></worldbody></mujoco>"
     with pytest.raises(EpisodeMismatchError, match="stateSize"):
         read_part_episode(broken)
+
+
+def test_free_body_rotations_are_mujocos_xmat(tmp_path):
+    """The rotations MuJoCo's forward kinematics leaves in ``xmat`` for the stored joint
+    quaternions (unit, a few bits off unit, far off unit), bit for bit; SciPy's matrices of
+    the same quaternions differ from them in the last bits."""
+    import mujoco
+    from scipy.spatial.transform import Rotation
+
+    setup = write_setup(tmp_path / "s.episode.zip")
+    model = load_model(setup)
+    data = mujoco.MjData(model)
+    rng = np.random.default_rng(4)
+    scipy_differs = 0
+    for trial in range(30):
+        quats = rng.normal(size=(3, 4))
+        quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+        quats *= [[1.0], [1 + 3e-16 * (trial % 5 - 2)], [2.5]]
+        for k, q in enumerate(quats):
+            data.qpos[7 * k:7 * k + 7] = [0.1 * k, 0.0, 0.2, *q]
+        mujoco.mj_forward(model, data)
+        want = data.xmat[1:4].reshape(3, 3, 3)
+        assert np.array_equal(free_body_rotations(quats), want)
+        scipy_differs += not np.array_equal(Rotation.from_quat(quats[:, [1, 2, 3, 0]]).as_matrix(), want)
+    assert scipy_differs > 0
