@@ -90,6 +90,7 @@ def build_results(study: Study, settings: AnalysisSettings, *, suite_dir: str = 
                      "permutations": settings.n_permutations},
         "scoring": score_stats or {},
         "systems": list(study.systems),
+        "roles": analyses.system_roles(study),
         "tasks": tasks,
         "runs": runs,
         "unscored_runs": by_status,
