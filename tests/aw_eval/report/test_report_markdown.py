@@ -96,7 +96,8 @@ def test_report_opens_with_how_to_read_it(small):
     assert heads[0] == "How to read this"
     how = _section(md, "How to read this")
     lines = how.strip().splitlines()
-    assert lines[0].startswith("- **Headline: Overall SR**") and "heuristic 0.00%" in lines[0] and "mine 0.00%" in lines[0]
+    assert lines[0].startswith("- **Headline: Overall SR**") and "heuristic 0.00% (95% CI [0.0, 0.0]; PA 50.00%)" in lines[0]
+    assert "mine 0.00%" in lines[0]
     assert "oracle" not in lines[0] and "idle" not in lines[0]  # the headline is about real systems only
     for metric in ("**PA**", "**SR**", "**SR^a**", "**SCD**"):
         assert sum(line.startswith(f"- {metric}") for line in lines) == 1, metric
@@ -146,12 +147,17 @@ def test_table1_caption_is_short_and_says_only_what_is_missing(small):
     doc, md = small
     caption = _section(md, "Table 1: benchmark results").strip().split("\n\n")[-1]
     assert len(caption.split()) <= 45
-    assert "tokens: not recorded; cost: not recorded." in caption
+    assert caption.endswith("Bold: best among real systems. Not recorded: tokens, cost.")
     full = _study(1, {"a": ("heuristic", GOOD, 1.0, 1)})
     for r in full.runs.values():
         r.info.tokens, r.info.cost_usd = TokenUsage(total=10), 0.5
     caption = _section(render_markdown(build_results(full, FAST)), "Table 1: benchmark results").strip().split("\n\n")[-1]
-    assert "records" not in caption and "Bold: best among real systems." in caption
+    assert caption.endswith("Bold: best among real systems.")
+    some = _study(1, {"a": ("heuristic", GOOD, 1.0, 1), "b": ("heuristic", GOOD, 1.0, 1)})
+    for (s, t), r in some.runs.items():
+        r.info.cost_usd = 0.5 if s == "a" or t.startswith("partnet") else None
+    caption = _section(render_markdown(build_results(some, FAST)), "Table 1: benchmark results").strip().split("\n\n")[-1]
+    assert caption.endswith("Not recorded: tokens. Means over fewer runs: cost (b 2/5).")
 
 
 def test_counts_are_plural_only_when_more_than_one():
