@@ -156,13 +156,14 @@ class Picture:
     label: str
     src: str | None
     numbers: str
+    target: bool = False
 
 
 def _final_pictures(scene: TaskScene | None, views: dict[str, RunView], study: TaskRuns, task_id: str, camera,
                     folder: Path, rel: str) -> list[Picture]:
     out = []
     if scene is not None:
-        out.append(Picture("Target", rel + scene.render(scene.target_poses, camera, CARD_SIZE, folder), ""))
+        out.append(Picture("Target", rel + scene.render(scene.target_poses, camera, CARD_SIZE, folder), "", True))
     for s in study.systems:
         r = study.score(s, task_id)
         v = views.get(s)
@@ -179,7 +180,7 @@ def _finals(pictures: list[Picture], views: dict[str, RunView]) -> str:
     figs = []
     for p in pictures:
         if p.src is not None:
-            pic = _img(p.src, f"{p.label} final state" if p.label != "Target" else "target", CARD_SIZE)
+            pic = _img(p.src, "target" if p.target else f"{p.label} final state", CARD_SIZE)
         else:
             pic = (f'<div class="nopic" style="width:{CARD_SIZE[0]}px;height:{CARD_SIZE[1]}px">'
                    f"{html.escape(p.numbers)}</div>")
@@ -208,7 +209,7 @@ def registration_hint(scene: TaskScene, view: RunView, threshold: float) -> str:
     more = f" and {len(away) - 4} more" if len(away) > 4 else ""
     return (f"{view.system}: {int(placed.sum())} of {len(placed)} parts lie at their targets as placed, yet PA is "
             f"{_pa(r.pa)}. The scorer registers the whole assembly with ONE rigid transform before it compares "
-            f"parts, so the {'part' if len(away) == 1 else 'parts'} left away ({', '.join(named)}{more}) "
+            f"parts, so the {'part' if len(away) == 1 else 'parts'} left away, {', '.join(named)}{more}, "
             f"{'pulls' if len(away) == 1 else 'pull'} that transform off the parts in place.")
 
 

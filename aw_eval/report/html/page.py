@@ -107,12 +107,13 @@ GLANCE_TITLE = "At a glance"
 
 
 def _glance(doc: dict[str, Any], systems: list[str], pictures: dict[str, list[Picture]]) -> str:
-    """The first task of each source (at most :data:`GLANCE_TASKS`): the target beside every
-    system's final state, small, linking to the task's card; empty when no card has pictures."""
+    """The first task of each source with a picture of a run (at most :data:`GLANCE_TASKS`): the
+    target beside every system's final state, small, linking to the task's card; empty when no
+    card has pictures of runs."""
     picked, sources = [], set()
     for t in doc["tasks"]:
         pics = pictures.get(t["task_id"]) or []
-        if t["variant"] == "original" and t["source"] not in sources and any(p.src for p in pics):
+        if t["variant"] == "original" and t["source"] not in sources and any(p.src and not p.target for p in pics):
             sources.add(t["source"])
             picked.append((t, pics))
     if not picked:

@@ -235,12 +235,12 @@ def test_page_reads_top_down_in_a_1400_px_window(report, browser):
     assert heads[:4] == ["how-to-read-this", "runs", "table-1-benchmark-results", "at-a-glance"]
     first_img = page.evaluate("""() => { const img = document.querySelector('main img');
         const before = Array.from(document.querySelectorAll('main table')).filter(t =>
-            t.compareDocumentPosition(img) & Node.DOCUMENT_POSITION_FOLLOWING);
+            !t.contains(img) && (t.compareDocumentPosition(img) & Node.DOCUMENT_POSITION_FOLLOWING));
         return {top: img.getBoundingClientRect().top + window.scrollY, tablesBefore: before.length,
                 rowsBefore: before.map(t => t.rows.length)}; }""")
     assert first_img["tablesBefore"] == 1 and first_img["top"] < 2000, first_img  # only Table 1 comes before
-    glance = page.locator("table.glance img")
-    assert glance.count() == 2 * 6  # two sources with runs: target + 5 systems each
+    # the first task of each source with runs: PartNet's (target + 5 systems), Fantastic Breaks' (target + alpha)
+    assert page.locator("table.glance tbody tr").count() == 2 and page.locator("table.glance img").count() == 6 + 2
     # the appendix is folded; a link from the contents opens its section
     assert page.eval_on_selector("h2#table-a-11-geometric-failure-classes", "h => !h.closest('details').open")
     page.click("nav a[href='#table-a-11-geometric-failure-classes']")
@@ -261,5 +261,9 @@ def test_cards_say_why_parts_in_place_score_zero(report):
     page = (report["out"] / "report.html").read_text()
     card = page.split(f'id="task-{TASK}"')[1].split('<section class="card"')[0]
     hints = re.findall(r'<p class="hint">(.*?)</p>', card)
-    assert len(hints) == 1 and hints[0].startswith("gamma: 2 of 3 parts lie at their targets as placed, yet PA is 0.0%")
-    assert "(p03) pulls that transform off the parts in place" in hints[0]
+    # beta placed one part of three, gamma two; alpha and the oracles' PA counts what they placed
+    assert [h.split(":")[0] for h in hints] == ["beta", "gamma"]
+    assert hints[0].startswith("beta: 1 of 3 parts lie at their targets as placed, yet PA is 0.0%")
+    assert "the parts left away, p02, p03, pull that transform" in hints[0]
+    assert hints[1].startswith("gamma: 2 of 3 parts lie at their targets as placed, yet PA is 0.0%")
+    assert "the part left away, p03, pulls that transform off the parts in place" in hints[1]

@@ -169,7 +169,7 @@ def test_a_card_explains_parts_in_place_that_the_global_registration_does_not_co
     view = RunView("agent", score, np.zeros((0, 2, 7)), final, recorded_final=final)
     hint = registration_hint(s, view, 0.01)
     assert hint.startswith("agent: 1 of 2 parts lie at their targets as placed, yet PA is 0.0%.")
-    assert "ONE rigid transform" in hint and "the part left away (p02 (never moved)) pulls" in hint
+    assert "ONE rigid transform" in hint and "the part left away, p02 (never moved), pulls" in hint
     score.pa = 0.5  # PA counts what is in place: nothing to explain
     assert registration_hint(s, view, 0.01) == ""
     score.pa = 0.0
