@@ -63,6 +63,9 @@ def small():
 
 
 def test_roles_come_from_the_run_json_agent_else_from_baseline_names():
+    from aw.agents import AGENTS, NEEDS_TARGETS, ROLES
+
+    assert set(ROLES) == set(AGENTS) and all(ROLES[a] == "calibration" for a in NEEDS_TARGETS)
     roles = system_roles(_study(1))
     assert roles == {"heuristic": "system", "mine": "system", "oracle-noise0.5": "calibration", "oracle": "calibration",
                      "idle": "floor"}
