@@ -113,7 +113,8 @@ def _how_to_read(doc: dict[str, Any]) -> str:
         kinds = ", ".join(f"{len(v)} {k}" for k, v in sorted(doc["unscored_runs"].items()))
         warn.append(f"{_plural(n_unscored, 'run')} not scored ({kinds}) count PA = SR = 0: see Runs.")
     if doc.get("unknown_runs"):
-        warn.append(f"{_plural(len(doc['unknown_runs']), 'run')} for tasks not in the suite were ignored: see Runs.")
+        n = len(doc["unknown_runs"])
+        warn.append(f"{_plural(n, 'run')} for tasks not in the suite {'was' if n == 1 else 'were'} ignored: see Runs.")
     for s in _order(doc):
         o = q.get(s, {}).get("overall")
         if o and _role(doc, s) != "calibration" and o["sra"] - o["sr"] >= 25:

@@ -245,6 +245,9 @@ def test_page_reads_top_down_in_a_1400_px_window(report, browser):
     assert page.eval_on_selector("h2#table-a-11-geometric-failure-classes", "h => !h.closest('details').open")
     page.click("nav a[href='#table-a-11-geometric-failure-classes']")
     assert page.eval_on_selector("h2#table-a-11-geometric-failure-classes", "h => h.closest('details').open")
+    page.eval_on_selector("h2#table-a-11-geometric-failure-classes", "h => { h.closest('details').open = false; }")
+    page.click("nav a[href='#table-a-11-geometric-failure-classes']")  # the same link again
+    page.wait_for_function("() => document.getElementById('table-a-11-geometric-failure-classes').closest('details').open")
     # nothing is wider than the window: wide tables scroll inside their box
     page.evaluate("() => document.querySelectorAll('details').forEach(d => { d.open = true; })")
     widths = page.evaluate("""() => ({page: document.documentElement.scrollWidth, win: window.innerWidth,

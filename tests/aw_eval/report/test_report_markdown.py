@@ -168,3 +168,15 @@ def test_counts_are_plural_only_when_more_than_one():
                  blocks={("ikea_manual", "manual")})
     md = render_markdown(build_results(one, FAST))
     assert "1 task: the tests have no power: with 1 object the smallest" in md
+
+
+def test_unscored_and_unknown_runs_are_warned_about_up_front():
+    study = _study(1, {"a": ("heuristic", GOOD, 1.0, 1)})
+    for tid in ("partnet-o00-none", "ikea_manual-o00-manual"):
+        rec = study.runs[("a", tid)]
+        rec.score = run_from_errors("a", tid, [], status="missing")
+    doc = build_results(study, FAST)
+    doc["unknown_runs"] = [{"system": "a", "task_id": "elsewhere-1"}]
+    how = _section(render_markdown(doc), "How to read this")
+    assert "- **Warning:** 2 runs not scored (2 missing) count PA = SR = 0: see Runs." in how
+    assert "- **Warning:** 1 run for tasks not in the suite was ignored: see Runs." in how

@@ -58,5 +58,8 @@
     if (fold) fold.open = true;
   }
   window.addEventListener("hashchange", openTarget);
+  document.querySelectorAll('a[href^="#"]').forEach(function (a) {
+    a.addEventListener("click", function () { setTimeout(openTarget); }); // the same link again: no hashchange
+  });
   openTarget();
 })();
