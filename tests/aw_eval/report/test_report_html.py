@@ -243,11 +243,12 @@ def test_page_reads_top_down_in_a_1400_px_window(report, browser):
     assert page.locator("table.glance tbody tr").count() == 2 and page.locator("table.glance img").count() == 6 + 2
     # the appendix is folded; a link from the contents opens its section
     assert page.eval_on_selector("h2#table-a-11-geometric-failure-classes", "h => !h.closest('details').open")
+    opened = "() => document.getElementById('table-a-11-geometric-failure-classes').closest('details').open"
     page.click("nav a[href='#table-a-11-geometric-failure-classes']")
-    assert page.eval_on_selector("h2#table-a-11-geometric-failure-classes", "h => h.closest('details').open")
+    page.wait_for_function(opened)
     page.eval_on_selector("h2#table-a-11-geometric-failure-classes", "h => { h.closest('details').open = false; }")
-    page.click("nav a[href='#table-a-11-geometric-failure-classes']")  # the same link again
-    page.wait_for_function("() => document.getElementById('table-a-11-geometric-failure-classes').closest('details').open")
+    page.click("nav a[href='#table-a-11-geometric-failure-classes']")  # the same link again: no hashchange
+    page.wait_for_function(opened)
     # nothing is wider than the window: wide tables scroll inside their box
     page.evaluate("() => document.querySelectorAll('details').forEach(d => { d.open = true; })")
     widths = page.evaluate("""() => ({page: document.documentElement.scrollWidth, win: window.innerWidth,
