@@ -23,5 +23,9 @@ AGENT_OPTIONS: dict[str, frozenset[str]] = {
 }
 # Agents that must be handed the hidden targets file (never a benchmark result).
 NEEDS_TARGETS = frozenset({"oracle"})
+# What each agent's runs are in a study's tables: "calibration" (reads the hidden targets: an
+# upper bound of the scorer, never a result), "floor" (makes no attempt to assemble: idle never
+# moves, random moves blindly) or "system" (a real attempt through the tools only).
+ROLES: dict[str, str] = {"idle": "floor", "random": "floor", "oracle": "calibration", "heuristic": "system"}
 
-__all__ = ["AGENTS", "AGENT_OPTIONS", "NEEDS_TARGETS", "AgentContext", "AgentOutcome", "AgentFn"]
+__all__ = ["AGENTS", "AGENT_OPTIONS", "NEEDS_TARGETS", "ROLES", "AgentContext", "AgentOutcome", "AgentFn"]

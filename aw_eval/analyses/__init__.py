@@ -15,6 +15,7 @@ part_count         part-count bands
 categories         results per category
 completion         declared completion vs geometric success
 robustness         layout / distractor / missing-part variants paired with originals
+roles              which systems are real, calibration (read the targets) or floor (no attempt)
 =================  ===========================================================================
 """
 
@@ -27,6 +28,7 @@ from aw_eval.analyses.failures import failure_analysis
 from aw_eval.analyses.part_count import part_count_bands
 from aw_eval.analyses.part_scale import part_scale
 from aw_eval.analyses.robustness import robustness
+from aw_eval.analyses.roles import system_roles
 from aw_eval.analyses.scd_tail import scd_tail
 from aw_eval.analyses.thresholds import threshold_sweep
 from aw_eval.analyses.uncertainty import system_order, uncertainty
@@ -46,6 +48,7 @@ __all__ = [
     "robustness",
     "scd_tail",
     "system_order",
+    "system_roles",
     "threshold_sweep",
     "uncertainty",
 ]

@@ -17,6 +17,7 @@ from aw_eval.stats import (
     pairwise_tests,
     percentile_interval,
     reference_effects,
+    smallest_pvalue,
 )
 from aw_eval.study.table import Study
 
@@ -63,6 +64,10 @@ def uncertainty(study: Study, *, n_draws: int = DEFAULT_DRAWS, n_permutations: i
         tests = pairwise_tests(d, metrics, w, pairs=pairs, n_permutations=n_permutations, seed=seed + 1, level=level)
         by = {(t.a, t.b, t.metric): t for t in tests}
         out["family_size"] = len(tests)
+        # what the study can show at all: the smallest p_Holm any data could give (the best p times
+        # the family size); above 1 - level, no difference can be declared however large
+        out["n_objects"] = len(d.objects)
+        out["min_p_holm"] = min(1.0, len(tests) * smallest_pvalue(len(d.objects), n_permutations))
         for a, b in pairs:
             row: dict[str, Any] = {"a": study.systems[a], "b": study.systems[b]}
             for m in TEST_METRICS:

@@ -11,18 +11,136 @@ from typing import Any
 
 from aw_eval.analyses.failures import CLASSES
 from aw_eval.report.fmt import DASH, bold_best, ci, fixed, md_table, paper, pval, signed, threshold_label
+from aw_eval.report.results import protocol_of
 
-__all__ = ["render_markdown"]
+__all__ = ["render_markdown", "system_label", "SUMMARY_SECTIONS"]
+
+HOW_TO_READ = "How to read this"
+TABLE1 = "Table 1: benchmark results"
+OVERVIEW = "Table A-3: benchmark quality with bootstrap intervals"
+PAIRS = "Table A-4: paired system differences"
+# The sections a reader needs first; report.html shows them open and folds the rest.
+SUMMARY_SECTIONS = (HOW_TO_READ, TABLE1, OVERVIEW, PAIRS)
 
 SOURCE_NAMES = {"partnet": "PartNet", "ikea_manual": "IKEA-Manual", "assemblybench": "AssemblyBench",
                 "fantastic_breaks": "Fantastic Breaks"}
 
 
+ROLE_MARKS = {"calibration": " (calibration)", "floor": " (floor)"}
+
+
+def _role(doc: dict[str, Any], system: str) -> str:
+    return doc.get("roles", {}).get(system, "system")
+
+
+def system_label(doc: dict[str, Any], system: str) -> str:
+    """A system's name as the tables print it: calibration and floor systems marked."""
+    return system + ROLE_MARKS.get(_role(doc, system), "")
+
+
 def _order(doc: dict[str, Any]) -> list[str]:
-    return doc["uncertainty"].get("order") or list(doc["systems"])
+    """Row order: real systems, then floors, then calibration, each by Overall SR then PA."""
+    order = doc["uncertainty"].get("order") or list(doc["systems"])
+    rank = {"system": 0, "floor": 1, "calibration": 2}
+    return sorted(order, key=lambda s: rank.get(_role(doc, s), 0))
+
+
+def _real(doc: dict[str, Any]) -> list[str]:
+    return [s for s in _order(doc) if _role(doc, s) == "system"]
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n:,} {word}" + ("" if n == 1 else "s")
 
 
 NO_ORIGINALS = "The suite has no original (non-variant) tasks: no benchmark aggregate."
+
+
+def _no_power(doc: dict[str, Any]) -> str | None:
+    """Why the paired tests cannot show anything on this study, or None when they can."""
+    u = doc["uncertainty"]
+    floor, alpha = u.get("min_p_holm"), 1 - u.get("level", 0.95)
+    if floor is None or floor <= alpha:
+        return None
+    return (f"with {_plural(u['n_objects'], 'object')} the smallest p_Holm any result could give is {pval(floor)} "
+            f"({u['family_size']} comparisons), so no difference can reach p < {alpha:g}: p_Holm here says the study "
+            "is too small, not that the systems are alike")
+
+
+def _how_to_read(doc: dict[str, Any]) -> str:
+    """The report's first section: the headline, the four metrics in a line each, which rows are
+    not results, and what makes this study's numbers weak."""
+    p = protocol_of(doc)
+    over, q = doc["uncertainty"].get("overview") or {}, doc["quality"]["systems"]
+    real = [s for s in _real(doc) if s in over]
+    if real:
+        head = "; ".join(f"{s} {paper(over[s]['sr']['value'])}% (95% CI {ci(over[s]['sr']['ci'])}; PA "
+                         f"{paper(over[s]['pa']['value'])}%)" for s in real)
+        headline = f"- **Headline: Overall SR** (Table 1; sources weighted equally): {head}."
+    elif over:
+        headline = "- **Headline: none.** Every system is calibration or floor: the study measures the scorer, not an agent."
+    else:
+        headline = f"- **Headline: none.** {NO_ORIGINALS}"
+    lines = [
+        headline,
+        f"- **PA** (part accuracy, %): parts whose Chamfer distance to their matched target part is at most "
+        f"{p.threshold:g}, after ONE rigid registration of the whole assembly onto the target (one misplaced part "
+        "can pull every other part off).",
+        "- **SR** (success rate, %): tasks with every part correct (PA 100%).",
+        f"- **SR^a** (%): tasks whose whole assembly is within SCD {p.sra_threshold:g} of the target: a looser, "
+        "shape-level success that can hold while PA is low (parts that look alike swapped, small offsets everywhere).",
+        "- **SCD** (x1000, lower is better): Chamfer distance of the whole registered assembly to the target, "
+        "averaged over scored runs only.",
+    ]
+    roles = doc.get("roles", {})
+    cal = [s for s in doc["systems"] if roles.get(s) == "calibration"]
+    flo = [s for s in doc["systems"] if roles.get(s) == "floor"]
+    if cal:
+        lines.append(f"- **Calibration rows** ({', '.join(cal)}): read the hidden targets, so they show what the scorer "
+                     "gives a near-perfect assembly; not results, never bolded.")
+    if flo:
+        lines.append(f"- **Floor rows** ({', '.join(flo)}): make no real attempt (idle never moves, random moves "
+                     "blindly); the level any agent should beat; never bolded.")
+    lines.append("- **Bold** marks the best value among real systems only (the lowest resource use only among those "
+                 "with PA > 0), and only where at least two differ.")
+    warn = []
+    n_orig = doc["suite"]["n_original"]
+    why = _no_power(doc)
+    if why:
+        warn.append(f"{_plural(n_orig, 'task')}: the tests have no power: {why}.")
+    n_unscored = sum(len(v) for v in doc["unscored_runs"].values())
+    if n_unscored:
+        kinds = ", ".join(f"{len(v)} {k}" for k, v in sorted(doc["unscored_runs"].items()))
+        warn.append(f"{_plural(n_unscored, 'run')} not scored ({kinds}) count PA = SR = 0: see Runs.")
+    if doc.get("unknown_runs"):
+        n = len(doc["unknown_runs"])
+        warn.append(f"{_plural(n, 'run')} for tasks not in the suite {'was' if n == 1 else 'were'} ignored: see Runs.")
+    for s in _order(doc):
+        o = q.get(s, {}).get("overall")
+        if o and _role(doc, s) != "calibration" and o["sra"] - o["sr"] >= 25:
+            warn.append(f"{system_label(doc, s)}: SR^a {paper(o['sra'])}% but SR {paper(o['sr'])}% and PA {paper(o['pa'])}%: "
+                        "its assemblies are close in shape, not part by part.")
+    if doc["settings"].get("protocol_overrides"):
+        warn.append("Scored with protocol overrides: not comparable with the paper's numbers.")
+    lines += [f"- **Warning:** {w}" for w in warn]
+    return "\n".join(lines)
+
+
+def _resource_note(doc: dict[str, Any], systems: list[str]) -> str:
+    """Which resource means rest on fewer runs than tasks (empty when none)."""
+    res, q = doc["resources"], doc["quality"]["systems"]
+    names = {"time_min": "time", "mcp_calls": "calls", "tokens_m": "tokens", "cost_usd": "cost"}
+    none, fewer = [], []
+    for k, label in names.items():
+        if all(res[s][k]["n"] == 0 for s in systems):
+            none.append(label)
+            continue
+        short = [f"{s} {res[s][k]['n']}/{q[s]['n_tasks']}" for s in systems if res[s][k]["n"] < q[s]["n_tasks"]]
+        if short:
+            fewer.append(f"{label} ({', '.join(short)})")
+    out = ([f"Not recorded: {', '.join(none)}."] if none else []) + (
+        [f"Means over fewer runs: {'; '.join(fewer)}."] if fewer else [])
+    return " ".join(out)
 
 
 def _table1(doc: dict[str, Any]) -> str:
@@ -39,28 +157,25 @@ def _table1(doc: dict[str, Any]) -> str:
     res_keys = ("time_min", "mcp_calls", "tokens_m", "cost_usd")
     for k in res_keys:
         cols.append([res[s][k]["mean"] for s in systems])
-    # Lowest resource use is only "best" for a system that achieved something (an idle system's
-    # few calls are not an achievement).
-    achieved = [float(q["systems"][s]["overall"]["pa"] or 0) > 0 for s in systems]
+    # Only real systems compete; lowest resource use is only "best" for a system that achieved
+    # something (an idle system's few calls are not an achievement).
+    real = [_role(doc, s) == "system" for s in systems]
+    achieved = [r and float(q["systems"][s]["overall"]["pa"] or 0) > 0 for r, s in zip(real, systems)]
     text_cols = []
     for j, col in enumerate(cols):
         if j <= len(cells):
             txt = [paper(v) for v in col]
-            text_cols.append(bold_best(txt, col, higher=True))
+            text_cols.append(bold_best(txt, col, higher=True, eligible=real))
         else:
             k = res_keys[j - len(cells) - 1]
             digits = {"time_min": 2, "mcp_calls": 0, "tokens_m": 2, "cost_usd": 2}[k]
             txt = [fixed(v, digits) for v in col]
             text_cols.append(bold_best(txt, col, higher=False, eligible=achieved))
-    rows = [[s] + [tc[i] for tc in text_cols] for i, s in enumerate(systems)]
-    note = ("SR (%) per source and condition (NR: no reference, IR: assembled-object image, M: manual); Overall by "
-            "eq. 3 (PartNet conditions averaged first, sources weighted equally). Resource columns are arithmetic "
-            "per-evaluation means over available records (records: "
-            + "; ".join(f"{s}: time {res[s]['time_min']['n']}, calls {res[s]['mcp_calls']['n']}, tokens "
-                        f"{res[s]['tokens_m']['n']}, cost {res[s]['cost_usd']['n']}" for s in systems)
-            + "). Bold marks the highest SR, or the lowest resource use among systems with PA > 0, where "
-            "systems differ.")
-    return md_table(header, rows) + "\n\n" + note
+    rows = [[system_label(doc, s)] + [tc[i] for tc in text_cols] for i, s in enumerate(systems)]
+    note = ("SR (%) per source and condition (NR: no reference, IR: image, M: manual); Overall by eq. 3 (sources "
+            "weighted equally). Resources: mean per run. Bold: best among real systems.")
+    extra = _resource_note(doc, systems)
+    return md_table(header, rows) + "\n\n" + note + (f" {extra}" if extra else "")
 
 
 def _quality_full(doc: dict[str, Any]) -> str:
@@ -77,7 +192,7 @@ def _quality_full(doc: dict[str, Any]) -> str:
         o = row["overall"]
         rows.append(["**Overall**", str(row["n_tasks"]), str(row["n_scored"]), fixed(o["pa"], 2), fixed(o["sr"], 2),
                      fixed(o["sra"], 2), fixed(o["scd"], 2)])
-        out.append(f"**{s}**\n\n" + md_table(["Cell", "Tasks", "Scored", "PA (%)", "SR (%)", "SR^a (%)", "SCD (x1000)"], rows))
+        out.append(f"**{system_label(doc, s)}**\n\n" + md_table(["Cell", "Tasks", "Scored", "PA (%)", "SR (%)", "SR^a (%)", "SCD (x1000)"], rows))
     return "\n\n".join(out) + ("\n\nPA, SR and SR^a average all attempted tasks (an unscored attempt counts 0); SCD "
                               "averages scored attempts only. Overall SCD applies eq. 3 to the cell means.")
 
@@ -91,7 +206,7 @@ def _overview(doc: dict[str, Any]) -> str:
         o = u["overview"].get(s)
         if o is None:
             continue
-        rows.append([s, paper(o["sr"]["value"]), ci(o["sr"]["ci"]), paper(o["pa"]["value"]), ci(o["pa"]["ci"]),
+        rows.append([system_label(doc, s), paper(o["sr"]["value"]), ci(o["sr"]["ci"]), paper(o["pa"]["value"]), ci(o["pa"]["ci"]),
                      str(oc[s]["errors_timeouts"])])
     return (md_table(["System", "SR (%)", "95% CI", "PA (%)", "95% CI", "Errors/timeouts"], rows) +
             f"\n\nSource-weighted quality with pointwise percentile bootstrap intervals ({u['n_draws']:,} draws, seed "
@@ -105,12 +220,13 @@ def _pairs(doc: dict[str, Any]) -> str:
         return NO_ORIGINALS
     if not u["pairs"]:
         return "Only one system: no pairwise comparisons."
-    rows = [[p["a"], p["b"], f"{signed(p['sr']['diff'])} {ci(p['sr']['ci'])}", pval(p["sr"]["p_holm"]),
+    rows = [[system_label(doc, p["a"]), system_label(doc, p["b"]), f"{signed(p['sr']['diff'])} {ci(p['sr']['ci'])}", pval(p["sr"]["p_holm"]),
              f"{signed(p['pa']['diff'])} {ci(p['pa']['ci'])}", pval(p["pa"]["p_holm"])] for p in u["pairs"]]
     return (md_table(["A", "B", "ΔSR (pp) [95% CI]", "p_Holm", "ΔPA (pp) [95% CI]", "p_Holm"], rows, "llrrrr") +
             f"\n\nA minus B in percentage points. Two-sided randomization tests ({u['n_permutations']:,} relabellings, "
             f"add-one correction, labels exchanged within objects), Holm correction over all {u.get('family_size', 0)} "
-            "system-pair/metric comparisons; intervals are pointwise.")
+            "system-pair/metric comparisons; intervals are pointwise." +
+            (f" **Too few objects for these tests: {why}.**" if (why := _no_power(doc)) else ""))
 
 
 def _reference(doc: dict[str, Any]) -> str:
@@ -119,7 +235,7 @@ def _reference(doc: dict[str, Any]) -> str:
         return "No source has paired no-reference and image conditions: no reference effects."
     rows = []
     for r in ref:
-        rows.append([r["system"], SOURCE_NAMES.get(r["source"], r["source"]), str(r["n_objects"]), signed(r["pa"]["diff"]),
+        rows.append([system_label(doc, r["system"]), SOURCE_NAMES.get(r["source"], r["source"]), str(r["n_objects"]), signed(r["pa"]["diff"]),
                      ci(r["pa"]["ci"]), f"{r['pa']['up']}/{r['pa']['down']}", signed(r["sr"]["diff"]), ci(r["sr"]["ci"]),
                      f"{r['sr']['up']}/{r['sr']['down']}"])
     return (md_table(["System", "Source", "Objects", "ΔPA (pp)", "95% CI", "PA up/down", "ΔSR (pp)", "95% CI", "SR up/down"],
@@ -152,7 +268,7 @@ def _part_count(doc: dict[str, Any]) -> str:
                 v = r["bands"].get(b)
                 cells.append(DASH if v is None else f"{v['n']}: {fixed(v['pa'], 2)}/{fixed(v['sr'], 2)}")
             rows.append([r["label"]] + cells)
-        out.append(f"**{s}**\n\n" + md_table(["Condition"] + [f"{b} parts (n: PA/SR %)" for b in used], rows))
+        out.append(f"**{system_label(doc, s)}**\n\n" + md_table(["Condition"] + [f"{b} parts (n: PA/SR %)" for b in used], rows))
     return "\n\n".join(out) + "\n\nEach cell: number of tasks and mean PA/SR in percent."
 
 
@@ -162,7 +278,7 @@ def _scd_tail(doc: dict[str, Any]) -> str:
         rows = [[r["label"], str(r["n"]), fixed(r["mean"], 2), fixed(r["median"], 2), str(r["k"]), fixed(r["contribution"], 2),
                  fixed(r["remaining_mean"], 2), str(r["tail_never_moved"])] for r in doc["scd_tail"]["systems"].get(s, [])]
         if rows:
-            out.append(f"**{s}**\n\n" + md_table(["Setting", "N", "Mean SCD (x1000)", "Median SCD (x1000)", "k", "Contribution (%)",
+            out.append(f"**{system_label(doc, s)}**\n\n" + md_table(["Setting", "N", "Mean SCD (x1000)", "Median SCD (x1000)", "k", "Contribution (%)",
                                                  "Remaining mean SCD (x1000)",
                                                  "Tail never moved"], rows))
     if not out:
@@ -176,7 +292,7 @@ def _categories(doc: dict[str, Any]) -> str:
     for s in _order(doc):
         rows = [[r["label"], r["category"], str(r["n"]), fixed(r["scd"], 2), fixed(r["pa"], 2), fixed(r["sr"], 2)]
                 for r in doc["categories"]["systems"].get(s, [])]
-        out.append(f"**{s}**\n\n" + md_table(["Cell", "Category", "N", "SCD (x1000)", "PA (%)", "SR (%)"], rows, "llrrrr"))
+        out.append(f"**{system_label(doc, s)}**\n\n" + md_table(["Cell", "Category", "N", "SCD (x1000)", "PA (%)", "SR (%)"], rows, "llrrrr"))
     return "\n\n".join(out)
 
 
@@ -191,7 +307,7 @@ def _thresholds(doc: dict[str, Any]) -> str:
         v = th["systems"].get(s)
         if v is None:
             continue
-        rows.append([s] + [paper(v["pa"][i]) for i in show] + [paper(v["sr"][i]) for i in show])
+        rows.append([system_label(doc, s)] + [paper(v["pa"][i]) for i in show] + [paper(v["sr"][i]) for i in show])
     return md_table(header, rows) + ("\n\nPA/SR (%, eq. 3) at correctness thresholds, with the saved registration and "
                                     "Hungarian correspondence fixed; the full sweep is in scores.json and thresholds.png.")
 
@@ -202,7 +318,7 @@ def _stages(doc: dict[str, Any]) -> str:
         st = doc["dynamics"]["systems"].get(s, {}).get("stages")
         if not st:
             continue
-        rows.append([s, fixed(st["translation_early"], 3), fixed(st["translation_late"], 3), fixed(st["rotation_early"], 1),
+        rows.append([system_label(doc, s), fixed(st["translation_early"], 3), fixed(st["translation_late"], 3), fixed(st["rotation_early"], 1),
                      fixed(st["rotation_late"], 1), fixed(st["revisit"], 1)])
     return (md_table(["System", "Trans. early (diag.)", "Late (diag.)", "Rot. early (deg)", "Late (deg)", "Revisit (%)"], rows) +
             "\n\nSource-weighted medians of per-evaluation medians in the first and last third of the interaction "
@@ -225,7 +341,7 @@ def _activity(doc: dict[str, Any]) -> str:
             rows.append([f"{b * 10}–{(b + 1) * 10}%", str(v["active"][b])] +
                         [DASH if x is None else fixed(100 * x, 1) for x in sh] +
                         [fixed(mg["translation"][b], 3), fixed(mg["rotation_deg"][b], 1)])
-        out.append(f"**{s}**\n\n" + md_table(["Bin", "Active", "Inspect (%)", "Observe (%)", "Manipulate (%)", "Other (%)",
+        out.append(f"**{system_label(doc, s)}**\n\n" + md_table(["Bin", "Active", "Inspect (%)", "Observe (%)", "Manipulate (%)", "Other (%)",
                                              "Translation", "Rotation (deg)"], rows))
     return "\n\n".join(out) + ("\n\nMean call shares within active evaluation-bins (ten equal-width bins from the first to "
                               "the last call), averaged with benchmark weights; magnitudes are weighted medians of "
@@ -240,14 +356,14 @@ def _curves(doc: dict[str, Any]) -> str:
         v = cv["systems"].get(s)
         if v is None:
             continue
-        rows.append([s] + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["normalized"], v["sr"]["normalized"])])
+        rows.append([system_label(doc, s)] + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["normalized"], v["sr"]["normalized"])])
     t1 = md_table(["System"] + [f"PA/SR (%) at {p:g}" for p in pts], rows)
     rows = []
     for s in _order(doc):
         v = cv["systems"].get(s)
         if v is None:
             continue
-        rows.append([s] + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["budget"], v["sr"]["budget"])] +
+        rows.append([system_label(doc, s)] + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["budget"], v["sr"]["budget"])] +
                     [f"{paper(v['pa']['final'])}/{paper(v['sr']['final'])}", str(v["edits_after_last_budget"])])
     t2 = md_table(["System"] + [f"PA/SR (%) at {m:g} min" for m in cv["budget_minutes"]] + ["Final PA/SR (%)",
                   "Edits after last budget"], rows)
@@ -268,7 +384,7 @@ def _curves(doc: dict[str, Any]) -> str:
 
 def _completion(doc: dict[str, Any]) -> str:
     c = doc["completion"]
-    rows = [[s, str(v["declared"]), str(v["declared_successful"]), str(v["not_declared"]), str(v["no_report"]),
+    rows = [[system_label(doc, s), str(v["declared"]), str(v["declared_successful"]), str(v["not_declared"]), str(v["no_report"]),
              fixed(v["median_incorrect_fraction_of_failed_claims"])] for s, v in c.items()]
     if all(v["declared"] + v["not_declared"] == 0 for v in c.values()):
         return "No run.json records declared completion: nothing to compare."
@@ -284,7 +400,7 @@ def _failures(doc: dict[str, Any]) -> str:
         if v is None:
             continue
         rng = v["grid_range"]
-        rows.append([s, str(v["failed_tasks"]), str(v["wrong_parts"]), fixed(v["translation_part_pooled"]),
+        rows.append([system_label(doc, s), str(v["failed_tasks"]), str(v["wrong_parts"]), fixed(v["translation_part_pooled"]),
                      fixed(v["translation_task_pooled"]), DASH if rng is None else f"{fixed(rng[0])}–{fixed(rng[1])}"])
     t1 = md_table(["System", "Failed tasks", "Wrong parts", "Part pooled (%)", "Task pooled (%)", "Sensitivity range (%)"], rows)
     rows = []
@@ -292,7 +408,7 @@ def _failures(doc: dict[str, Any]) -> str:
         v = f["systems"].get(s)
         if v is None:
             continue
-        rows.append([s] + [str(v["class_counts"][c]) for c in CLASSES])
+        rows.append([system_label(doc, s)] + [str(v["class_counts"][c]) for c in CLASSES])
     t2 = md_table(["System"] + [c.replace("_", " ") for c in CLASSES], rows)
     return (t1 + "\n\nTranslation-dominated fractions of incorrect parts (part pooling weights incorrect parts equally; "
             "task pooling averages within failed tasks first). The sensitivity range spans offset cutoffs "
@@ -318,7 +434,7 @@ def _robustness(doc: dict[str, Any]) -> str:
             continue
         rows = [[r["label"], r["object_id"], one(r["original"]),
                  cell(r["layout"]), cell(r["distractor"]), cell(r["missing"])] for r in v["rows"]]
-        out.append(f"**{s}**\n\n" + md_table(["Source", "Object", "Original", "Layouts", "Distractor", "Missing"], rows, "llrrrr"))
+        out.append(f"**{system_label(doc, s)}**\n\n" + md_table(["Source", "Object", "Original", "Layouts", "Distractor", "Missing"], rows, "llrrrr"))
     return "\n\n".join(out) + ("\n\nEach cell: PA (%) / SR (0 or 1); the missing-part column reports retained-part PA / "
                               "retained-part completeness. A dash marks an untested condition; a status in parentheses a run "
                               "that was not scored (counted 0 in the aggregates).")
@@ -357,11 +473,12 @@ def render_markdown(doc: dict[str, Any], plots: dict[str, str] | None = None) ->
          if st.get("protocol_overrides") else ""),
         *([f"**PARTIAL STUDY: {sum(len(doc['unscored_runs'].get(k, [])) for k in ('error', 'task_error'))} runs could "
            "not be scored (listed under Runs); the tables count them 0.**"] if doc.get("partial") else []),
+        f"## {HOW_TO_READ}", _how_to_read(doc),
         "## Runs", _runs(doc),
-        "## Table 1: benchmark results", _table1(doc),
+        f"## {TABLE1}", _table1(doc),
         "## Quality per cell (PA, SR, SR^a, SCD)", _quality_full(doc),
-        "## Table A-3: benchmark quality with bootstrap intervals", _overview(doc),
-        "## Table A-4: paired system differences", _pairs(doc),
+        f"## {OVERVIEW}", _overview(doc),
+        f"## {PAIRS}", _pairs(doc),
         "## Table A-5: paired reference effects", _reference(doc),
     ]
     if "reference" in plots:

@@ -11,9 +11,10 @@ import numpy as np
 
 from aw_eval import analyses
 from aw_eval.analyses.failures import CLASSES, classify_parts
+from aw_eval.settings import ProtocolSettings
 from aw_eval.study.table import Study
 
-__all__ = ["SCHEMA", "SCHEMA_VERSION", "AnalysisSettings", "build_results"]
+__all__ = ["SCHEMA", "SCHEMA_VERSION", "AnalysisSettings", "build_results", "protocol_of"]
 
 SCHEMA = "assemblyworld.scores"
 SCHEMA_VERSION = 1
@@ -60,6 +61,16 @@ def _run_entry(study: Study, system: str, task_id: str) -> dict[str, Any]:
     return entry
 
 
+def protocol_of(doc: dict[str, Any]) -> ProtocolSettings:
+    """The protocol a ``scores.json`` document was scored with: the paper's, with its overrides."""
+    over = dict(doc["settings"].get("protocol_overrides") or {})
+    known = {k: v for k, v in over.items() if k in ProtocolSettings.__dataclass_fields__}
+    try:
+        return ProtocolSettings(**known)
+    except (TypeError, ValueError):
+        return ProtocolSettings()
+
+
 PARTIAL_STATUSES = ("error", "task_error")
 
 
@@ -90,6 +101,7 @@ def build_results(study: Study, settings: AnalysisSettings, *, suite_dir: str = 
                      "permutations": settings.n_permutations},
         "scoring": score_stats or {},
         "systems": list(study.systems),
+        "roles": analyses.system_roles(study),
         "tasks": tasks,
         "runs": runs,
         "unscored_runs": by_status,

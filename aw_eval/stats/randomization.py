@@ -16,7 +16,7 @@ import numpy as np
 
 from aw_eval.stats.design import Design
 
-__all__ = ["object_contributions", "randomization_pvalues", "holm", "PairTest", "pairwise_tests"]
+__all__ = ["object_contributions", "randomization_pvalues", "smallest_pvalue", "holm", "PairTest", "pairwise_tests"]
 
 DEFAULT_PERMUTATIONS = 100_000
 # |T*| >= |T_obs| is decided up to rounding: sums of the same terms in another order may differ
@@ -55,6 +55,15 @@ def randomization_pvalues(contrib: np.ndarray, *, n_permutations: int = DEFAULT_
         hits += (np.abs(signs @ contrib) >= threshold).sum(axis=0)
         done += m
     return (1.0 + hits) / (1.0 + n_permutations)
+
+
+def smallest_pvalue(n_objects: int, n_permutations: int | None = None) -> float:
+    """The smallest two-sided p-value a sign-flip test on ``n_objects`` objects can give, whatever
+    the data: at best only the observed signs and their mirror reach ``|T_obs|``, one relabelling
+    in ``2 ** (n_objects - 1)`` (exactly; in expectation for drawn relabellings), and the add-one
+    correction keeps ``n_permutations`` drawn relabellings at or above ``1 / (1 + n_permutations)``."""
+    p = 1.0 if n_objects < 1 else 2.0 ** (1 - n_objects)
+    return p if n_permutations is None else max(p, 1.0 / (1.0 + n_permutations))
 
 
 def holm(pvalues) -> np.ndarray:

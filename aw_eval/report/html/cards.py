@@ -15,14 +15,15 @@ import orjson
 from aw.formats import FormatError, read_final, read_trajectory
 from aw_eval.analyses.curves import NORMALIZED_POINTS, normalized_states
 from aw_eval.report.fmt import DASH, fixed
-from aw_eval.report.html.markup import slug
+from aw_eval.report.html.markup import scroll_box, slug
 from aw_eval.report.html.scenes import TaskScene, aligned_poses
 from aw_eval.report.html.svg import Series, step_chart
+from aw_eval.settings import ProtocolSettings
 from aw_eval.study.episode import poses_array
 from aw_eval.study.model import RunScore, TaskFacts
 from aw_eval.study.table import RunRecord, Study
 
-__all__ = ["TaskRuns", "RunView", "load_run_view", "task_card", "viewer_data", "system_colors", "CARD_SIZE", "FRAME_SIZE",
+__all__ = ["TaskRuns", "RunView", "Picture", "Card", "load_run_view", "task_card", "registration_hint", "viewer_data", "system_colors", "CARD_SIZE", "FRAME_SIZE",
            "MAX_VIEWER_STATES", "MAX_LISTED_CALLS"]
 
 CARD_SIZE = (320, 240)  # target and final-state pictures
@@ -62,7 +63,8 @@ class TaskRuns:
 @dataclass
 class RunView:
     """What a card shows of one scored run: ``states (N, P, 7)`` its checkpoints and
-    ``final (P, 7)`` its final state, both aligned onto the target; ``calls`` its tool calls."""
+    ``final (P, 7)`` its final state, both aligned onto the target; ``recorded_final (P, 7)`` the
+    final state as recorded (world frame, unregistered); ``calls`` its tool calls."""
 
     system: str
     score: RunScore
@@ -70,6 +72,7 @@ class RunView:
     final: np.ndarray
     calls: list = field(default_factory=list)
     note: str = ""
+    recorded_final: np.ndarray | None = None
 
 
 def _recorded_states(run_dir: Path, task_id: str, part_ids: list[str]):
@@ -107,6 +110,7 @@ def load_run_view(study: TaskRuns, system: str, task_id: str, scene: TaskScene) 
     note = ""
     if len(r.reg_rotation) == 0:
         note = "drawn unregistered: the cached scores predate saved registrations (rescore with a fresh --out)"
+    recorded_final = final
     final = aligned_poses(final, r.reg_rotation, r.reg_translation, scene.divisor)
     states = np.zeros((0, len(scene.part_ids), 7))
     if len(r.ck_pa) and ck_poses is not None and len(ck_poses) == len(r.ck_pa):
@@ -115,7 +119,7 @@ def load_run_view(study: TaskRuns, system: str, task_id: str, scene: TaskScene) 
             states = aligned_poses(ck_poses, r.ck_reg_rotation, r.ck_reg_translation, scene.divisor)
     elif len(r.ck_pa):
         note = "the trajectory changed since it was scored: checkpoints not shown"
-    return RunView(system, r, states, final, calls, note)
+    return RunView(system, r, states, final, calls, note, recorded_final)
 
 
 # ---------------------------------------------------------------- numbers
@@ -144,24 +148,69 @@ def _x_of(r: RunScore) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- card parts
-def _finals(scene: TaskScene | None, views: dict[str, RunView], study: TaskRuns, task_id: str, camera, folder: Path,
-            rel: str) -> str:
-    figs = []
+@dataclass
+class Picture:
+    """One picture of a card's first row: the target or a system's final state (``src`` None:
+    no picture, ``numbers`` says why)."""
+
+    label: str
+    src: str | None
+    numbers: str
+    target: bool = False
+
+
+def _final_pictures(scene: TaskScene | None, views: dict[str, RunView], study: TaskRuns, task_id: str, camera,
+                    folder: Path, rel: str) -> list[Picture]:
+    out = []
     if scene is not None:
-        figs.append(f'<figure>{_img(rel + scene.render(scene.target_poses, camera, CARD_SIZE, folder), "target", CARD_SIZE)}'
-                    f"<figcaption><b>Target</b></figcaption></figure>")
+        out.append(Picture("Target", rel + scene.render(scene.target_poses, camera, CARD_SIZE, folder), "", True))
     for s in study.systems:
         r = study.score(s, task_id)
         v = views.get(s)
-        if v is not None and scene is not None:
-            pic = _img(rel + scene.render(v.final, camera, CARD_SIZE, folder), f"{s} final state", CARD_SIZE)
+        src = rel + scene.render(v.final, camera, CARD_SIZE, folder) if v is not None and scene is not None else None
+        if r.scored:
+            nums = _run_numbers(r) if src is not None else f"{_run_numbers(r)} · no picture"
         else:
-            why = "; ".join(r.problems) if not r.scored else "no picture"
-            pic = f'<div class="nopic" style="width:{CARD_SIZE[0]}px;height:{CARD_SIZE[1]}px">{html.escape(r.status)}: {html.escape(why)}</div>'
-        nums = _run_numbers(r) if r.scored else f"{html.escape(r.status)} (PA = SR = 0)"
+            nums = f"{r.status}: {'; '.join(r.problems) or r.status} (PA = SR = 0)"
+        out.append(Picture(s, src, nums))
+    return out
+
+
+def _finals(pictures: list[Picture], views: dict[str, RunView]) -> str:
+    figs = []
+    for p in pictures:
+        if p.src is not None:
+            pic = _img(p.src, "target" if p.target else f"{p.label} final state", CARD_SIZE)
+        else:
+            pic = (f'<div class="nopic" style="width:{CARD_SIZE[0]}px;height:{CARD_SIZE[1]}px">'
+                   f"{html.escape(p.numbers)}</div>")
+        v = views.get(p.label)
         note = f'<br><span class="note">{html.escape(v.note)}</span>' if v is not None and v.note else ""
-        figs.append(f"<figure>{pic}<figcaption><b>{html.escape(s)}</b><br>{nums}{note}</figcaption></figure>")
+        nums = f"<br>{html.escape(p.numbers)}" if p.numbers and p.src is not None else ""
+        figs.append(f"<figure>{pic}<figcaption><b>{html.escape(p.label)}</b>{nums}{note}</figcaption></figure>")
     return f'<div class="finals">{"".join(figs)}</div>'
+
+
+HINT_GAP = 0.25  # share of parts placed minus PA from which a card explains the difference
+
+
+def registration_hint(scene: TaskScene, view: RunView, threshold: float) -> str:
+    """Why a run's PA is far below the share of its parts that lie at their targets as placed
+    (:meth:`TaskScene.placed`), or ``""`` when it is not: the scorer moves the whole assembly
+    with one rigid registration, so parts left elsewhere pull it off the parts in place."""
+    r = view.score
+    if view.recorded_final is None or not len(scene.part_ids):
+        return ""
+    placed = scene.placed(view.recorded_final, threshold)
+    away = np.flatnonzero(~placed)
+    if placed.mean() - r.pa < HINT_GAP or not len(away):
+        return ""
+    named = [scene.part_ids[i] + ("" if i < len(r.moved) and r.moved[i] else " (never moved)") for i in away[:4]]
+    more = f" and {len(away) - 4} more" if len(away) > 4 else ""
+    return (f"{view.system}: {int(placed.sum())} of {len(placed)} parts lie at their targets as placed, yet PA is "
+            f"{_pa(r.pa)}. The scorer registers the whole assembly with ONE rigid transform before it compares "
+            f"parts, so the {'part' if len(away) == 1 else 'parts'} left away, {', '.join(named)}{more}, "
+            f"{'pulls' if len(away) == 1 else 'pull'} that transform off the parts in place.")
 
 
 def _part_table(scene_ids: list[str], colors: np.ndarray | None, study: TaskRuns, doc_runs: dict, task_id: str) -> str:
@@ -183,7 +232,7 @@ def _part_table(scene_ids: list[str], colors: np.ndarray | None, study: TaskRuns
             tds += (f'<td class="r" data-v="{"" if not np.isfinite(e) else f"{1000 * e:.6g}"}">{fixed(1000 * e, 2)}</td>'
                     f'<td class="l {"ok" if cls == "correct" else ""}">{html.escape(cls.replace("_", " "))}</td>')
         rows.append(f"<tr>{tds}</tr>")
-    return (f'<table class="sortable parts"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
+    return (scroll_box(f'<table class="sortable parts"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>') +
             '<p class="note">Matched part Chamfer distance (normalized units, ×1000) of the final state; a part is '
             "correct at or below 10. Classes: the geometric failure classes of Table A-11.</p>")
 
@@ -249,20 +298,36 @@ def _call_rows(view: RunView) -> list[list[Any]]:
 NO_MESHES = "The suite has no meshes for this task (an official package): no pictures."
 
 
+@dataclass
+class Card:
+    """One task's card: its HTML and the pictures of its first row (target, final states)."""
+
+    html: str
+    pictures: list[Picture]
+
+
 def task_card(study: TaskRuns, task: dict[str, Any], doc_runs: dict, scene: TaskScene | None, views: dict[str, RunView],
-              folder: Path, rel: str, viewer_src: str | None, colors: dict[str, str], no_pictures: str = NO_MESHES) -> str:
-    """HTML of one task's card; pictures are rendered into ``folder`` (``rel``: its path from the
-    page); without a ``scene`` the card says ``no_pictures`` instead."""
+              folder: Path, rel: str, viewer_src: str | None, colors: dict[str, str], no_pictures: str = NO_MESHES,
+              threshold: float = ProtocolSettings.threshold) -> Card:
+    """One task's card; pictures are rendered into ``folder`` (``rel``: its path from the page);
+    without a ``scene`` the card says ``no_pictures`` instead. ``threshold``: the protocol's
+    part-correct threshold (for the note on parts placed but not counted)."""
     tid = task["task_id"]
     camera = None
     if scene is not None:
         camera = scene.camera([v.final for v in views.values()])
     meta = " · ".join(str(x) for x in (task["source"], task["condition"], task["category"],
                                        f"{task['n_parts']} parts", task["variant"]) if x)
+    pictures = _final_pictures(scene, views, study, tid, camera, folder, rel)
     parts = [f'<section class="card" id="task-{slug(tid)}"><h3>{html.escape(tid)}</h3><p class="meta">{html.escape(meta)}</p>',
-             _finals(scene, views, study, tid, camera, folder, rel)]
+             _finals(pictures, views)]
     if scene is None:
         parts.append(f'<p class="note">{html.escape(no_pictures)}</p>')
+    else:
+        for s in study.systems:
+            hint = registration_hint(scene, views[s], threshold) if s in views else ""
+            if hint:
+                parts.append(f'<p class="hint">{html.escape(hint)}</p>')
     parts.append(_curves(study, tid, views, colors))
     parts.append(_part_table(scene.part_ids if scene else (study.facts[tid].part_ids if tid in study.facts else []),
                              scene.colors if scene else None, study, doc_runs, tid))
@@ -278,7 +343,7 @@ def task_card(study: TaskRuns, task: dict[str, Any], doc_runs: dict, scene: Task
         parts.append(f'<button class="open3d" data-task="{html.escape(tid)}" data-src="{html.escape(viewer_src)}">'
                      "Open the 3D view</button><div class=\"viewer\" hidden></div>")
     parts.append("</section>")
-    return "".join(parts)
+    return Card("".join(parts), pictures)
 
 
 # ---------------------------------------------------------------- 3D viewer data

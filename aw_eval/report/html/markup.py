@@ -1,21 +1,27 @@
 """``report.md`` as HTML: the report's own Markdown (headings, paragraphs, pipe tables, lists,
 images, bold and code spans) turned into HTML, so the page shows every table with exactly the
-Markdown report's numbers. Tables get the ``sortable`` class; each cell carries the number it
-starts with (``data-v``) for sorting, so ``59.40``, ``**59.40**``, ``[1.0, 2.0]`` and ``3: 50.00/0.00``
-sort by their first number and a dash sorts last."""
+Markdown report's numbers. Tables get the ``sortable`` class. Each cell of a right-aligned
+(numeric) column carries the number it starts with (``data-v``) for sorting, so ``59.40``,
+``**59.40**``, ``[1.0, 2.0]`` and ``3: 50.00/0.00`` sort by their first number and a dash sorts
+last; left-aligned columns (names) sort by their text, whatever digits a name holds."""
 
 from __future__ import annotations
 
 import html
 import re
 
-__all__ = ["markdown_to_html", "sort_value", "slug"]
+__all__ = ["markdown_to_html", "sort_value", "slug", "scroll_box"]
 
 _NUMBER = re.compile(r"[-+−]?\d[\d,]*(?:\.\d+)?(?:[eE][-+]?\d+)?")
 
 
 def slug(text: str) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-") or "section"
+
+
+def scroll_box(table: str) -> str:
+    """A table inside a box that scrolls sideways when the table is wider than the page."""
+    return f'<div class="tablewrap">{table}</div>'
 
 
 def sort_value(cell: str) -> str:
@@ -43,10 +49,10 @@ def _table(lines: list[str]) -> str:
     th = "".join(f'<th class="{"r" if r else "l"}">{_inline(h)}</th>' for h, r in zip(header, right))
     rows = []
     for line in lines[2:]:
-        tds = "".join(f'<td class="{"r" if r else "l"}" data-v="{sort_value(c)}">{_inline(c)}</td>'
-                      for c, r in zip(_cells(line), right))
+        tds = "".join(f'<td class="r" data-v="{sort_value(c)}">{_inline(c)}</td>' if r
+                      else f'<td class="l">{_inline(c)}</td>' for c, r in zip(_cells(line), right))
         rows.append(f"<tr>{tds}</tr>")
-    return f'<table class="sortable"><thead><tr>{th}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
+    return scroll_box(f'<table class="sortable"><thead><tr>{th}</tr></thead><tbody>{"".join(rows)}</tbody></table>')
 
 
 def _list(lines: list[str]) -> str:

@@ -25,15 +25,19 @@ import orjson
 from aw.formats import FormatError
 from aw.render_platform import RenderError
 from aw_eval.report.fmt import fixed
-from aw_eval.report.html.cards import TaskRuns, load_run_view, system_colors, task_card, viewer_data
-from aw_eval.report.html.markup import markdown_to_html, slug
+from aw_eval.report.html.cards import Picture, TaskRuns, load_run_view, system_colors, task_card, viewer_data
+from aw_eval.report.html.markup import markdown_to_html, scroll_box, slug
 from aw_eval.report.html.scenes import TaskScene
+from aw_eval.report.markdown import SUMMARY_SECTIONS, TABLE1, system_label
+from aw_eval.report.results import protocol_of
 from aw_eval.study.table import Study
 
 __all__ = ["write_html", "build_card", "CardJob", "CardResult", "HtmlStats", "ASSETS_DIR"]
 
 ASSETS_DIR = "report_files"
 MIN_POOL_TASKS = 4  # fewer tasks: cards are built in this process whatever ``jobs`` says
+GLANCE_TASKS = 6  # tasks in the strip of pictures near the top (the first of each source)
+GLANCE_SIZE = (160, 120)  # its pictures: the cards' renders, shown smaller
 _STATIC = ("report.css", "report.js", "viewer.js")
 
 
@@ -91,12 +95,65 @@ def _overview(doc: dict[str, Any], study: Study) -> str:
             else:
                 tds += f'<td class="r" data-v="">{html.escape(r["status"])}</td><td class="r" data-v=""></td>'
         rows.append(f"<tr>{tds}</tr>")
-    return f'<table class="sortable tasks"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
+    return scroll_box(f'<table class="sortable tasks"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>')
 
 
 def _toc(body: str) -> str:
     links = [f'<a href="#{m.group(1)}">{m.group(2)}</a>' for m in re.finditer(r'<h2 id="([^"]+)">(.*?)</h2>', body)]
     return "<nav><b>Contents</b>" + "".join(links) + "</nav>"
+
+
+GLANCE_TITLE = "At a glance"
+
+
+def _glance(doc: dict[str, Any], systems: list[str], pictures: dict[str, list[Picture]]) -> str:
+    """The first task of each source with a picture of a run (at most :data:`GLANCE_TASKS`): the
+    target beside every system's final state, small, linking to the task's card; empty when no
+    card has pictures of runs."""
+    picked, sources = [], set()
+    for t in doc["tasks"]:
+        pics = pictures.get(t["task_id"]) or []
+        if t["variant"] == "original" and t["source"] not in sources and any(p.src and not p.target for p in pics):
+            sources.add(t["source"])
+            picked.append((t, pics))
+    if not picked:
+        return ""
+    w, h = GLANCE_SIZE
+    head = "<th>Task</th><th>Target</th>" + "".join(f"<th>{html.escape(system_label(doc, s))}</th>" for s in systems)
+    rows = []
+    for t, pics in picked[:GLANCE_TASKS]:
+        tid = t["task_id"]
+        tds = (f'<td class="l"><a href="#task-{slug(tid)}">{html.escape(tid)}</a><br><span class="note">'
+               f'{t["n_parts"]} parts</span></td>')
+        for p in pics:
+            img = (f'<img src="{html.escape(p.src)}" alt="{html.escape(p.label)} on {html.escape(tid)}" width="{w}" '
+                   f'height="{h}">' if p.src else "")
+            tds += f'<td>{img}<div class="note">{html.escape(p.numbers)}</div></td>'
+        rows.append(f"<tr>{tds}</tr>")
+    return (f'<h2 id="{slug(GLANCE_TITLE)}">{GLANCE_TITLE}</h2><p>The first task of each source: the target beside '
+            "every system's final state (registered onto the target, one camera per task). Each task has a card "
+            'under <a href="#tasks">Tasks</a>.</p>' +
+            scroll_box(f'<table class="glance"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'))
+
+
+def _arrange(body: str, glance: str) -> str:
+    """The page's sections in order: the summary sections open, the glance strip after Table 1,
+    every other section folded (its heading stays visible, so the contents' links still land)."""
+    chunks = re.split(r'(?=<h2 id=")', body)
+    open_ids = {slug(t) for t in SUMMARY_SECTIONS}
+    out, placed = [], not glance
+    for chunk in chunks:
+        m = re.match(r'<h2 id="([^"]+)">(.*?)</h2>', chunk)
+        if m is None or m.group(1) in open_ids:
+            out.append(chunk)
+        else:
+            out.append(f'<details class="fold"><summary>{m.group(0)}</summary>{chunk[m.end():]}</details>')
+        if m is not None and m.group(1) == slug(TABLE1) and not placed:
+            out.append(glance)
+            placed = True
+    if not placed:  # no Table 1 (a suite of variants only): the strip goes first
+        out.insert(1, glance)
+    return "".join(out)
 
 
 @dataclass(frozen=True)
@@ -109,6 +166,7 @@ class CardJob:
     suite_dir: str | None
     files: str
     colors: dict[str, str]
+    threshold: float  # the protocol's part-correct threshold
 
 
 @dataclass
@@ -117,6 +175,7 @@ class CardResult:
     viewer_file: str | None
     render_files: list[str]
     no_render: str | None  # why the card has no pictures, when rendering failed
+    pictures: list[Picture]  # the card's first row: target and final states
 
 
 def build_card(job: CardJob) -> CardResult:
@@ -147,7 +206,7 @@ def build_card(job: CardJob) -> CardResult:
         if scene is not None:
             try:
                 card = task_card(job.runs, job.task, job.doc_runs, scene, views, files / "renders", rel, viewer_src,
-                                 job.colors)
+                                 job.colors, threshold=job.threshold)
             except RenderError as exc:
                 no_render = f"No pictures: offscreen rendering is unavailable ({exc})."
         if card is None:
@@ -156,7 +215,7 @@ def build_card(job: CardJob) -> CardResult:
     finally:
         if scene is not None:
             scene.close()
-    return CardResult(card, viewer_file, [p.split("/")[-1] for p in _srcs(card, rel)], no_render)
+    return CardResult(card.html, viewer_file, [p.split("/")[-1] for p in _srcs(card.html, rel)], no_render, card.pictures)
 
 
 def _cards(jobs: list[CardJob], n_jobs: int):
@@ -190,13 +249,15 @@ def write_html(study: Study, doc: dict[str, Any], markdown: str, out_dir: str | 
     doc_runs = {(r["system"], r["task_id"]): r for r in doc["runs"]}
     card_jobs = [CardJob(t, TaskRuns.of(study, t["task_id"]),
                          {(s, t["task_id"]): doc_runs[(s, t["task_id"])] for s in study.systems},
-                         None if suite_dir is None else str(suite_dir), str(files), colors) for t in doc["tasks"]]
+                         None if suite_dir is None else str(suite_dir), str(files), colors, protocol_of(doc).threshold)
+                 for t in doc["tasks"]]
     used_renders: set[str] = set()
     used_viewer: set[str] = set()
-    cards, no_render = [], None
+    cards, pictures, no_render = [], {}, None
     # spawned workers take seconds to start: not worth it for a handful of cards
-    for res in _cards(card_jobs, jobs if len(card_jobs) >= MIN_POOL_TASKS else 1):
+    for job, res in zip(card_jobs, _cards(card_jobs, jobs if len(card_jobs) >= MIN_POOL_TASKS else 1)):
         cards.append(res.html)
+        pictures[job.task["task_id"]] = res.pictures
         used_renders.update(res.render_files)
         if res.viewer_file:
             used_viewer.add(res.viewer_file)
@@ -208,7 +269,7 @@ def write_html(study: Study, doc: dict[str, Any], markdown: str, out_dir: str | 
         for p in folder.iterdir():
             if p.name not in used:
                 p.unlink()
-    body = markdown_to_html(markdown)
+    body = _arrange(markdown_to_html(markdown), _glance(doc, list(study.systems), pictures))
     body += ('\n<h2 id="tasks">Tasks</h2><p>Every task with each system\'s final PA and SR; the cards below show '
              "the target beside each system's final state (registered onto the target, one camera, part colours "
              "shared), filmstrips at the quality curves' normalized times, per-run curves and tool calls, and a 3D "

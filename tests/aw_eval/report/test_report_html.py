@@ -33,6 +33,13 @@ def report(tmp_path_factory):
                        inspect_moves=False)
     write_scripted_run(runs / "alpha" / "fantastic_breaks-box000-none", suite, "fantastic_breaks-box000-none",
                        system="alpha", inspect_moves=False)
+    # names with digits (the demo's oracles) and a calibration role; gamma leaves one part 0.3 off
+    # and the global registration then counts none of its parts
+    for name, kw in (("oracle-noise0.5", {}), ("oracle-noise1.5", {"correct": ["p01", "p02"], "wrong_offset": 0.05}),
+                     ("gamma", {"correct": ["p01", "p02"], "wrong_offset": 0.3})):
+        agent = "heuristic" if name == "gamma" else "oracle"
+        write_scripted_run(runs / name / TASK, suite, TASK, system=name, inspect_moves=False, run_info={"agent": agent},
+                           **kw)
     out = root / "out"
     assert main([str(suite), str(runs), "--out", str(out), *OPTS]) == 0
     return {"root": root, "suite": suite, "runs": runs, "out": out}
@@ -157,3 +164,110 @@ def test_page_in_chromium(report, browser):
 
     assert problems == [] and remote == []
     page.close()
+
+
+_TABLES = """() => Array.from(document.querySelectorAll('table.sortable')).map((t, ti) => {
+    Array.from(t.tBodies[0].rows).forEach((r, i) => { r.dataset.testI = i; });
+    return Array.from(t.tBodies[0].rows).map(r => Array.from(r.cells).map(c =>
+        [c.hasAttribute('data-v'), c.getAttribute('data-v'), c.textContent.trim()]));
+})"""
+_CLICK = """([ti, col]) => { const t = document.querySelectorAll('table.sortable')[ti];
+    t.tHead.rows[0].cells[col].click();
+    return Array.from(t.tBodies[0].rows).map(r => Number(r.dataset.testI)); }"""
+
+
+def _expected_orders(rows: list[list], col: int, text_rank: dict[str, int]) -> tuple[list[int], list[int]]:
+    """Ascending and descending row orders of column ``col``: numbers (data-v) before text (natural
+    order), values without a number or text last in both directions, ties in the original order."""
+    keys = []
+    for i, row in enumerate(rows):
+        has_v, v, text = row[col] if col < len(row) else (False, None, "")
+        if has_v:
+            try:
+                keys.append((0, float(v), i))
+            except ValueError:
+                keys.append((2, 0, i))
+        elif text in ("", "–"):
+            keys.append((2, 0, i))
+        else:
+            keys.append((1, text_rank[text], i))
+    asc = [k[2] for k in sorted(keys)]
+    full = sorted((k for k in keys if k[0] != 2), key=lambda k: (-k[0], -k[1], k[2])) + [k for k in keys if k[0] == 2]
+    return asc, [k[2] for k in full]
+
+
+def test_every_table_sorts_on_every_column_stably(report, browser):
+    page = browser.new_page(viewport={"width": 1400, "height": 1000})
+    page.goto((report["out"] / "report.html").as_uri())
+    page.wait_for_load_state("load")
+    tables = page.evaluate(_TABLES)
+    texts = sorted({c[2] for t in tables for r in t for c in r})
+    # the browser's own collator (numeric, case-insensitive) fixes the natural order of the texts
+    ranked = page.evaluate("""ts => { const c = new Intl.Collator(undefined, {numeric: true, sensitivity: 'base'});
+        return ts.slice().sort((a, b) => c.compare(a, b) || (a < b ? -1 : a > b ? 1 : 0)); }""", texts)
+    rank = {t: i for i, t in enumerate(ranked)}
+    checked = 0
+    for ti, rows in enumerate(tables):
+        if not rows:
+            continue
+        for col in range(len(rows[0])):
+            asc, desc = _expected_orders(rows, col, rank)
+            first, second, third = (page.evaluate(_CLICK, [ti, col]) for _ in range(3))
+            assert first == asc, (ti, col)
+            assert second == desc, (ti, col)
+            assert third == first, (ti, col)  # the same click always gives the same order
+            checked += 1
+    assert checked > 100
+    # Table 1's System column: text order, the oracles' digits read as numbers within the name
+    t1 = "h2#table-1-benchmark-results ~ .tablewrap table"
+    page.click(f"{t1} th >> nth=0")
+    assert _cells(page, t1, 0) == ["alpha", "beta", "gamma", "oracle-noise0.5 (calibration)",
+                                   "oracle-noise1.5 (calibration)"]
+    page.close()
+
+
+def test_page_reads_top_down_in_a_1400_px_window(report, browser):
+    page = browser.new_page(viewport={"width": 1400, "height": 1000})
+    page.goto((report["out"] / "report.html").as_uri())
+    page.wait_for_load_state("load")
+    # how to read it first, then Table 1 and a strip of pictures before any other table
+    heads = page.eval_on_selector_all("main h2", "hs => hs.map(h => h.id)")
+    assert heads[:4] == ["how-to-read-this", "runs", "table-1-benchmark-results", "at-a-glance"]
+    first_img = page.evaluate("""() => { const img = document.querySelector('main img');
+        const before = Array.from(document.querySelectorAll('main table')).filter(t =>
+            !t.contains(img) && (t.compareDocumentPosition(img) & Node.DOCUMENT_POSITION_FOLLOWING));
+        return {top: img.getBoundingClientRect().top + window.scrollY, tablesBefore: before.length,
+                rowsBefore: before.map(t => t.rows.length)}; }""")
+    assert first_img["tablesBefore"] == 1 and first_img["top"] < 2000, first_img  # only Table 1 comes before
+    # the first task of each source with runs: PartNet's (target + 5 systems), Fantastic Breaks' (target + alpha)
+    assert page.locator("table.glance tbody tr").count() == 2 and page.locator("table.glance img").count() == 6 + 2
+    # the appendix is folded; a link from the contents opens its section
+    assert page.eval_on_selector("h2#table-a-11-geometric-failure-classes", "h => !h.closest('details').open")
+    opened = "() => document.getElementById('table-a-11-geometric-failure-classes').closest('details').open"
+    page.click("nav a[href='#table-a-11-geometric-failure-classes']")
+    page.wait_for_function(opened)
+    page.eval_on_selector("h2#table-a-11-geometric-failure-classes", "h => { h.closest('details').open = false; }")
+    page.click("nav a[href='#table-a-11-geometric-failure-classes']")  # the same link again: no hashchange
+    page.wait_for_function(opened)
+    # nothing is wider than the window: wide tables scroll inside their box
+    page.evaluate("() => document.querySelectorAll('details').forEach(d => { d.open = true; })")
+    widths = page.evaluate("""() => ({page: document.documentElement.scrollWidth, win: window.innerWidth,
+        tables: Array.from(document.querySelectorAll('main table')).map(t => {
+            const box = t.closest('.tablewrap'); const r = (box || t).getBoundingClientRect();
+            return {w: t.scrollWidth, boxRight: r.right, boxed: !!box}; })})""")
+    assert widths["page"] <= widths["win"] == 1400
+    assert all(t["boxed"] and t["boxRight"] <= 1400 for t in widths["tables"]), widths["tables"]
+    assert all(t["w"] <= 1400 for t in widths["tables"]), widths["tables"]
+    page.close()
+
+
+def test_cards_say_why_parts_in_place_score_zero(report):
+    page = (report["out"] / "report.html").read_text()
+    card = page.split(f'id="task-{TASK}"')[1].split('<section class="card"')[0]
+    hints = re.findall(r'<p class="hint">(.*?)</p>', card)
+    # beta placed one part of three, gamma two; alpha and the oracles' PA counts what they placed
+    assert [h.split(":")[0] for h in hints] == ["beta", "gamma"]
+    assert hints[0].startswith("beta: 1 of 3 parts lie at their targets as placed, yet PA is 0.0%")
+    assert "the parts left away, p02, p03, pull that transform" in hints[0]
+    assert hints[1].startswith("gamma: 2 of 3 parts lie at their targets as placed, yet PA is 0.0%")
+    assert "the part left away, p03, pulls that transform off the parts in place" in hints[1]

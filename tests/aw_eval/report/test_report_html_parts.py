@@ -10,7 +10,7 @@ import trimesh
 from aw.pose import apply_pose, matrix_to_quat
 from aw_eval.analyses.curves import normalized_states, normalized_values
 from aw_eval.report.fmt import md_table
-from aw_eval.report.html.cards import _cluster
+from aw_eval.report.html.cards import RunView, _cluster, registration_hint
 from aw_eval.report.html.markup import markdown_to_html, sort_value
 from aw_eval.report.html.scenes import TaskScene, aligned_poses
 from aw_eval.study.model import RunScore
@@ -27,6 +27,10 @@ def test_markdown_tables_become_sortable_with_the_same_cells():
     assert '<td class="r" data-v="59.40"><strong>59.40</strong></td>' in out
     assert '<td class="r" data-v="1.0">[1.0, 2.0]</td>' in out
     assert '<td class="r" data-v="">–</td>' in out  # a dash has no number: sorted last
+    # a name column sorts by its text, whatever digits the names hold (oracle-noise0.5 is no 0.5)
+    names = markdown_to_html(md_table(["System", "SR"], [["oracle-noise0.5", "1"], ["heuristic", "2"]]))
+    assert '<td class="l">oracle-noise0.5</td>' in names and '<td class="l">heuristic</td>' in names
+    assert '<div class="tablewrap"><table class="sortable">' in names  # wide tables scroll inside their box
     assert "<ul><li><strong>missing</strong> (1):<ul><li>a / t1: no run</li></ul></li><li>next</li></ul>" in out
     assert '<img src="plots/q.png" alt="quality" loading="lazy">' in out
     assert markdown_to_html("a <b> & c") == "<p>a &lt;b&gt; &amp; c</p>"
@@ -120,3 +124,53 @@ def test_filmstrip_states_are_the_curves_checkpoints():
     assert idx[0] == 0 and idx[-1] is None and idx[3] == 1 and idx[8] == 2
     pa = normalized_values(r, "pa")
     np.testing.assert_array_equal(pa, [r.pa if k is None else r.ck_pa[k] for k in idx])
+
+
+def _box_points(scene, poses, n=400, seed=0):
+    """Surface samples ``(P, n, 3)`` of the scene's parts at ``poses``, normalized by the divisor."""
+    out = []
+    for i, m in enumerate(scene.meshes):
+        pts = trimesh.sample.sample_surface(m, n, seed=seed + i)[0]
+        out.append(apply_pose(poses[i], pts) / scene.divisor)
+    return np.stack(out)
+
+
+def test_placed_parts_are_within_the_threshold_of_their_targets_before_registration():
+    from aw_eval.chamfer import chamfer_pairs
+
+    s = _scene()  # divisor 0.4: a part is placed when 2 (largest vertex shift / 0.4)^2 <= threshold
+    threshold = 0.01
+    poses = s.target_poses.copy()
+    poses[1, 0] += 0.02  # 2 (0.05)^2 = 0.005: placed
+    assert s.placed(poses, threshold).tolist() == [True, True]
+    poses[1, 0] += 0.02  # 2 (0.1)^2 = 0.02: not
+    assert s.placed(poses, threshold).tolist() == [True, False]
+    # the bound holds against the Chamfer distance of real surface samples, for random small motions
+    rng = np.random.default_rng(1)
+    target_pts = _box_points(s, s.target_poses)
+    seen = set()
+    for _ in range(40):
+        p = s.target_poses.copy()
+        p[:, :3] += rng.normal(scale=0.01, size=(2, 3))
+        p[:, 3:] = [matrix_to_quat(_rotation(rng.normal(size=3), rng.normal(scale=0.08))) for _ in range(2)]
+        placed = s.placed(p, threshold)
+        cd = chamfer_pairs(_box_points(s, p), target_pts)
+        assert np.all(cd[placed] <= threshold)
+        seen.update(placed.tolist())
+    assert seen == {True, False}  # both outcomes were exercised
+
+
+def test_a_card_explains_parts_in_place_that_the_global_registration_does_not_count():
+    s = _scene()
+    final = s.target_poses.copy()
+    final[1] = [0, 0, 0, 1, 0, 0, 0]  # p02 left at its initial pose (0.15 below its target: not placed)
+    score = RunScore(system="agent", task_id="t", status="scored", pa=0.0, sr=0.0, scd=0.3,
+                     moved=np.array([True, False]))
+    view = RunView("agent", score, np.zeros((0, 2, 7)), final, recorded_final=final)
+    hint = registration_hint(s, view, 0.01)
+    assert hint.startswith("agent: 1 of 2 parts lie at their targets as placed, yet PA is 0.0%.")
+    assert "ONE rigid transform" in hint and "the part left away, p02 (never moved), pulls" in hint
+    score.pa = 0.5  # PA counts what is in place: nothing to explain
+    assert registration_hint(s, view, 0.01) == ""
+    score.pa = 0.0
+    assert registration_hint(s, RunView("agent", score, np.zeros((0, 2, 7)), final), 0.01) == ""  # not recorded
