@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 from aw.cli.common import add_jobs, add_overwrite, check_out_dir, new_parser, nonnegative_float, positive_int, run_main
+from aw.runner.batch import system_label
 
 DEFAULT_PER_SOURCE = 5
 DEFAULT_NOISE = (0.5, 1.5)
@@ -50,7 +51,7 @@ def _run(cmd: list[str]) -> None:
 def systems(noise_levels: tuple[float, ...]) -> list[tuple[str, str, float | None]]:
     """(label, agent, noise) of every demo system, in table order."""
     out = [("idle", "idle", None), ("heuristic", "heuristic", None)]
-    out += [(f"oracle-noise{n:g}", "oracle", n) for n in noise_levels]
+    out += [(system_label("oracle", None, {"noise": n}), "oracle", n) for n in noise_levels]
     return out
 
 
