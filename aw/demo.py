@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from aw.cli.common import add_jobs, add_overwrite, check_out_dir, new_parser, nonnegative_float, positive_int, run_main
+from aw.cli.common import add_jobs, add_overwrite, check_out_dir, new_parser, nonnegative_float, plural, positive_int, run_main
 from aw.runner.batch import system_label
 
 DEFAULT_PER_SOURCE = 5
@@ -108,7 +108,7 @@ def _demo(args: argparse.Namespace) -> int:
     total = 4
     timings: dict[str, float] = {}
 
-    _stage(1, total, f"building the synthetic suite ({args.per_source} objects per source) in {suite}")
+    _stage(1, total, f"building the synthetic suite ({plural(args.per_source, 'object')} per source) in {suite}")
     t0 = time.monotonic()
     recipe = out / ".suite-recipe"
     want = f"per_source={args.per_source} seed={args.seed} blocks={args.blocks or 'all'}"

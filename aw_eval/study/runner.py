@@ -319,8 +319,8 @@ def score_study(suite_dir: str | Path, runs_dir: str | Path, out_dir: str | Path
     stats.tasks_dispatched = len(jobs)
     outputs, stats.executor, close = _run_jobs(jobs, scheduler=scheduler, n_jobs=n_jobs or default_jobs())
     if log and jobs:
-        log(f"scoring {sum(len(j.runs) for j in jobs)} runs of {len(jobs)} tasks ({stats.executor}); "
-            f"{stats.cached} runs from the cache")
+        log(f"scoring {plural(sum(len(j.runs) for j in jobs), 'run')} of {plural(len(jobs), 'task')} ({stats.executor}); "
+            f"{plural(stats.cached, 'run')} from the cache")
     try:
         with _progress(len(jobs), progress and len(jobs) > 0, "scoring") as bar:
             for out in outputs:

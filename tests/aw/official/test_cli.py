@@ -85,7 +85,7 @@ def test_export_a_native_run(tmp_path, capsys):
 
 
 def test_one_line_errors(tmp_path, capsys):
-    assert main(["official", str(tmp_path), "--out", str(tmp_path / "suite")]) == 1
+    assert main(["official", str(tmp_path), "--out", str(tmp_path / "suite")]) == 2  # an unusable path
     err = capsys.readouterr().err
     assert err.startswith("aw-prepare: error: ") and "benchmark.json not found" in err and len(err.splitlines()) == 1
     (tmp_path / "run").mkdir()
