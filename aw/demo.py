@@ -26,6 +26,10 @@ from aw.runner.batch import system_label
 DEFAULT_PER_SOURCE = 5
 DEFAULT_NOISE = (0.5, 1.5)
 QUICK_DRAWS = ("--bootstrap", "1000", "--permutations", "10000")  # the paper: 10,000 and 100,000
+# Minutes per episode per core, the whole demo included (suite, episodes, scoring, report): the
+# defaults (25 tasks x 4 systems, --jobs 2) took 3 to 10 minutes on the 2-core development
+# machine, depending on what else ran on it.
+MINUTES_PER_EPISODE_CORE = (0.06, 0.2)
 
 
 def _bin(name: str) -> list[str]:
@@ -69,6 +73,22 @@ def summary_from_report(report_md: Path, wanted: tuple[str, ...] = ("Table 1:", 
     return text.strip()[:4000]
 
 
+def plan_line(per_source: int, blocks: str | None, noise_levels: tuple[float, ...], jobs: int) -> str:
+    """What the demo is about to do and about how long it takes, said before it starts."""
+    from aw.sources.synthetic import BLOCKS
+
+    names = [b.strip() for b in blocks.split(",") if b.strip() in BLOCKS] if blocks else list(BLOCKS)
+    n_tasks = per_source * sum(len(BLOCKS[b].conditions) for b in names)
+    n_systems = len(systems(noise_levels))
+    episodes = n_tasks * n_systems
+    lo, hi = (episodes / jobs * m for m in MINUTES_PER_EPISODE_CORE)
+    took = "under a minute" if hi < 1 else f"about {max(1, round(lo))} to {max(2, round(hi))} minutes"
+    return (f"aw-demo: builds a synthetic suite of {plural(n_tasks, 'task')}, runs {plural(n_systems, 'system')} on "
+            f"every task ({plural(episodes, 'episode')} through aw-serve, {jobs} at a time), rescores every "
+            f"trajectory with aw-score and writes the report; expect {took} on {plural(jobs, 'core')} "
+            "(3 to 10 with the defaults on 2 cores)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = new_parser("aw-demo", "The whole loop of the paper on the embedded synthetic benchmark, in one command.",
                    epilog=__doc__.split("\n\n")[1] + "\n\nThe oracle systems read the hidden targets: calibration "
@@ -97,6 +117,7 @@ def _demo(args: argparse.Namespace) -> int:
     from aw.runner.batch import BatchConfig, run_batch
 
     check_out_dir(args.out)
+    print(plan_line(args.per_source, args.blocks, tuple(args.noise), args.jobs), flush=True)
     t_all = time.monotonic()
     out = args.out.resolve()
     suite, runs, report = out / "suite", out / "runs", out / "report"
