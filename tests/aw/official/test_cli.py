@@ -23,7 +23,7 @@ def test_convert_then_export(tmp_path, capsys):
     original = read_archive(run / "blocks" / "partnet-none" / "samples" / "743" / "final.episode.zip")
     assert main(["official", str(pkg_root), "--episodes", str(tmp_path / "logs"), "--out", str(tmp_path / "suite"),
                  "--runs", str(tmp_path / "runs")]) == 0
-    assert "wrote 1 tasks" in capsys.readouterr().out
+    assert "wrote 1 task to " in capsys.readouterr().out
     run = tmp_path / "runs" / "fixture-m" / "partnet-none--743"
     out = tmp_path / "final.episode.zip"
     assert main(["official-export", str(run), "--suite", str(tmp_path / "suite"), "--out", str(out)]) == 0
