@@ -216,24 +216,34 @@ def settings_differences(recorded: dict[str, Any], now: dict[str, Any]) -> list[
     return out
 
 
-def check_reuse(cfg: BatchConfig, episodes: list[Episode]) -> None:
-    """Refuse to skip existing runs made with other options (they would be scored as this
-    configuration): name the option that differs and the flags that resolve it."""
+def check_reuse(cfg: BatchConfig, planned: list[Episode]) -> None:
+    """Refuse a batch that would leave runs of other options under this label: the existing runs
+    it would skip, and (with ``--tasks``) those of other tasks it does not touch, which aw-score
+    would read as one system. Names the option that differs and the flags that resolve it."""
+    system_dir = cfg.out_dir / cfg.system
+    if not system_dir.is_dir():
+        return
+    replaced = {ep.task_id for ep in planned} if cfg.overwrite else set()
     now = run_settings(cfg)
     clashes: dict[str, list[str]] = {}
-    for ep in episodes:
+    for path in sorted(system_dir.glob("*/run.json")):
+        if path.parent.name in replaced:
+            continue
         try:
-            info = read_run_info(ep.run_dir / "run.json")
+            info = read_run_info(path)
         except FormatError:  # unreadable: aw-score reports it; nothing to compare
             continue
         for diff in settings_differences(_recorded_settings(info), now):
-            clashes.setdefault(diff, []).append(ep.task_id)
-    if clashes:
-        n = len({t for ts in clashes.values() for t in ts})
-        what = "; ".join(clashes)
-        raise RunnerError(f"{cfg.out_dir / cfg.system} holds {n} run{'s' if n != 1 else ''} made with other options "
-                          f"({what}); pass --system LABEL to run these options as another system, or --overwrite "
-                          "to replace those runs")
+            clashes.setdefault(diff, []).append(path.parent.name)
+    if not clashes:
+        return
+    tasks = sorted({t for ts in clashes.values() for t in ts})
+    outside = [t for t in tasks if t not in {ep.task_id for ep in planned}]
+    fix = ("--overwrite to replace those runs" if not outside else
+           "--overwrite without --tasks (or with --tasks also naming " + ", ".join(outside[:3]) +
+           (", ..." if len(outside) > 3 else "") + ") to replace them")
+    raise RunnerError(f"{system_dir} holds {len(tasks)} run{'s' if len(tasks) != 1 else ''} made with other options "
+                      f"({'; '.join(clashes)}); pass --system LABEL to run these options as another system, or {fix}")
 
 
 def plan_episodes(cfg: BatchConfig) -> list[Episode]:
@@ -541,17 +551,15 @@ def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None
     """Run every planned episode, ``cfg.jobs`` at a time, with a progress bar."""
     check_config(cfg)
     episodes = plan_episodes(cfg)
+    check_reuse(cfg, episodes)
     skipped = []
     if not cfg.overwrite:
         todo = []
-        kept = []
         for ep in episodes:
             if (ep.run_dir / "run.json").is_file():
                 skipped.append(ep.task_id)
-                kept.append(ep)
             else:
                 todo.append(ep)
-        check_reuse(cfg, kept)
         episodes = todo
     (cfg.out_dir / cfg.system).mkdir(parents=True, exist_ok=True)
     env = episode_env()

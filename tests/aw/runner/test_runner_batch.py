@@ -117,10 +117,19 @@ def test_a_run_made_with_other_options_is_refused_not_reused(agent_runs, tiny_su
     before = (out / "oracle" / "tiny_table_none" / "run.json").read_bytes()
     assert aw_run([*base, "--agent", "oracle", "--system", "oracle", "--noise", "1.5"]) == 2
     err = capsys.readouterr().err
-    assert ("aw-run: error: " + str(out / "oracle") + " holds 1 run made with other options (--noise not set there, "
-            "1.5 now); pass --system LABEL to run these options as another system, or --overwrite") in err
+    assert ("aw-run: error: " + str(out / "oracle") + " holds 2 runs made with other options (--noise not set there, "
+            "1.5 now); pass --system LABEL to run these options as another system, or --overwrite without --tasks "
+            "(or with --tasks also naming tiny_shelf_none) to replace them") in err
     assert aw_run([*base, "--agent", "idle", "--seed", "3"]) == 2
     assert "(--seed 0 there, 3 now)" in capsys.readouterr().err
+    # another task under the same label, with other options: the system would mix two configurations
+    other = [str(tiny_suite), "--out", str(out), "--tasks", "tiny_shelf_none", "--no-progress", "--agent", "idle"]
+    for extra in ([], ["--overwrite"]):
+        assert aw_run([*other, "--seed", "3", *extra]) == 2
+        assert ("holds 1 run made with other options (--seed 0 there, 3 now); pass --system LABEL to run these "
+                "options as another system, or --overwrite without --tasks (or with --tasks also naming "
+                "tiny_table_none) to replace them") in capsys.readouterr().err
+    assert not (out / "idle" / "tiny_shelf_none").exists()
     assert (out / "oracle" / "tiny_table_none" / "run.json").read_bytes() == before
     # a run.json written before the settings were kept: its other fields still tell the options
     legacy = out / "legacy"
