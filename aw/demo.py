@@ -83,10 +83,10 @@ def plan_line(per_source: int, blocks: str | None, noise_levels: tuple[float, ..
     episodes = n_tasks * n_systems
     lo, hi = (episodes / jobs * m for m in MINUTES_PER_EPISODE_CORE)
     took = "under a minute" if hi < 1 else f"about {max(1, round(lo))} to {max(2, round(hi))} minutes"
+    basis = "" if (episodes, jobs) == (100, 2) else " (scaled from 3 to 10 minutes with the defaults on 2 cores)"
     return (f"aw-demo: builds a synthetic suite of {plural(n_tasks, 'task')}, runs {plural(n_systems, 'system')} on "
             f"every task ({plural(episodes, 'episode')} through aw-serve, {jobs} at a time), rescores every "
-            f"trajectory with aw-score and writes the report; expect {took} on {plural(jobs, 'core')} "
-            "(3 to 10 with the defaults on 2 cores)")
+            f"trajectory with aw-score and writes the report; expect {took} on {plural(jobs, 'core')}{basis}")
 
 
 def build_parser() -> argparse.ArgumentParser:
