@@ -84,6 +84,21 @@ def test_objects_without_upright_members_or_that_would_fall_keep_z():
     assert guess_up_axis(rods).reason.endswith("would not rest stably with Y up; kept Z")
 
 
+def test_a_bar_broken_in_two_lying_along_y_keeps_z():
+    halves = [_box((0.04, 0.3, 0.04), (0, -0.15, 0.02)), _box((0.04, 0.3, 0.04), (0, 0.15, 0.02))]
+    got = guess_up_axis(halves)
+    assert got.axis == "z" and got.reason == "2 parts stand along Y, 0 along Z, but end to end, not side by side; kept Z"
+
+
+def test_the_synthetic_benchmark_objects_all_keep_z():
+    from aw.sources.synthetic import BLOCKS, generate_object
+
+    for block in BLOCKS:
+        for i in range(5):
+            obj = generate_object(block, i, 0)
+            assert guess_up_axis([p.mesh for p in obj.parts]).axis == "z", (block, i, obj.category)
+
+
 def test_load_object_turns_y_up_upright_and_respects_overrides(tmp_path):
     d = write_object(tmp_path, "stool", y_up_stool())
     obj = load_object(d)
