@@ -8,9 +8,10 @@ side panels) are longer than they are wide:
    :data:`ELONGATION` times each of its other two extents (a leg, a post; not a square top).
 2. Y is chosen when at least two parts stand along Y, more than stand along Z, two of them side
    by side (their footprints across Y apart, as legs are; not end to end, as the pieces of a
-   broken bar are), and the object rests stably with Y up: the area-weighted centroid of all part surfaces projects inside the
-   convex hull of the vertices within :data:`BASE_BAND` of the object's height above its lowest
-   point (its base), by at least :data:`STABLE_MARGIN` of its width.
+   broken bar are), and the object rests stably with Y up: the area-weighted centroid of all
+   part surfaces projects inside the convex hull of the vertices within :data:`BASE_BAND` of
+   the object's height above its lowest point (its base), by at least :data:`STABLE_MARGIN` of
+   its width.
 3. Otherwise Z, the convention of most mesh formats, is kept.
 
 Limits: objects without elongated parts (plates, boxes, most fragments) or with as many lying
