@@ -28,7 +28,7 @@ DEFAULT_NOISE = (0.5, 1.5)
 QUICK_DRAWS = ("--bootstrap", "1000", "--permutations", "10000")  # the paper: 10,000 and 100,000
 # Minutes per episode per core, the whole demo included (suite, episodes, scoring, report): the
 # defaults (25 tasks x 4 systems, --jobs 2) took 3 to 10 minutes on the 2-core development
-# machine, depending on what else ran on it.
+# machine, and 31 minutes while six other sessions shared it (load average 16).
 MINUTES_PER_EPISODE_CORE = (0.06, 0.2)
 
 
@@ -86,7 +86,8 @@ def plan_line(per_source: int, blocks: str | None, noise_levels: tuple[float, ..
     basis = "" if (episodes, jobs) == (100, 2) else " (scaled from 3 to 10 minutes with the defaults on 2 cores)"
     return (f"aw-demo: builds a synthetic suite of {plural(n_tasks, 'task')}, runs {plural(n_systems, 'system')} on "
             f"every task ({plural(episodes, 'episode')} through aw-serve, {jobs} at a time), rescores every "
-            f"trajectory with aw-score and writes the report; expect {took} on {plural(jobs, 'core')}{basis}")
+            f"trajectory with aw-score and writes the report; expect {took} on {plural(jobs, 'core')}{basis}, "
+            "longer when other work shares the cores")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -55,7 +55,8 @@ def test_the_demo_says_up_front_what_it_does_and_how_long_it_takes():
     line = plan_line(5, None, (0.5, 1.5), 2)  # the defaults on 2 cores
     assert line.startswith("aw-demo: builds a synthetic suite of 25 tasks, runs 4 systems on every task "
                            "(100 episodes through aw-serve, 2 at a time)")
-    assert line.endswith("expect about 3 to 10 minutes on 2 cores")
+    assert line.endswith("expect about 3 to 10 minutes on 2 cores, longer when other work shares the cores")
     assert plan_line(1, "fantastic_breaks", (0.5, 1.5), 2).endswith(
-        "expect under a minute on 2 cores (scaled from 3 to 10 minutes with the defaults on 2 cores)")
+        "expect under a minute on 2 cores (scaled from 3 to 10 minutes with the defaults on 2 cores), longer when "
+        "other work shares the cores")
     assert "of 6 tasks, runs 3 systems" in plan_line(2, "partnet,ikea_manual,nonsense", (0.5,), 16)
