@@ -20,11 +20,16 @@ import sys
 import time
 from pathlib import Path
 
-from aw.cli.common import add_jobs, add_overwrite, check_out_dir, new_parser, nonnegative_float, positive_int, run_main
+from aw.cli.common import add_jobs, add_overwrite, check_out_dir, new_parser, nonnegative_float, plural, positive_int, run_main
+from aw.runner.batch import system_label
 
 DEFAULT_PER_SOURCE = 5
 DEFAULT_NOISE = (0.5, 1.5)
 QUICK_DRAWS = ("--bootstrap", "1000", "--permutations", "10000")  # the paper: 10,000 and 100,000
+# Minutes per episode per core, the whole demo included (suite, episodes, scoring, report): the
+# defaults (25 tasks x 4 systems, --jobs 2) took 3 to 10 minutes on the 2-core development
+# machine, and 31 minutes while six other sessions shared it (load average 16).
+MINUTES_PER_EPISODE_CORE = (0.06, 0.2)
 
 
 def _bin(name: str) -> list[str]:
@@ -50,7 +55,7 @@ def _run(cmd: list[str]) -> None:
 def systems(noise_levels: tuple[float, ...]) -> list[tuple[str, str, float | None]]:
     """(label, agent, noise) of every demo system, in table order."""
     out = [("idle", "idle", None), ("heuristic", "heuristic", None)]
-    out += [(f"oracle-noise{n:g}", "oracle", n) for n in noise_levels]
+    out += [(system_label("oracle", None, {"noise": n}), "oracle", n) for n in noise_levels]
     return out
 
 
@@ -66,6 +71,23 @@ def summary_from_report(report_md: Path, wanted: tuple[str, ...] = ("Table 1:", 
         if re.search(r"(?m)^\|.*\|\s*$", sec):
             return sec
     return text.strip()[:4000]
+
+
+def plan_line(per_source: int, blocks: str | None, noise_levels: tuple[float, ...], jobs: int) -> str:
+    """What the demo is about to do and about how long it takes, said before it starts."""
+    from aw.sources.synthetic import BLOCKS
+
+    names = [b.strip() for b in blocks.split(",") if b.strip() in BLOCKS] if blocks else list(BLOCKS)
+    n_tasks = per_source * sum(len(BLOCKS[b].conditions) for b in names)
+    n_systems = len(systems(noise_levels))
+    episodes = n_tasks * n_systems
+    lo, hi = (episodes / jobs * m for m in MINUTES_PER_EPISODE_CORE)
+    took = "under a minute" if hi < 1 else f"about {max(1, round(lo))} to {max(2, round(hi))} minutes"
+    basis = "" if (episodes, jobs) == (100, 2) else " (scaled from 3 to 10 minutes with the defaults on 2 cores)"
+    return (f"aw-demo: builds a synthetic suite of {plural(n_tasks, 'task')}, runs {plural(n_systems, 'system')} on "
+            f"every task ({plural(episodes, 'episode')} through aw-serve, {jobs} at a time), rescores every "
+            f"trajectory with aw-score and writes the report; expect {took} on {plural(jobs, 'core')}{basis}, "
+            "longer when other work shares the cores")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -96,6 +118,7 @@ def _demo(args: argparse.Namespace) -> int:
     from aw.runner.batch import BatchConfig, run_batch
 
     check_out_dir(args.out)
+    print(plan_line(args.per_source, args.blocks, tuple(args.noise), args.jobs), flush=True)
     t_all = time.monotonic()
     out = args.out.resolve()
     suite, runs, report = out / "suite", out / "runs", out / "report"
@@ -107,7 +130,7 @@ def _demo(args: argparse.Namespace) -> int:
     total = 4
     timings: dict[str, float] = {}
 
-    _stage(1, total, f"building the synthetic suite ({args.per_source} objects per source) in {suite}")
+    _stage(1, total, f"building the synthetic suite ({plural(args.per_source, 'object')} per source) in {suite}")
     t0 = time.monotonic()
     recipe = out / ".suite-recipe"
     want = f"per_source={args.per_source} seed={args.seed} blocks={args.blocks or 'all'}"

@@ -19,7 +19,8 @@ import time
 from collections.abc import Sequence
 
 from aw.cli.common import (
-    CliError, UsageError, add_hidden_alias, add_jobs, add_no_progress, check_out_dir, new_parser, positive_int, run_main,
+    CliError, UsageError, add_hidden_alias, add_jobs, add_no_progress, check_out_dir, new_parser, plural, positive_int,
+    run_main,
 )
 
 __all__ = ["build_parser", "main", "protocol_note"]
@@ -139,16 +140,21 @@ def _score(args: argparse.Namespace) -> int:
                                                         "final_states": round(stats.seconds_final, 3)}},
                         plots=not args.no_plots, html=not args.no_html, log=log, jobs=args.jobs)
     doc = res["doc"]
-    unscored = {k: len(v) for k, v in doc["unscored_runs"].items()}
-    log(f"{len(study.systems)} systems x {len(study.entries)} tasks: {stats.cached} runs from the cache, "
-        f"{stats.scored} scored now" + (f", unscored {unscored}" if unscored else "") +
-        (f", {len(study.unknown_runs)} runs for unknown tasks ignored" if study.unknown_runs else "") +
+    unscored = ", ".join(f"{len(v)} {k}" for k, v in sorted(doc["unscored_runs"].items()))
+    log(f"{plural(len(study.systems), 'system')} x {plural(len(study.entries), 'task')}: "
+        f"{plural(stats.cached, 'run')} from the cache, {stats.scored} scored now" +
+        (f", unscored: {unscored}" if unscored else "") +
+        (f", {plural(len(study.unknown_runs), 'run')} for tasks not in the suite ignored" if study.unknown_runs else "") +
         f" ({time.perf_counter() - t0:.1f} s)")
     q = doc["quality"]["systems"]
     note = protocol_note(args.final_mode, overrides)
+    cov = stats.coverage
     for s in doc["uncertainty"].get("order", study.systems):
         o = q[s]["overall"]
-        print(f"{s}: Overall SR {o['sr']:.2f}%  PA {o['pa']:.2f}%{note}")
+        have = cov.runs.get(s, cov.n_tasks) if cov else None
+        short = f"  [WARNING: runs for only {have} of {plural(cov.n_tasks, 'task')}; the rest count 0]" \
+            if cov and have < cov.n_tasks else ""
+        print(f"{s}: Overall SR {o['sr']:.2f}%  PA {o['pa']:.2f}%{note}{short}")
     print(f"wrote {res['files']['report']}")
     if "html" in res["files"]:
         print(f"wrote {res['files']['html']}")

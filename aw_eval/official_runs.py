@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from aw.cli.common import plural
 from aw.formats import FormatError
 from aw.official.evaluation_output import error_row, row_base, scored_row, sort_rows, summarize, write_evaluation
 from aw.official.evaluation_cache import EvaluationInputs
@@ -176,7 +177,7 @@ def evaluate(sources: OfficialPackage, runs_dir: str | Path, out_dir: str | Path
             by_system[name] = chosen
     summaries = {}
     for name, attempts in by_system.items():
-        log(f"{name}: scoring {len(attempts)} attempts")
+        log(f"{name}: scoring {plural(len(attempts), 'attempt')}")
         summaries[name] = evaluate_system(attempts, sources, out / name, jobs)
     return summaries
 

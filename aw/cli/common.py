@@ -23,7 +23,7 @@ __all__ = [
     "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_INTERRUPTED",
     "CliError", "UsageError", "new_parser", "add_commands", "add_overwrite", "add_hidden_alias", "add_jobs", "add_no_progress",
     "default_jobs", "positive_int", "positive_float", "nonnegative_float", "check_out_dir",
-    "check_in_dir", "run_main",
+    "check_in_dir", "run_main", "plural",
 ]
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -77,6 +77,12 @@ def add_commands(p: argparse.ArgumentParser) -> argparse._SubParsersAction:
 def add_hidden_alias(p: argparse.ArgumentParser, *names: str, dest: str, **kwargs) -> None:
     """Old flag ``names`` still accepted for ``dest``, without a line in ``--help``."""
     p.add_argument(*names, dest=dest, default=argparse.SUPPRESS, help=argparse.SUPPRESS, **kwargs)
+
+
+def plural(n: int, noun: str, nouns: str | None = None) -> str:
+    """``"1 task"``, ``"3 tasks"``: a count with its noun in the right number (``nouns``: an
+    irregular plural)."""
+    return f"{n} {noun if n == 1 else (nouns or noun + 's')}"
 
 
 def add_overwrite(p: argparse.ArgumentParser, what: str) -> None:

@@ -12,7 +12,7 @@ import json
 import sys
 from pathlib import Path
 
-from aw.cli.common import add_overwrite
+from aw.cli.common import add_overwrite, plural
 
 __all__ = ["register_compose", "register_official", "register_official_export", "catalogs_from_args"]
 
@@ -72,11 +72,15 @@ def catalogs_from_args(args: argparse.Namespace) -> dict:
 def _cmd_compose(args: argparse.Namespace) -> int:
     from aw.cli.common import CliError, UsageError
     from aw.cli.suite import run_suite
+    from aw.formats import FormatError
     from aw.sources.compose import compose, specs_for
 
     if args.per_source < 1:
         raise UsageError("--per-source must be >= 1")
-    cats = catalogs_from_args(args)
+    try:
+        cats = catalogs_from_args(args)
+    except FormatError as exc:  # a dataset folder that cannot be used: said before any work
+        raise UsageError(str(exc)) from None
     if not cats:
         raise UsageError("no dataset given: pass at least one of --partnet, --ikea-manual, --assemblybench, "
                        "--fantastic-breaks, --breaking-bad, --rehosted")
@@ -86,7 +90,7 @@ def _cmd_compose(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
     summary = comp.summary()
     for source, s in summary["sources"].items():
-        print(f"{source}: {len(s['objects'])} of {s['candidates']} candidates; bands {s['bands']}; "
+        print(f"{source}: {len(s['objects'])} of {plural(s['candidates'], 'candidate')}; bands {s['bands']}; "
               f"categories {s['categories']}; conditions {', '.join(s['conditions'])}")
     if args.dry_run:
         print(json.dumps(summary, indent=2))
@@ -115,9 +119,13 @@ def register_official(sub) -> None:
 
 
 def _cmd_official(args: argparse.Namespace) -> int:
-    from aw.cli.common import UsageError, check_out_dir
+    from aw.cli.common import UsageError, check_in_dir, check_out_dir
     from aw.official.convert import convert, convert_package
 
+    if not (check_in_dir(args.package, "PKG") / "benchmark.json").is_file():
+        raise UsageError(f"PKG {args.package}: benchmark.json not found (is this an official benchmark package?)")
+    if args.episodes is not None:
+        check_in_dir(args.episodes, "--episodes")
     check_out_dir(args.out)
     if args.episodes is not None and not args.runs:
         raise UsageError("--episodes needs --runs")
@@ -136,7 +144,7 @@ def _cmd_official(args: argparse.Namespace) -> int:
                 print(f"aw-prepare: not converted (the official scorer counts it as an error): {line}", file=sys.stderr)
     except FileExistsError as exc:
         raise UsageError(str(exc).replace("pass force=True", "pass --overwrite")) from None
-    print(f"wrote {len(manifest.tasks)} tasks to {args.out}" + (f" and {len(runs)} runs to {args.runs}" if runs else ""))
+    print(f"wrote {plural(len(manifest.tasks), 'task')} to {args.out}" + (f" and {plural(len(runs), 'run')} to {args.runs}" if runs else ""))
     return 0
 
 
@@ -176,5 +184,5 @@ def _cmd_official_export(args: argparse.Namespace) -> int:
             ep = export_task_run(args.run, task_dir, args.out)
         else:
             raise CliError(f"{args.suite}: neither {initial} nor {task_dir} exists for task {task_id!r}")
-    print(f"wrote {args.out}: {len(ep.calls)} calls, {len(ep.states)} states, final state {ep.final_state().index}")
+    print(f"wrote {args.out}: {plural(len(ep.calls), 'call')}, {plural(len(ep.states), 'state')}, final state {ep.final_state().index}")
     return 0

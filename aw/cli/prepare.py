@@ -1,7 +1,7 @@
 """aw-prepare: build task suites (manifest.json, tasks/, targets/).
 
     aw-prepare synthetic --out SUITE [--per-source N] [--seed S]   the embedded procedural benchmark
-    aw-prepare folder SRC --out SUITE [--source NAME]              a folder of one's own objects
+    aw-prepare folder SRC --out SUITE [--source NAME] [--up-axis auto|z|y]   a folder of one's own objects
     aw-prepare compose --out SUITE --partnet DIR ...                the paper's benchmark from datasets
     aw-prepare official PKG --out SUITE [--episodes DIR --runs RUNS]
 
@@ -22,6 +22,7 @@ from aw.cli.common import CliError, UsageError, add_commands, new_parser, run_ma
 from aw.cli.suite import add_suite_options, check_unique_task_ids, run_suite
 from aw.formats import FormatError
 from aw.prepare import ObjectError, ObjectSpec, SuiteExistsError
+from aw.sources.folder import UP_AXES
 
 __all__ = ["REGISTRARS", "add_suite_options", "run_suite", "build_parser", "main"]
 
@@ -71,6 +72,10 @@ def register_folder(sub) -> None:
     p.add_argument("src", metavar="SRC", help="folder with one subfolder per object")
     add_suite_options(p, protocol="native")
     p.add_argument("--source", default="custom", help="benchmark block name for objects whose meta.json has none (default custom)")
+    p.add_argument("--up-axis", choices=UP_AXES, default="auto",
+                   help="which axis of the meshes points up, for objects whose meta.json has no up_axis: z, y (turned "
+                   "Z-up), or auto (default: Y where upright parts stand along Y and the object rests on them, else "
+                   "Z; the choice is printed per object; see docs/datasets.md)")
     p.set_defaults(func=_cmd_folder)
 
 
@@ -79,7 +84,10 @@ def _cmd_folder(args: argparse.Namespace) -> int:
 
     if not Path(args.src).is_dir():
         raise UsageError(f"SRC {args.src}: source folder not found")
-    found = scan_folder(args.src)
+    try:
+        found = scan_folder(args.src)
+    except FormatError as exc:  # SRC itself is unusable (no object folders, two objects with one id)
+        raise UsageError(str(exc)) from None
     loader = "aw.sources.folder:load_object"
     sources = []
     for f in found:
@@ -90,12 +98,19 @@ def _cmd_folder(args: argparse.Namespace) -> int:
         # the distractor comes from the next object of the same source, if there is one
         same = [j for j in range(len(found)) if sources[j] == sources[i] and j != i]
         donor_j = next((j for j in same if j > i), same[0] if same else None)
-        donor = ObjectSpec(loader, (found[donor_j].path, args.source)) if donor_j is not None else None
-        specs.append(ObjectSpec(loader, (f.path, args.source), tuple(f.conditions), donor))
+        donor = ObjectSpec(loader, (found[donor_j].path, args.source, args.up_axis)) if donor_j is not None else None
+        specs.append(ObjectSpec(loader, (f.path, args.source, args.up_axis), tuple(f.conditions), donor))
     check_unique_task_ids([(s, f.object_id, f.conditions) for s, f in zip(sources, found)])
-    # load every object once here: bad meshes are reported before any work is done
+    # load every object once here: bad meshes and objects that cannot be assessed are reported
+    # before any work is done, and the up axis chosen for each is said
     for f in found:
-        load_object(f.path, args.source)
+        obj = load_object(f.path, args.source, args.up_axis)
+        if obj.n_parts < 2:
+            raise CliError(f"{f.path}: one part ({obj.parts[0].name}) cannot be assessed: the registration aligns "
+                           "any single part onto its target, so an agent that never moves scores PA 100%, SR 1; "
+                           "an object needs at least 2 parts")
+        up = obj.meta["up_axis"]
+        print(f"{f.object_id}: up axis {up['axis'].upper()} ({up['how']})", file=sys.stderr)
     return run_suite(args, specs, sources, name=f"folder-{Path(args.src).resolve().name}", generator="aw.sources.folder")
 
 

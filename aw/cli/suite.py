@@ -8,7 +8,7 @@ import argparse
 import time
 from collections.abc import Sequence
 
-from aw.cli.common import CliError, UsageError, add_jobs, add_no_progress, add_overwrite, check_out_dir
+from aw.cli.common import CliError, UsageError, add_jobs, add_no_progress, add_overwrite, check_out_dir, plural
 from aw.prepare import ObjectSpec, VariantPlan, build_suite, format_summary, summarize, task_id_for
 
 __all__ = ["CliError", "add_suite_options", "check_unique_task_ids", "run_suite", "variant_plans"]
@@ -74,5 +74,6 @@ def run_suite(args: argparse.Namespace, specs: list[ObjectSpec], sources: list[s
     )
     elapsed = time.perf_counter() - start
     print(format_summary(summarize(manifest, results)))
-    print(f"wrote {len(manifest.tasks)} tasks of {len(results)} objects to {args.out} in {elapsed:.1f} s")
+    print(f"wrote {plural(len(manifest.tasks), 'task')} of {plural(len(results), 'object')} to {args.out} "
+          f"in {elapsed:.1f} s")
     return 0

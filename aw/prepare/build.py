@@ -9,7 +9,7 @@ from pathlib import Path
 from aw.assembly import AssembledObject
 from aw.formats import SuiteEntry
 from aw.prepare.references import IMAGE_SIZE, MANUAL_SIZE, reference_images
-from aw.prepare.standardize import PreparedObject, standardize
+from aw.prepare.standardize import PreparedObject, assembled_at_start, standardize
 from aw.prepare.variants import add_distractor, layout_variant, remove_part
 from aw.prepare.writer import task_id_for, write_prepared
 
@@ -36,6 +36,18 @@ class VariantPlan:
     def appendix_e(cls, seed: int = 0) -> "VariantPlan":
         """The paper's set: two alternative layouts, one removed part, one distractor."""
         return cls(layout_seeds=(seed + 1001, seed + 1002), missing_seed=seed + 2001, distractor_seed=seed + 3001)
+
+
+def _check_assessable(prep: PreparedObject) -> None:
+    """Refuse a layout in which parts are already assembled: they would score without a move."""
+    together = assembled_at_start(prep)
+    if not together:
+        return
+    n = len(prep.scored_parts)
+    what = (f"its one part {together[0]} is on its target after the registration" if n == 1 else
+            f"{len(together)} of its {n} parts ({', '.join(together)}) are already assembled in the initial layout")
+    raise ValueError(f"object {prep.obj.object_id} cannot be assessed: {what}, so an agent that never moves scores "
+                     "them as placed")
 
 
 def prepare_object(
@@ -75,12 +87,14 @@ def prepare_object(
         prep, official = prepare_official_object(obj, seed)
     else:
         prep = standardize(obj, seed)
+    _check_assessable(prep)
     refs = {c: reference_images(prep, c, image_size, manual_size) for c in conditions}
 
     derived: list[tuple[str, PreparedObject]] = []
     if variants is not None:
         for k, layout_seed in enumerate(variants.layout_seeds, start=1):
             derived.append((f"layout{k}", layout_variant(obj, layout_seed)))
+            _check_assessable(derived[-1][1])
         if variants.missing_seed is not None and obj.n_parts >= 3:
             derived.append(("missing", remove_part(prep, variants.missing_seed)))
         if variants.distractor_seed is not None:

@@ -32,7 +32,7 @@ import numpy as np
 import trimesh
 
 from aw.assembly import AssembledObject, SourcePart
-from aw.pose import matrix_to_quat, pca_frame, rotation_about_axis
+from aw.pose import apply_pose, matrix_to_quat, pca_frame, rotation_about_axis
 from aw.prepare.geometry import eval_divisor, unique_vertices
 from aw.prepare.layout import shelf_pack
 
@@ -41,6 +41,8 @@ __all__ = [
     "PreparedObject",
     "PartFrame",
     "clean_object",
+    "assembled_at_start",
+    "ASSEMBLED_TOLERANCE",
     "part_frames",
     "normalization_divisor",
     "standardize",
@@ -107,6 +109,30 @@ class PreparedObject:
 
     def with_parts(self, parts: list[PreparedPart], **changes) -> "PreparedObject":
         return replace(self, parts=sorted(parts, key=lambda p: p.part_id), **changes)
+
+
+ASSEMBLED_TOLERANCE = 1e-3
+"""Two parts keep their assembled placement when one rigid motion takes both onto their targets
+to within this many normalized units (the object is about 1 across)."""
+
+
+def assembled_at_start(prep: PreparedObject, tol: float = ASSEMBLED_TOLERANCE) -> list[str]:
+    """Scored parts already assembled among themselves in the initial layout: the largest group
+    (two or more) whose target poses are one rigid motion, so that the whole-assembly
+    registration can put them on their targets with no move at all; a one-part object's part;
+    else ``[]``. An object where this is every part cannot be assessed (an agent that never
+    moves scores PA 100%)."""
+    parts = prep.scored_parts
+    if len(parts) == 1:
+        return [parts[0].part_id]
+    best: list[str] = []
+    for a in parts:
+        group = [b.part_id for b in parts
+                 if all(float(np.abs(apply_pose(a.target, m.vertices) - apply_pose(b.target, m.vertices)).max()) <= tol
+                        for m in (a.mesh, b.mesh))]
+        if len(group) > len(best):
+            best = group
+    return best if len(best) >= 2 else []
 
 
 def referenced_only(mesh: trimesh.Trimesh) -> trimesh.Trimesh:

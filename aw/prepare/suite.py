@@ -256,7 +256,7 @@ def format_summary(summary: dict[str, dict[str, Any]]) -> str:
     lines = [fmt(head), rule, *(fmt(r) for r in rows[:-1]), rule, fmt(rows[-1])]
     for source, s in summary.items():
         conds = ", ".join(f"{k} {v}" for k, v in s["conditions"].items())
-        cats = ", ".join(f"{k} {v}" for k, v in s["categories"].items())
+        cats = ", ".join(f"{k or '(no category)'} {v}" for k, v in s["categories"].items())
         variants = ", ".join(f"{k} {v}" for k, v in s["variants"].items())
         lines.append(f"{source}: conditions {conds}; variants {variants}; categories {cats}; part counts {s['part_counts']}")
     return "\n".join(lines)

@@ -21,7 +21,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Callable
 
-from aw.formats import FormatError, RunInfo, read_manifest, read_task, read_trajectory, write_run_info
+from aw.formats import FormatError, RunInfo, read_manifest, read_run_info, read_task, read_trajectory, write_run_info
 from aw.formats.suite import suite_paths
 from aw.formats.task import MAX_BUDGET_MINUTES
 from aw.formats.trajectory import FinalState, write_final
@@ -134,6 +134,118 @@ def check_config(cfg: BatchConfig) -> None:
         raise RunnerError(f"--system must be a plain name (it becomes a directory), got {cfg.system!r}")
 
 
+def system_label(agent: str | None, harness: str | None, options: dict[str, Any] | None = None) -> str:
+    """The default system label: the agent or harness name, with the oracle's noise level when one
+    is set (``oracle-noise0.5``), so that two noise levels never share a runs folder."""
+    label = agent or harness or ""
+    noise = (options or {}).get("noise")
+    return f"{label}-noise{noise:g}" if isinstance(noise, (int, float)) else label
+
+
+def effective_options(cfg: BatchConfig) -> dict[str, Any]:
+    """The agent options an episode gets: ``agent_options`` with ``noise`` from ``--noise``."""
+    options = dict(cfg.agent_options)
+    if cfg.noise is not None:
+        options["noise"] = cfg.noise
+    return options
+
+
+# The options that change what an episode does, and the flag that sets each (run.json keeps them
+# as ``extra.settings``). Not here: --jobs, --call-timeout, --harness-bin (how, not what, is run).
+SETTING_FLAGS = {"agent": "--agent", "harness": "--harness", "seed": "--seed", "think_seconds": "--think-seconds",
+                 "budget_minutes": "--budget-minutes", "timeout_minutes": "--timeout-minutes",
+                 "harness_model": "--harness-model", "harness_args": "--harness-arg"}
+
+
+def run_settings(cfg: BatchConfig) -> dict[str, Any]:
+    """The behaviour-changing options of ``cfg`` (agent options as ``option.<name>``)."""
+    out: dict[str, Any] = {"timeout_minutes": cfg.limit_seconds / 60.0, "budget_minutes": cfg.budget_minutes}
+    if cfg.agent is not None:
+        out.update(agent=cfg.agent, seed=cfg.seed, think_seconds=cfg.think_seconds)
+        out.update({f"option.{k}": v for k, v in sorted(effective_options(cfg).items())})
+    else:
+        out.update(harness=cfg.harness, harness_model=cfg.harness_model, harness_args=list(cfg.harness_args))
+    return out
+
+
+def _recorded_settings(info: RunInfo) -> dict[str, Any]:
+    """What an existing run.json says about its options; for one written before ``settings``
+    was kept, what its other fields tell (agent, seed, think seconds, limit, agent options)."""
+    ex = info.extra
+    if isinstance(ex.get("settings"), dict):
+        return dict(ex["settings"])
+    if info.harness is not None:
+        return {"timeout_minutes": ex["limit_seconds"] / 60.0} if "limit_seconds" in ex else {}
+    out: dict[str, Any] = {"agent": info.agent}
+    for key, name in (("seed", "seed"), ("think_seconds", "think_seconds")):
+        if key in ex:
+            out[name] = ex[key]
+    if "limit_seconds" in ex:
+        out["timeout_minutes"] = ex["limit_seconds"] / 60.0
+    out.update({f"option.{k}": v for k, v in (ex.get("options") or {}).items()})
+    return out
+
+
+def _flag(key: str) -> str:
+    if key == "option.noise":
+        return "--noise"
+    if key.startswith("option."):
+        return f"--agent-option {key[7:]}"
+    return SETTING_FLAGS.get(key, key)
+
+
+def _shown(v: Any) -> str:
+    if v is None:
+        return "not set"
+    if isinstance(v, float):
+        return f"{v:g}"
+    return json.dumps(v) if isinstance(v, (list, dict)) else str(v)
+
+
+def settings_differences(recorded: dict[str, Any], now: dict[str, Any]) -> list[str]:
+    """``"--noise 0.5 there, 1.5 now"`` for every option whose value differs. Agent options are
+    compared over both sides' keys (one left unset is a difference); other keys only where the
+    recorded side has them (older run.json files lack some)."""
+    keys = [k for k in now if k in recorded or k.startswith("option.")]
+    keys += [k for k in recorded if k.startswith("option.") and k not in now]
+    out = []
+    for k in keys:
+        a, b = recorded.get(k), now.get(k)
+        if _shown(a) != _shown(b):
+            out.append(f"{_flag(k)} {_shown(a)} there, {_shown(b)} now")
+    return out
+
+
+def check_reuse(cfg: BatchConfig, planned: list[Episode]) -> None:
+    """Refuse a batch that would leave runs of other options under this label: the existing runs
+    it would skip, and (with ``--tasks``) those of other tasks it does not touch, which aw-score
+    would read as one system. Names the option that differs and the flags that resolve it."""
+    system_dir = cfg.out_dir / cfg.system
+    if not system_dir.is_dir():
+        return
+    replaced = {ep.task_id for ep in planned} if cfg.overwrite else set()
+    now = run_settings(cfg)
+    clashes: dict[str, list[str]] = {}
+    for path in sorted(system_dir.glob("*/run.json")):
+        if path.parent.name in replaced:
+            continue
+        try:
+            info = read_run_info(path)
+        except FormatError:  # unreadable: aw-score reports it; nothing to compare
+            continue
+        for diff in settings_differences(_recorded_settings(info), now):
+            clashes.setdefault(diff, []).append(path.parent.name)
+    if not clashes:
+        return
+    tasks = sorted({t for ts in clashes.values() for t in ts})
+    outside = [t for t in tasks if t not in {ep.task_id for ep in planned}]
+    fix = ("--overwrite to replace those runs" if not outside else
+           "--overwrite without --tasks (or with --tasks also naming " + ", ".join(outside[:3]) +
+           (", ..." if len(outside) > 3 else "") + ") to replace them")
+    raise RunnerError(f"{system_dir} holds {len(tasks)} run{'s' if len(tasks) != 1 else ''} made with other options "
+                      f"({'; '.join(clashes)}); pass --system LABEL to run these options as another system, or {fix}")
+
+
 def plan_episodes(cfg: BatchConfig) -> list[Episode]:
     """The suite's tasks (or the ``tasks`` subset, in suite order), checked before anything runs."""
     try:
@@ -220,9 +332,7 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
     work = ep.run_dir / ".runner"
     work.mkdir(parents=True, exist_ok=True)
     episode_marker = new_marker()
-    options = dict(cfg.agent_options)
-    if cfg.noise is not None:
-        options["noise"] = cfg.noise
+    options = effective_options(cfg)
     spec = EpisodeSpec(
         task_id=ep.task_id,
         agent=cfg.agent,
@@ -243,7 +353,8 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
     result: EpisodeResult | None = None
     if Path(spec.result_path).is_file():
         result = EpisodeResult.model_validate_json(Path(spec.result_path).read_bytes())
-    extra: dict[str, Any] = {"seed": cfg.seed, "think_seconds": cfg.think_seconds, "limit_seconds": cfg.limit_seconds}
+    extra: dict[str, Any] = {"seed": cfg.seed, "think_seconds": cfg.think_seconds, "limit_seconds": cfg.limit_seconds,
+                             "settings": run_settings(cfg)}
     if options:
         extra["options"] = options
     if sup.timed_out:
@@ -356,6 +467,7 @@ def _run_harness_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str]) -> 
         "exit_code": sup.returncode,
         "limit_seconds": cfg.limit_seconds,
         "transcript": adapter.transcript_name,
+        "settings": run_settings(cfg),
         **usage.extra,
     }
     if sup.killed:
@@ -439,6 +551,7 @@ def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None
     """Run every planned episode, ``cfg.jobs`` at a time, with a progress bar."""
     check_config(cfg)
     episodes = plan_episodes(cfg)
+    check_reuse(cfg, episodes)
     skipped = []
     if not cfg.overwrite:
         todo = []

@@ -21,9 +21,9 @@ from pathlib import Path
 
 from aw.cli.common import (
     CliError, UsageError, add_jobs, add_no_progress, add_overwrite, check_out_dir, new_parser,
-    nonnegative_float, positive_float, run_main,
+    nonnegative_float, plural, positive_float, run_main,
 )
-from aw.runner.batch import BatchConfig, RunnerError, check_config, run_batch
+from aw.runner.batch import BatchConfig, RunnerError, check_config, run_batch, system_label
 
 
 def _agent_option(text: str) -> tuple[str, object]:
@@ -47,7 +47,8 @@ def build_parser() -> argparse.ArgumentParser:
     who.add_argument("--harness", choices=["claude-code", "codex"], metavar="NAME",
                      help="run a real agent harness CLI: claude-code or codex")
     p.add_argument("--out", type=Path, metavar="RUNS", help="runs directory to write (required unless --check)")
-    p.add_argument("--system", metavar="LABEL", help="system label: the runs go to RUNS/LABEL/ (default: the agent or harness name)")
+    p.add_argument("--system", metavar="LABEL", help="system label: the runs go to RUNS/LABEL/ (default: the agent or harness name, with the "
+                   "oracle's noise level, e.g. oracle-noise0.5)")
     add_jobs(p, "episodes")
     p.add_argument("--tasks", nargs="+", metavar="ID", help="only these task ids")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="agent seed (default 0)")
@@ -131,7 +132,8 @@ def _run(args: argparse.Namespace) -> int:
             harness_bin = str(find_binary(args.harness, args.harness_bin))
         except ValueError as exc:
             raise UsageError(str(exc)) from None
-    system = args.system or args.agent or args.harness
+    system = args.system or system_label(args.agent, args.harness,
+                                         {**dict(args.agent_option), **({"noise": args.noise} if args.noise is not None else {})})
     cfg = BatchConfig(
         suite_dir=args.suite, system=system, out_dir=args.out, agent=args.agent, harness=args.harness, jobs=args.jobs,
         tasks=args.tasks, seed=args.seed, noise=args.noise, timeout_minutes=args.timeout_minutes,
@@ -155,8 +157,8 @@ def _run(args: argparse.Namespace) -> int:
         return 130
     ends = result.endings()
     summary = ", ".join(f"{k} {v}" for k, v in sorted(ends.items())) or "nothing to run"
-    print(f"{system}: {len(result.runs)} episodes in {result.wall_seconds:.1f} s ({summary})", end="")
-    print(f"; skipped {len(result.skipped)} with an existing run.json" if result.skipped else "")
+    print(f"{system}: {plural(len(result.runs), 'episode')} in {result.wall_seconds:.1f} s ({summary})", end="")
+    print(f"; skipped {len(result.skipped)} with an existing run.json (same options)" if result.skipped else "")
     print(f"runs: {os.path.join(str(args.out), system)}")
     for r in result.runs:
         if r.ended != "finished":

@@ -27,11 +27,14 @@ from aw.assembly import AssembledObject, SourcePart, y_up_to_z_up
 from aw.formats import FormatError
 from aw.formats.io import load_json, read_model
 from aw.meshes import load_mesh
+from aw.sources.up_axis import guess_up_axis
 
-__all__ = ["MESH_SUFFIXES", "ObjectMeta", "FolderObject", "UnknownMetaKeys", "load_object", "scan_folder", "unknown_keys"]
+__all__ = ["MESH_SUFFIXES", "UP_AXES", "ObjectMeta", "FolderObject", "UnknownMetaKeys", "load_object", "scan_folder", "unknown_keys"]
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
 Condition = Literal["none", "image", "manual"]
+UpAxis = Literal["z", "y", "auto"]
+UP_AXES = ("auto", "z", "y")
 
 
 class ObjectMeta(BaseModel):
@@ -41,7 +44,9 @@ class ObjectMeta(BaseModel):
     ``references``, else ``["none"]``; ``["none", "image"]`` builds paired tasks as for PartNet. A
     condition ``image`` or ``manual`` without references gets rendered ones (manual pages follow
     ``steps``, lists of part names, else one part per page). ``references`` paths are relative
-    to the object folder. ``up_axis: "y"`` turns Y-up meshes Z-up with (x, y, z) -> (x, -z, y).
+    to the object folder. ``up_axis``: ``"y"`` turns Y-up meshes Z-up with (x, y, z) -> (x, -z, y),
+    ``"z"`` keeps them, ``"auto"`` decides from the geometry (:mod:`aw.sources.up_axis`); unset,
+    the importer's choice (``aw-prepare folder --up-axis``, default ``auto``) applies.
     """
 
     model_config = ConfigDict(extra="ignore")  # real folders carry metadata of their own
@@ -55,7 +60,7 @@ class ObjectMeta(BaseModel):
     references: dict[Literal["image", "manual"], list[str]] = Field(default_factory=dict)
     equivalence: list[list[str]] | None = None
     steps: list[list[str]] | None = None
-    up_axis: Literal["z", "y"] = "z"
+    up_axis: UpAxis | None = None
 
     @model_validator(mode="after")
     def _one_condition_field(self) -> "ObjectMeta":
@@ -110,22 +115,37 @@ def _conditions(meta: ObjectMeta) -> list[str]:
     return [c for c in ("image", "manual") if meta.references.get(c)] or ["none"]
 
 
-def load_object(obj_dir: str | Path, default_source: str = "custom") -> AssembledObject:
-    """Read one object folder into an :class:`AssembledObject` (``meta`` carries ``conditions``)."""
+def _up_axis(meta: ObjectMeta, up_axis: str, meshes: list) -> tuple[str, str]:
+    """``(axis, how it was decided)``: ``meta.json`` first, then the importer's ``up_axis``, then
+    the geometry."""
+    if meta.up_axis in ("y", "z"):
+        return meta.up_axis, "meta.json up_axis"
+    if meta.up_axis is None and up_axis in ("y", "z"):
+        return up_axis, "--up-axis"
+    guess = guess_up_axis(meshes)
+    return guess.axis, f"auto: {guess.reason}"
+
+
+def load_object(obj_dir: str | Path, default_source: str = "custom", up_axis: str = "auto") -> AssembledObject:
+    """Read one object folder into an :class:`AssembledObject` (``meta`` carries ``conditions``
+    and ``up_axis``: ``{"axis": "y"|"z", "how": ...}``, how the up axis was decided).
+
+    ``up_axis`` (``auto``, ``z`` or ``y``) applies where ``meta.json`` names none."""
     obj_dir = Path(obj_dir)
+    if up_axis not in UP_AXES:
+        raise ValueError(f"up_axis must be one of {UP_AXES}, got {up_axis!r}")
     if not obj_dir.is_dir():
         raise FormatError(obj_dir, "object folder not found")
     meta = read_meta(obj_dir)
     meta_path = obj_dir / "meta.json"
-    parts = []
-    for f in _part_files(obj_dir):
-        mesh = load_mesh(f)
-        if meta.up_axis == "y":
-            mesh = y_up_to_z_up(mesh)
+    files = _part_files(obj_dir)
+    meshes = [load_mesh(f) for f in files]
+    for f, mesh in zip(files, meshes):
         extent = np.ptp(np.asarray(mesh.vertices), axis=0)
         if not np.any(extent > 0):
             raise FormatError(f, "all vertices coincide; a part needs extent")
-        parts.append(SourcePart(f.stem, mesh))
+    axis, how = _up_axis(meta, up_axis, meshes)
+    parts = [SourcePart(f.stem, y_up_to_z_up(m) if axis == "y" else m) for f, m in zip(files, meshes)]
     names = {p.name for p in parts}
     for field_name, groups in (("equivalence", meta.equivalence), ("steps", meta.steps)):
         for group in groups or []:
@@ -144,7 +164,7 @@ def load_object(obj_dir: str | Path, default_source: str = "custom") -> Assemble
             paths.append(p)
         if paths:
             references[cond] = paths
-    extra = {"conditions": _conditions(meta), "folder": str(obj_dir)}
+    extra = {"conditions": _conditions(meta), "folder": str(obj_dir), "up_axis": {"axis": axis, "how": how}}
     if meta.steps:
         extra["steps"] = meta.steps
     return AssembledObject(

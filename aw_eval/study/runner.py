@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import re
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
@@ -18,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from aw.cli.common import plural
 from aw.formats import FormatError, read_manifest, read_run_info
 from aw.formats.suite import suite_paths
 from aw_eval.study import evaluator
@@ -26,7 +28,7 @@ from aw_eval.study.job import STATUS_ERROR, RunRequest, ScoreSettings, TaskJob, 
 from aw_eval.study.model import STATUS_MISSING, RunScore
 from aw_eval.study.table import RunRecord, Study
 
-__all__ = ["StudyError", "ScoringFailed", "discover_runs", "score_study", "ScoreStats", "default_jobs"]
+__all__ = ["StudyError", "ScoringFailed", "Coverage", "discover_runs", "score_study", "ScoreStats", "default_jobs"]
 
 
 class StudyError(Exception):
@@ -52,6 +54,7 @@ class ScoreStats:
     seconds_geometry: float = 0.0  # summed over the tasks dispatched now (worker wall time)
     seconds_checkpoints: float = 0.0
     seconds_final: float = 0.0
+    coverage: Coverage | None = None  # how the runs found match the suite
 
 
 def default_jobs() -> int:
@@ -83,29 +86,88 @@ def _is_run_dir(p: Path) -> bool:
     return (p / "trajectory.jsonl").exists() or (p / "final.json").exists()
 
 
+_ATTEMPT = re.compile(r"attempt-[0-9]+")
+
+
+def _attempt_dirs(system_dir: Path) -> list[Path]:
+    """The ``attempt-N`` subfolders of an ``aw-serve --record-under`` folder, in attempt order."""
+    dirs = [p for p in system_dir.iterdir() if p.is_dir() and _ATTEMPT.fullmatch(p.name)]
+    return sorted(dirs, key=lambda p: int(p.name.split("-")[1]))
+
+
 def discover_runs(runs_dir: Path, task_ids: set[str]) -> tuple[list[str], dict[tuple[str, str], Path], list[dict[str, Any]]]:
     """``(systems, {(system, task_id): run_dir}, unknown)`` where ``unknown`` lists run
-    directories of tasks not in the suite. Hidden directories are skipped."""
+    directories of tasks not in the suite. Hidden directories are skipped.
+
+    A system folder laid out by ``aw-serve --record-under`` (``<name>/attempt-N/<task_id>/``, no
+    task folder of its own) is one system per attempt, named ``<name>/attempt-N``."""
     if not runs_dir.is_dir():
         raise StudyError(f"{runs_dir}: runs directory not found")
-    systems = sorted(p.name for p in runs_dir.iterdir() if p.is_dir() and not p.name.startswith("."))
-    as_tasks = [s for s in systems if s in task_ids and _is_run_dir(runs_dir / s)]
+    top = sorted(p.name for p in runs_dir.iterdir() if p.is_dir() and not p.name.startswith("."))
+    as_tasks = [s for s in top if s in task_ids and _is_run_dir(runs_dir / s)]
     if as_tasks:
         shown = ", ".join(as_tasks[:3]) + (", ..." if len(as_tasks) > 3 else "")
         raise StudyError(f"{runs_dir} looks like one system's folder: its subdirectories {shown} are runs of suite "
                          f"tasks; pass the runs root that holds it ({runs_dir.parent}), laid out as "
                          "RUNS_DIR/<system>/<task_id>/")
+    folders: dict[str, Path] = {}
+    for name in top:
+        attempts = _attempt_dirs(runs_dir / name)
+        own_tasks = any((runs_dir / name / t).is_dir() for t in task_ids)
+        if attempts and not own_tasks:
+            folders.update((f"{name}/{a.name}", a) for a in attempts)
+        else:
+            folders[name] = runs_dir / name
     found: dict[tuple[str, str], Path] = {}
     unknown: list[dict[str, Any]] = []
-    for s in systems:
-        for p in sorted((runs_dir / s).iterdir()):
+    for s, folder in folders.items():
+        for p in sorted(folder.iterdir()):
             if not p.is_dir() or p.name.startswith("."):
                 continue
             if p.name in task_ids:
                 found[(s, p.name)] = p
             elif _is_run_dir(p):
                 unknown.append({"system": s, "task_id": p.name, "path": str(p)})
-    return systems, found, unknown
+    return list(folders), found, unknown
+
+
+@dataclass
+class Coverage:
+    """How the runs found match the suite: ``runs[system]`` runs (a folder with a trajectory or
+    final.json) of its ``n_tasks`` tasks, and ``unknown`` runs of tasks outside it."""
+
+    n_tasks: int
+    runs: dict[str, int]
+    unknown: int
+
+    @classmethod
+    def of(cls, systems: list[str], found: dict[tuple[str, str], Path], unknown: list[dict[str, Any]],
+           n_tasks: int) -> "Coverage":
+        runs = {s: 0 for s in systems}
+        for (s, _), p in found.items():
+            runs[s] += _is_run_dir(p)
+        return cls(n_tasks, runs, len(unknown))
+
+    @property
+    def matched(self) -> int:
+        return sum(self.runs.values())
+
+    def numbers(self) -> str:
+        """Runs found, suite tasks, unknown runs, in one phrase."""
+        return (f"{plural(self.matched + self.unknown, 'run')} found: {self.matched} for the suite's "
+                f"{plural(self.n_tasks, 'task')}, {self.unknown} for tasks not in the suite")
+
+    def warnings(self, suite_name: str) -> list[str]:
+        """One line per system that lacks runs, and one for runs of tasks outside the suite."""
+        out = []
+        for s, k in self.runs.items():
+            if k < self.n_tasks:
+                out.append(f"system {s} has runs for {k} of the {plural(self.n_tasks, 'task')}; the other "
+                           f"{self.n_tasks - k} count as missing (PA = SR = 0)")
+        if self.unknown:
+            out.append(f"{plural(self.unknown, 'run')} for tasks not in suite {suite_name} ignored "
+                       f"({self.numbers()})")
+        return out
 
 
 def _progress(total: int, enabled: bool, desc: str):
@@ -206,9 +268,23 @@ def score_study(suite_dir: str | Path, runs_dir: str | Path, out_dir: str | Path
     systems, found, unknown = discover_runs(runs_dir, ids)
     if not systems:
         raise StudyError(f"{runs_dir}: no system directories (expected RUNS_DIR/<system>/<task_id>/)")
+    coverage = Coverage.of(systems, found, unknown, len(entries))
+    if coverage.matched == 0:  # a table of zeros would look like a result
+        example = f" (e.g. {unknown[0]['system']}/{unknown[0]['task_id']})" if unknown else ""
+        raise StudyError(f"{runs_dir}: no run matches a task of suite {manifest.name} ({coverage.numbers()}{example}); "
+                         "are these runs of another suite? Runs are RUNS_DIR/<system>/<task_id>/ with "
+                         "trajectory.jsonl or final.json")
+    if log:
+        recorded = sorted({s.split("/")[0] for s in systems if "/" in s})
+        for name in recorded:
+            mine = [s for s in systems if s.startswith(name + "/")]
+            log(f"{runs_dir / name} holds aw-serve --record-under recordings: scored as "
+                f"{plural(len(mine), 'system')}, one per attempt ({', '.join(mine)})")
+        for line in coverage.warnings(manifest.name):
+            log(f"warning: {line}")
     cache = Cache(out_dir / "cache")
     ev_version = evaluator.evaluator_version()
-    stats = ScoreStats()
+    stats = ScoreStats(coverage=coverage)
     scores: dict[tuple[str, str], RunScore] = {}
     keys: dict[tuple[str, str], str] = {}
     facts = {}
@@ -243,8 +319,8 @@ def score_study(suite_dir: str | Path, runs_dir: str | Path, out_dir: str | Path
     stats.tasks_dispatched = len(jobs)
     outputs, stats.executor, close = _run_jobs(jobs, scheduler=scheduler, n_jobs=n_jobs or default_jobs())
     if log and jobs:
-        log(f"scoring {sum(len(j.runs) for j in jobs)} runs of {len(jobs)} tasks ({stats.executor}); "
-            f"{stats.cached} runs from the cache")
+        log(f"scoring {plural(sum(len(j.runs) for j in jobs), 'run')} of {plural(len(jobs), 'task')} ({stats.executor}); "
+            f"{plural(stats.cached, 'run')} from the cache")
     try:
         with _progress(len(jobs), progress and len(jobs) > 0, "scoring") as bar:
             for out in outputs:

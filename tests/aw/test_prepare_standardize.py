@@ -162,3 +162,28 @@ def test_invalid_objects_raise_clear_errors():
     bad.equivalence = [["leg1", "nope"]]
     with pytest.raises(ValueError, match="unknown parts"):
         standardize(bad)
+
+
+def test_parts_already_assembled_in_the_layout_are_found_and_refused(tmp_path):
+    from dataclasses import replace
+
+    from aw.pose import apply_pose, invert_pose
+    from aw.prepare.standardize import assembled_at_start
+
+    prep = standardize(stool())
+    assert assembled_at_start(prep) == []  # the standardized layout moves every part on its own
+    a, b, *rest = prep.parts
+    # re-bake b so that the motion that assembles a also assembles b: the two stay together
+    v = apply_pose(invert_pose(a.target), apply_pose(b.target, np.asarray(b.mesh.vertices)))
+    glued = prep.with_parts([a, replace(b, mesh=trimesh.Trimesh(v, b.mesh.faces, process=False), target=a.target.copy()), *rest])
+    assert assembled_at_start(glued) == [a.part_id, b.part_id]
+    from aw.prepare.build import _check_assessable
+
+    with pytest.raises(ValueError, match=rf"2 of its 5 parts \({a.part_id}, {b.part_id}\) are already assembled"):
+        _check_assessable(glued)
+    # one part: the registration puts it on its target whatever its pose
+    single = AssembledObject("plate", "custom", "test", "", [SourcePart("plate", box((0.4, 0.3, 0.02), (0, 0, 0)))])
+    assert assembled_at_start(standardize(single)) == [standardize(single).parts[0].part_id]
+    with pytest.raises(ValueError, match=r"object plate cannot be assessed: its one part p01 is on its target"):
+        prepare_object(single, tmp_path, ["none"])
+    assert not (tmp_path / "tasks").exists()

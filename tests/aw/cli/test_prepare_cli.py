@@ -96,6 +96,11 @@ def test_bad_arguments_give_one_line_errors(tmp_path, capsys):
     assert "is a file" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["nonsense"])
+    # a source path that cannot be used is a usage error (2), as --out is
+    assert main(["compose", "--out", str(tmp_path / "c"), "--partnet", str(tmp_path / "nope")]) == 2
+    assert "nope: PartNet folder not found" in capsys.readouterr().err
+    assert main(["official", str(tmp_path / "nope"), "--out", str(tmp_path / "c")]) == 2
+    assert "PKG " + str(tmp_path / "nope") + ": no such directory" in capsys.readouterr().err
 
 
 def _folder(root):
@@ -133,6 +138,31 @@ def test_folder_errors_name_the_file(tmp_path, capsys):
     assert "lamp/part1.obj" in err and "no triangles" in err
     assert main(["folder", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
     assert "source folder not found" in capsys.readouterr().err
+
+
+def test_folder_refuses_an_unusable_source_and_objects_that_cannot_be_assessed(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    assert main(["folder", str(tmp_path / "empty"), "--out", str(tmp_path / "o")]) == 2  # a usage error, said first
+    assert "empty: contains no object folders" in capsys.readouterr().err
+    src = _folder(tmp_path / "src")
+    (src / "single").mkdir()
+    trimesh.creation.box(extents=(0.4, 0.3, 0.05)).export(src / "single" / "plate.obj")
+    assert main(["folder", str(src), "--out", str(tmp_path / "o"), "--jobs", "1", "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert "single: one part (plate) cannot be assessed" in err and "never moves scores PA 100%, SR 1" in err
+    assert not (tmp_path / "o").exists()  # refused before any work
+
+
+def test_folder_summary_names_an_empty_category_and_counts_in_the_right_number(tmp_path, capsys):
+    src = _folder(tmp_path / "src")
+    for extra in ("desk", "lamp"):
+        (src / extra / "meta.json").unlink()
+        for f in (src / extra).iterdir():
+            f.unlink()
+        (src / extra).rmdir()
+    assert main(["folder", str(src), "--out", str(tmp_path / "o"), "--jobs", "1", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert "categories (no category) 1;" in out and "wrote 1 task of 1 object to" in out
 
 
 def test_folder_warns_of_unknown_meta_keys_in_one_line(tmp_path, capsys):

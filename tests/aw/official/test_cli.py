@@ -23,7 +23,7 @@ def test_convert_then_export(tmp_path, capsys):
     original = read_archive(run / "blocks" / "partnet-none" / "samples" / "743" / "final.episode.zip")
     assert main(["official", str(pkg_root), "--episodes", str(tmp_path / "logs"), "--out", str(tmp_path / "suite"),
                  "--runs", str(tmp_path / "runs")]) == 0
-    assert "wrote 1 tasks" in capsys.readouterr().out
+    assert "wrote 1 task to " in capsys.readouterr().out
     run = tmp_path / "runs" / "fixture-m" / "partnet-none--743"
     out = tmp_path / "final.episode.zip"
     assert main(["official-export", str(run), "--suite", str(tmp_path / "suite"), "--out", str(out)]) == 0
@@ -85,7 +85,7 @@ def test_export_a_native_run(tmp_path, capsys):
 
 
 def test_one_line_errors(tmp_path, capsys):
-    assert main(["official", str(tmp_path), "--out", str(tmp_path / "suite")]) == 1
+    assert main(["official", str(tmp_path), "--out", str(tmp_path / "suite")]) == 2  # an unusable path
     err = capsys.readouterr().err
     assert err.startswith("aw-prepare: error: ") and "benchmark.json not found" in err and len(err.splitlines()) == 1
     (tmp_path / "run").mkdir()

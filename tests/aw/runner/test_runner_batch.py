@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aw.formats import read_final, read_run_info, read_targets, read_task, read_trajectory
+from aw.formats import read_final, read_run_info, read_targets, read_task, read_trajectory, write_run_info
 from aw.formats.suite import suite_paths
 from aw.meshes import load_task_meshes
 from aw.pose import apply_pose
-from aw.runner.batch import BatchConfig, RunnerError, run_batch
+from aw.runner.batch import BatchConfig, RunnerError, run_batch, system_label
 from aw.runner.cli import main as aw_run
 
 EDIT_TOOLS = {"translate_objects", "rotate_objects", "set_object_pose"}
@@ -109,6 +109,47 @@ def test_existing_runs_are_skipped_unless_overwrite(agent_runs, tiny_suite):
     cfg = BatchConfig(suite_dir=tiny_suite, system="idle", out_dir=out, agent="idle", tasks=["tiny_table_none"], progress=False)
     res = run_batch(cfg)
     assert res.skipped == ["tiny_table_none"] and res.runs == []
+
+
+def test_a_run_made_with_other_options_is_refused_not_reused(agent_runs, tiny_suite, capsys):
+    out, _ = agent_runs
+    base = [str(tiny_suite), "--out", str(out), "--tasks", "tiny_table_none", "--no-progress"]
+    before = (out / "oracle" / "tiny_table_none" / "run.json").read_bytes()
+    assert aw_run([*base, "--agent", "oracle", "--system", "oracle", "--noise", "1.5"]) == 2
+    err = capsys.readouterr().err
+    assert ("aw-run: error: " + str(out / "oracle") + " holds 2 runs made with other options (--noise not set there, "
+            "1.5 now); pass --system LABEL to run these options as another system, or --overwrite without --tasks "
+            "(or with --tasks also naming tiny_shelf_none) to replace them") in err
+    assert aw_run([*base, "--agent", "idle", "--seed", "3"]) == 2
+    assert "(--seed 0 there, 3 now)" in capsys.readouterr().err
+    # another task under the same label, with other options: the system would mix two configurations
+    other = [str(tiny_suite), "--out", str(out), "--tasks", "tiny_shelf_none", "--no-progress", "--agent", "idle"]
+    for extra in ([], ["--overwrite"]):
+        assert aw_run([*other, "--seed", "3", *extra]) == 2
+        assert ("holds 1 run made with other options (--seed 0 there, 3 now); pass --system LABEL to run these "
+                "options as another system, or --overwrite without --tasks (or with --tasks also naming "
+                "tiny_table_none) to replace them") in capsys.readouterr().err
+    assert not (out / "idle" / "tiny_shelf_none").exists()
+    assert (out / "oracle" / "tiny_table_none" / "run.json").read_bytes() == before
+    # a run.json written before the settings were kept: its other fields still tell the options
+    legacy = out / "legacy"
+    (legacy / "tiny_table_none").mkdir(parents=True)
+    info = read_run_info(out / "idle" / "tiny_table_none" / "run.json")
+    info.extra.pop("settings")
+    write_run_info(legacy / "tiny_table_none" / "run.json", info)
+    assert aw_run([*base, "--agent", "idle", "--system", "legacy", "--think-seconds", "0.5"]) == 2
+    assert "(--think-seconds 0 there, 0.5 now)" in capsys.readouterr().err
+
+
+def test_the_default_label_carries_the_oracle_noise(tiny_suite, tmp_path, capsys):
+    assert system_label("oracle", None, {"noise": 0.5}) == "oracle-noise0.5" and system_label("idle", None) == "idle"
+    base = [str(tiny_suite), "--out", str(tmp_path), "--tasks", "tiny_table_none", "--no-progress", "--agent", "oracle"]
+    assert aw_run([*base, "--noise", "1.5"]) == 0
+    assert capsys.readouterr().out.startswith("oracle-noise1.5: 1 episode in ")
+    assert aw_run([*base, "--agent-option", "noise=1.5"]) == 0  # the same configuration: reused
+    assert "skipped 1 with an existing run.json (same options)" in capsys.readouterr().out
+    settings = read_run_info(tmp_path / "oracle-noise1.5" / "tiny_table_none" / "run.json").extra["settings"]
+    assert settings["option.noise"] == 1.5 and settings["agent"] == "oracle" and settings["seed"] == 0
 
 
 @pytest.mark.parametrize(
