@@ -108,6 +108,7 @@ def _score(args: argparse.Namespace) -> int:
         return official_runs.main(args.suite_dir, args.runs_dir, args.out, args.jobs)
 
     from aw_eval.report import AnalysisSettings, write_outputs
+    from aw_eval.report.markdown import system_label
     from aw_eval.study import ScoreSettings, ScoringFailed, StudyError, score_study
 
     def log(msg: str) -> None:
@@ -154,7 +155,7 @@ def _score(args: argparse.Namespace) -> int:
         have = cov.runs.get(s, cov.n_tasks) if cov else None
         short = f"  [WARNING: runs for only {have} of {plural(cov.n_tasks, 'task')}; the rest count 0]" \
             if cov and have < cov.n_tasks else ""
-        print(f"{s}: Overall SR {o['sr']:.2f}%  PA {o['pa']:.2f}%{note}{short}")
+        print(f"{system_label(doc, s)}: Overall SR {o['sr']:.2f}%  PA {o['pa']:.2f}%{note}{short}")
     print(f"wrote {res['files']['report']}")
     if "html" in res["files"]:
         print(f"wrote {res['files']['html']}")

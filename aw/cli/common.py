@@ -82,7 +82,7 @@ def add_hidden_alias(p: argparse.ArgumentParser, *names: str, dest: str, **kwarg
 def plural(n: int, noun: str, nouns: str | None = None) -> str:
     """``"1 task"``, ``"3 tasks"``: a count with its noun in the right number (``nouns``: an
     irregular plural)."""
-    return f"{n} {noun if n == 1 else (nouns or noun + 's')}"
+    return f"{n:,} {noun if n == 1 else (nouns or noun + 's')}"
 
 
 def add_overwrite(p: argparse.ArgumentParser, what: str) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from aw.cli.common import plural
 from aw_eval.analyses.failures import CLASSES
 from aw_eval.report.fmt import DASH, bold_best, ci, fixed, md_table, paper, pval, signed, threshold_label
 from aw_eval.report.results import protocol_of
@@ -49,10 +50,6 @@ def _real(doc: dict[str, Any]) -> list[str]:
     return [s for s in _order(doc) if _role(doc, s) == "system"]
 
 
-def _plural(n: int, word: str) -> str:
-    return f"{n:,} {word}" + ("" if n == 1 else "s")
-
-
 NO_ORIGINALS = "The suite has no original (non-variant) tasks: no benchmark aggregate."
 
 
@@ -62,7 +59,7 @@ def _no_power(doc: dict[str, Any]) -> str | None:
     floor, alpha = u.get("min_p_holm"), 1 - u.get("level", 0.95)
     if floor is None or floor <= alpha:
         return None
-    return (f"with {_plural(u['n_objects'], 'object')} the smallest p_Holm any result could give is {pval(floor)} "
+    return (f"with {plural(u['n_objects'], 'object')} the smallest p_Holm any result could give is {pval(floor)} "
             f"({u['family_size']} comparisons), so no difference can reach p < {alpha:g}: p_Holm here says the study "
             "is too small, not that the systems are alike")
 
@@ -107,14 +104,14 @@ def _how_to_read(doc: dict[str, Any]) -> str:
     n_orig = doc["suite"]["n_original"]
     why = _no_power(doc)
     if why:
-        warn.append(f"{_plural(n_orig, 'task')}: the tests have no power: {why}.")
+        warn.append(f"{plural(n_orig, 'task')}: the tests have no power: {why}.")
     n_unscored = sum(len(v) for v in doc["unscored_runs"].values())
     if n_unscored:
         kinds = ", ".join(f"{len(v)} {k}" for k, v in sorted(doc["unscored_runs"].items()))
-        warn.append(f"{_plural(n_unscored, 'run')} not scored ({kinds}) count PA = SR = 0: see Runs.")
+        warn.append(f"{plural(n_unscored, 'run')} not scored ({kinds}) count PA = SR = 0: see Runs.")
     if doc.get("unknown_runs"):
         n = len(doc["unknown_runs"])
-        warn.append(f"{_plural(n, 'run')} for tasks not in the suite {'was' if n == 1 else 'were'} ignored: see Runs.")
+        warn.append(f"{plural(n, 'run')} for tasks not in the suite {'was' if n == 1 else 'were'} ignored: see Runs.")
     for s in _order(doc):
         o = q.get(s, {}).get("overall")
         if o and _role(doc, s) != "calibration" and o["sra"] - o["sr"] >= 25:
@@ -471,8 +468,8 @@ def render_markdown(doc: dict[str, Any], plots: dict[str, str] | None = None) ->
         f"; seed {st['seed']}. Generated {doc['generated_at']} (schema {doc['format']} v{doc['format_version']})." +
         (f" **Protocol overrides (not the paper's protocol): {st['protocol_overrides']}.**"
          if st.get("protocol_overrides") else ""),
-        *([f"**PARTIAL STUDY: {sum(len(doc['unscored_runs'].get(k, [])) for k in ('error', 'task_error'))} runs could "
-           "not be scored (listed under Runs); the tables count them 0.**"] if doc.get("partial") else []),
+        *([f"**PARTIAL STUDY: {plural(sum(len(doc['unscored_runs'].get(k, [])) for k in ('error', 'task_error')), 'run')} "
+           "could not be scored (listed under Runs); the tables count them 0.**"] if doc.get("partial") else []),
         f"## {HOW_TO_READ}", _how_to_read(doc),
         "## Runs", _runs(doc),
         f"## {TABLE1}", _table1(doc),

@@ -76,6 +76,8 @@ def test_record_under_layout_is_one_system_per_attempt(suite, tmp_path, capsys):
     doc = json.loads((tmp_path / "rep" / "scores.json").read_text())
     assert doc["systems"] == ["idle", "mine/attempt-1", "mine/attempt-2"]
     assert any(line.startswith("mine/attempt-1: Overall SR 100.00%") for line in out.splitlines())
+    assert doc["roles"]["idle"] == "floor"  # printed marked, as the report's tables mark it
+    assert any(line.startswith("idle (floor): Overall SR ") for line in out.splitlines()), out
     assert "warning: system mine/attempt-2 has runs for 1 of the 2 tasks" in err
 
 

@@ -104,7 +104,7 @@ def test_runs_the_tool_failed_to_score_mark_the_study_partial():
     runs[("A", entries[0].task_id)] = run_from_errors("A", entries[0].task_id, [], status="error")
     doc = build_results(make_study(entries, runs), AnalysisSettings(n_draws=20, n_permutations=20))
     assert doc["partial"] is True and doc["unscored_runs"]["error"][0]["task_id"] == entries[0].task_id
-    assert "**PARTIAL STUDY: 1 runs could not be scored" in render_markdown(doc)
+    assert "**PARTIAL STUDY: 1 run could not be scored" in render_markdown(doc)
 
 
 def test_a_lost_dask_worker_is_an_error_not_zeros(small, tmp_path):
