@@ -218,7 +218,11 @@ class Episode:
             raise RunDirError(f"cannot create {self.run_dir}: {exc.strerror}") from None
         try:
             self._prepare_run_dir(overwrite)
-            self._writer = self._open_trajectory(system)
+            try:
+                self._writer = self._open_trajectory(system)
+            except RecordingError as exc:  # a full disk before the first line
+                (self.run_dir / TRAJECTORY_FILE).unlink(missing_ok=True)
+                raise RunDirError(f"cannot record in {self.run_dir}: {exc.reason}") from None
         except BaseException:
             self._run_lock.release()
             raise

@@ -69,7 +69,8 @@ async def test_hostile_input_is_answered_in_one_line_and_recorded(box_task, tmp_
 _WRAPPER = """
 import os, resource, sys
 limit, errlog = int(sys.argv[1]), sys.argv[2]
-os.dup2(os.open(errlog, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644), 2)
+if errlog != "-":
+    os.dup2(os.open(errlog, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644), 2)
 if limit:
     resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 from aw_server.cli import main
@@ -168,3 +169,16 @@ async def test_full_disk_changes_nothing_and_never_contradicts_replies(box_task,
     assert final.poses == traj.checkpoints()[-1].poses
     log = errlog.read_text()
     assert "Traceback" not in log and len([line for line in log.splitlines() if "recording" in line]) == 1, log
+
+
+def test_a_run_directory_that_takes_no_header_is_refused_in_one_line(box_task, tmp_path):
+    import subprocess
+    import sys
+
+    task_dir, _, _ = box_task
+    r = subprocess.run([sys.executable, "-c", _WRAPPER, "100", "-", str(task_dir), "--record", str(tmp_path / "run")],
+                       stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=120)
+    lines = r.stderr.splitlines()  # a pipe: not limited like the files
+    assert r.returncode == 2 and len(lines) == 1, lines
+    assert lines[0].startswith("aw-serve: error: cannot record in ") and "File too large" in lines[0]
+    assert not (tmp_path / "run" / "trajectory.jsonl").exists()
