@@ -101,9 +101,9 @@ class _MetaTool(Tool):
     def _run(self, arguments: dict[str, Any]) -> CallToolResult:
         try:
             return self.handler(arguments)
-        except Exception as exc:  # a bug: answer in one line, record the call, keep serving
+        except Exception as exc:  # a bug: answer in one line, record the failure, keep serving
             log.error("internal error in %s: %s: %s", self.name, type(exc).__name__, exc)
-            message = f"{self.name} failed with an internal error; the scene is unchanged"
+            message = f"{self.name} failed with an internal error"
             return _text(self.episode.reject(self.name, arguments, message), error=True)
 
 
