@@ -40,7 +40,16 @@ from typing import Any
 import numpy as np
 
 from aw.camera import IMAGE_HEIGHT, IMAGE_WIDTH, VERTICAL_FOV_DEG
-from aw.formats import FinalState, Task, TrajectoryCall, TrajectoryEnd, TrajectoryHeader, TrajectoryWriter, write_final
+from aw.formats import (
+    FinalState,
+    RecordingError,
+    Task,
+    TrajectoryCall,
+    TrajectoryEnd,
+    TrajectoryHeader,
+    TrajectoryWriter,
+    write_final,
+)
 from aw.formats.task import MAX_BUDGET_MINUTES
 from aw.formats.trajectory import CameraState
 from aw.runlock import RunDirBusy, RunDirLock
@@ -65,12 +74,21 @@ CAPTURE_DIR = "captures"
 EDIT_TOOLS = frozenset({"translate_objects", "rotate_objects", "set_object_pose", "group_objects", "ungroup_objects"})
 # Recorded arguments are the agent's own input; cap their size so a runaway call cannot bloat the file.
 MAX_RECORDED_ARGS_CHARS = 20_000
+# Deeper argument values are recorded as a placeholder (JSON writers refuse a few hundred levels).
+MAX_RECORDED_DEPTH = 32
 PNG_COMPRESS_LEVEL = 3
 
 
 class EpisodeError(Exception):
     """A refused or failed call. The message is meant for the agent: it says what was wrong and
     what is allowed, and never contains geometry, targets or file paths."""
+
+
+class _RecordingFailed(Exception):
+    """The run directory stopped taking writes (``reason``: the OS's words)."""
+
+    def __init__(self, reason: str):
+        self.reason = reason
 
 
 class RunDirError(Exception):
@@ -100,27 +118,42 @@ def _utc_now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
-def _jsonable_args(args: Mapping[str, Any]) -> dict[str, Any]:
-    """The call's arguments as plain JSON (NaN/inf and integers beyond 64 bits become strings;
-    oversized input is cut)."""
+def _recordable_text(s: str) -> str:
+    """``s``, with what UTF-8 cannot hold (lone UTF-16 surrogates, as JSON's ``\\ud800`` decodes
+    to) written as backslash escapes."""
+    try:
+        s.encode("utf-8")
+        return s
+    except UnicodeEncodeError:
+        return s.encode("utf-8", "backslashreplace").decode("utf-8")
 
-    def clean(v):
+
+def _jsonable_args(args: Mapping[str, Any]) -> dict[str, Any]:
+    """The call's arguments as plain JSON that any JSON writer takes: NaN/inf and integers beyond
+    64 bits become strings, lone surrogates are escaped, nesting deeper than
+    ``MAX_RECORDED_DEPTH`` becomes a named placeholder, and oversized input is cut."""
+
+    def clean(v, depth):
+        if isinstance(v, str):
+            return _recordable_text(v)
         if isinstance(v, float) and not math.isfinite(v):
             return repr(v)
         if isinstance(v, int) and not isinstance(v, bool) and not -(2**63) <= v < 2**64:
             # beyond what JSON writers (orjson) take: kept as text, or its size if even that is huge
             return str(v) if v.bit_length() < 14_000 else f"<integer of {v.bit_length()} bits>"
-        if isinstance(v, (str, int, float, bool)) or v is None:
+        if isinstance(v, (int, float, bool)) or v is None:
             return v
+        if isinstance(v, (Mapping, list, tuple, np.ndarray)) and depth >= MAX_RECORDED_DEPTH:
+            return f"<nested deeper than {MAX_RECORDED_DEPTH} levels>"
         if isinstance(v, Mapping):
-            return {str(k): clean(x) for k, x in v.items()}
+            return {_recordable_text(str(k)): clean(x, depth + 1) for k, x in v.items()}
         if isinstance(v, (list, tuple)):
-            return [clean(x) for x in v]
+            return [clean(x, depth + 1) for x in v]
         if isinstance(v, np.ndarray):
-            return clean(v.tolist())
-        return repr(v)
+            return clean(v.tolist(), depth)
+        return _recordable_text(repr(v))
 
-    out = {str(k): clean(v) for k, v in dict(args).items()}
+    out = {_recordable_text(str(k)): clean(v, 1) for k, v in dict(args).items()}
     size = len(repr(out))
     if size > MAX_RECORDED_ARGS_CHARS:
         return {"_truncated": f"arguments of {size} characters were not recorded"}
@@ -171,6 +204,8 @@ class Episode:
         self._closed = False
         self._timer: threading.Timer | None = None
         self.end_reason: str | None = None
+        # Why the recording failed (a full disk, ...); from then on no call is taken.
+        self.recording_failure: str | None = None
 
         self.scene: Scene = scene_from_meshes(self.part_ids, self._meshes)
         # Held until close(): a second server on this directory is refused, --overwrite or not.
@@ -183,7 +218,11 @@ class Episode:
             raise RunDirError(f"cannot create {self.run_dir}: {exc.strerror}") from None
         try:
             self._prepare_run_dir(overwrite)
-            self._writer = self._open_trajectory(system)
+            try:
+                self._writer = self._open_trajectory(system)
+            except RecordingError as exc:  # a full disk before the first line
+                (self.run_dir / TRAJECTORY_FILE).unlink(missing_ok=True)
+                raise RunDirError(f"cannot record in {self.run_dir}: {exc.reason}") from None
         except BaseException:
             self._run_lock.release()
             raise
@@ -293,68 +332,117 @@ class Episode:
     # ------------------------------------------------------------------ dispatch
     def call(self, tool: str, args: Mapping[str, Any] | None = None) -> Any:
         """Execute one tool call and record it. ``args`` are the validated keyword arguments
-        (optional ones may be ``None``, meaning "not given"). Raises :class:`EpisodeError`."""
+        (optional ones may be ``None``, meaning "not given"). Raises :class:`EpisodeError`.
+
+        A call takes effect only once its line is written: if the recording fails (a full
+        disk), the call is undone, the reply says so, and the episode takes no further calls."""
         args = {k: v for k, v in dict(args or {}).items() if v is not None}
         with self._lock:
             if self._closed:
                 raise EpisodeError("the episode has ended; no further calls are accepted")
-            handler = self._handlers.get(tool)
-            if handler is None:
-                msg = f"unknown tool {tool!r}; the tools are: {', '.join(self._handlers)}"
-                self._record(tool, args, ok=False, error=msg)
-                raise EpisodeError(msg)
             try:
-                inspect.signature(handler).bind(**args)
-            except TypeError as exc:
-                # Unknown or missing keyword: the adapter's closed schema normally catches this first.
-                msg = f"invalid arguments for {tool}: {exc}"
-                self._record(tool, args, ok=False, error=msg)
-                raise EpisodeError(msg) from None
-            if tool in EDIT_TOOLS and self._t0 is None:
-                self._begin()  # the first edit starts the clock if start_episode was skipped
-            self._check_budget()
-            try:
-                if tool in EDIT_TOOLS and self._timed_out:
-                    raise EpisodeError(
-                        f"the execution budget of {self.budget_s / 60:.4g} minutes is exhausted: edits are refused "
-                        "and the final state is kept; queries, camera moves and captures still work"
-                    )
-                out = handler(**args)
-            except (SceneError, EpisodeError) as exc:
-                self._record(tool, args, ok=False, error=str(exc))
-                raise EpisodeError(str(exc)) from None
-            except Exception as exc:  # a bug or a renderer failure: keep serving, say nothing internal
-                log.exception("internal error in %s", tool)
-                self._record(tool, args, ok=False, error=f"internal error: {type(exc).__name__}: {exc}")
-                raise EpisodeError(f"{tool} failed with an internal error; the scene is unchanged") from None
-            self._record(tool, args, ok=True, changed=out.changed, image=out.image)
-            return out.result
+                return self._call(tool, args)
+            except _RecordingFailed:
+                raise EpisodeError(self._recording_failed_message()) from None
 
-    def reject(self, tool: str, raw_args: Mapping[str, Any] | Any, message: str) -> None:
-        """Record a call that the adapter refused before it reached the scene (schema errors)."""
+    def _call(self, tool: str, args: dict[str, Any]) -> Any:
+        if self.recording_failure is not None:
+            raise _RecordingFailed(self.recording_failure)
+        handler = self._handlers.get(tool)
+        if handler is None:
+            msg = f"unknown tool {tool!r}; the tools are: {', '.join(self._handlers)}"
+            self._record(tool, args, ok=False, error=msg)
+            raise EpisodeError(msg)
+        try:
+            inspect.signature(handler).bind(**args)
+        except TypeError as exc:
+            # Unknown or missing keyword: the adapter's closed schema normally catches this first.
+            msg = f"invalid arguments for {tool}: {exc}"
+            self._record(tool, args, ok=False, error=msg)
+            raise EpisodeError(msg) from None
+        before = self.scene.snapshot()
+        clock_was = self._t0
+        if tool in EDIT_TOOLS and self._t0 is None:
+            self._begin()  # the first edit starts the clock if start_episode was skipped
+        self._check_budget()
+        out = None
+        try:
+            if tool in EDIT_TOOLS and self._timed_out:
+                raise EpisodeError(
+                    f"the execution budget of {self.budget_s / 60:.4g} minutes is exhausted: edits are refused "
+                    "and the final state is kept; queries, camera moves and captures still work"
+                )
+            out = handler(**args)
+        except (SceneError, EpisodeError) as exc:
+            self._record(tool, args, ok=False, error=str(exc))
+            raise EpisodeError(str(exc)) from None
+        except _RecordingFailed:
+            raise
+        except Exception as exc:  # a bug or a renderer failure: keep serving, say nothing internal
+            log.exception("internal error in %s", tool)
+            self.scene.restore(before)
+            self._record(tool, args, ok=False, error=f"internal error: {type(exc).__name__}: {exc}")
+            raise EpisodeError(f"{tool} failed with an internal error; the scene is unchanged") from None
+        try:
+            self._record(tool, args, ok=True, changed=out.changed, image=out.image)
+        except _RecordingFailed:
+            # Not recorded, so not done: the scene, the clock and the capture file go back.
+            self.scene.restore(before)
+            if clock_was is None and self._t0 is not None:
+                self._stop_clock()
+            if out.image is not None:
+                (self.run_dir / out.image).unlink(missing_ok=True)
+            raise
+        return out.result
+
+    def _recording_failed_message(self) -> str:
+        return (f"recording failed ({self.recording_failure}): this call was not carried out and the episode "
+                "takes no further calls")
+
+    def reject(self, tool: str, raw_args: Mapping[str, Any] | Any, message: str) -> str:
+        """Record a call that the adapter refused before it reached the scene (schema errors).
+        Returns the reply for the agent: ``message``, or why the call could not be recorded."""
         args = raw_args if isinstance(raw_args, Mapping) else {"_raw": raw_args}
         with self._lock:
-            if not self._closed:
+            if self._closed:
+                return message
+            try:
+                if self.recording_failure is not None:
+                    raise _RecordingFailed(self.recording_failure)
                 self._record(tool, args, ok=False, error=message)
+            except _RecordingFailed:
+                return self._recording_failed_message()
+        return message
 
     def _record(self, tool: str, args: Mapping[str, Any], *, ok: bool, error: str | None = None,
                 changed: Sequence[str] = (), image: str | None = None) -> None:
-        self._seq += 1
+        """Write one call line; raises ``_RecordingFailed`` (and latches it) if it cannot be written."""
         rec = TrajectoryCall(
-            seq=self._seq,
+            seq=self._seq + 1,
             t=round(self.elapsed(), 6) if self.started else None,
             server_t=self._server_t(),
-            tool=tool,
+            tool=_recordable_text(tool),
             args=_jsonable_args(args),
             ok=ok,
-            error=error,
+            error=None if error is None else _recordable_text(error),
             changed=list(changed),
             poses=self.scene.pose_dict() if changed else None,
             camera=CameraState(**self.scene.camera.to_dict()),
             image=image,
             episode_active=self.started,
         )
-        self._writer.call(rec)
+        try:
+            self._writer.call(rec)
+        except RecordingError as exc:
+            self._fail_recording(exc.reason)
+        self._seq += 1
+
+    def _fail_recording(self, reason: str) -> None:
+        """Latch a recording failure; logged once, as one line."""
+        if self.recording_failure is None:
+            self.recording_failure = reason
+            log.error("recording in %s failed (%s): the episode takes no further calls", self.run_dir, reason)
+        raise _RecordingFailed(reason)
 
     # ------------------------------------------------------------------ ending
     def close(self, reason: str = "disconnect", message: str = "") -> str:
@@ -369,13 +457,17 @@ class Episode:
             self.end_reason = final_reason
             if self._timer is not None:
                 self._timer.cancel()
+            if self.recording_failure is not None and not message:
+                message = f"recording failed ({self.recording_failure})"
             try:
                 self._writer.end(
                     TrajectoryEnd(reason=final_reason, t=round(self.elapsed(), 6) if self.started else None,
-                                  server_t=self._server_t(), message=message, poses=self.scene.pose_dict())
+                                  server_t=self._server_t(), message=_recordable_text(message),
+                                  poses=self.scene.pose_dict())
                 )
-            finally:
-                self._write_final(final_reason)
+            except RecordingError as exc:
+                log.error("the closing line of %s could not be written (%s)", self.run_dir, exc.reason)
+            self._write_final(final_reason)
             renderer, self._renderer = self._renderer, None
             self._run_lock.release()
         if renderer is not None:
@@ -386,8 +478,11 @@ class Episode:
         return final_reason
 
     def _write_final(self, reason: str) -> None:
-        write_final(self.run_dir / FINAL_FILE, FinalState(task_id=self.task.task_id, reason=reason,
-                                                          poses=self.scene.pose_dict()))
+        try:
+            write_final(self.run_dir / FINAL_FILE, FinalState(task_id=self.task.task_id, reason=reason,
+                                                              poses=self.scene.pose_dict()))
+        except OSError as exc:  # write_final is atomic: an older final.json, if any, is left whole
+            log.error("%s could not be written (%s)", self.run_dir / FINAL_FILE, exc.strerror or exc)
 
     # ------------------------------------------------------------------ queries
     def _object_or_group(self, id) -> dict:
@@ -488,6 +583,13 @@ class Episode:
         self._timer.daemon = True
         self._timer.start()
 
+    def _stop_clock(self) -> None:
+        """Undo :meth:`_begin` (the call that started the clock was not recorded)."""
+        self._t0 = None
+        if self._timer is not None:
+            self._timer.cancel()
+            self._timer = None
+
     def _start(self, task=None) -> _Outcome:
         if task is not None and (not isinstance(task, str) or len(task) > MAX_GROUP_NAME):
             raise SceneError(f"task must be a string of at most {MAX_GROUP_NAME} characters")
@@ -521,6 +623,10 @@ class Episode:
     def _capture(self) -> _Outcome:
         png, w, h = self._render_png()
         rel = f"{CAPTURE_DIR}/{self._seq + 1:06d}.png"
-        (self.run_dir / rel).write_bytes(png)
+        try:
+            (self.run_dir / rel).write_bytes(png)
+        except OSError as exc:
+            (self.run_dir / rel).unlink(missing_ok=True)
+            self._fail_recording(exc.strerror or type(exc).__name__)
         cap = Capture(png=png, path=rel, width=w, height=h, camera=self.scene.camera.describe())
         return _Outcome(cap, image=rel)

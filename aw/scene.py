@@ -39,6 +39,16 @@ class Group:
     members: list[str]
 
 
+@dataclass(frozen=True)
+class SceneSnapshot:
+    """A scene's mutable state at one moment (:meth:`Scene.snapshot`)."""
+
+    poses: dict[str, np.ndarray]
+    groups: dict[str, Group]
+    next_group: int
+    camera: Camera
+
+
 @dataclass
 class PartInfo:
     """What the scene knows of a part: its id, display name and mesh-local bounding box."""
@@ -312,6 +322,20 @@ class Scene:
             raise SceneError("the zoom would put the camera outside the allowed distance range; refused")
         self.camera = cam
         return cam
+
+    # ---------------------------------------------------------------- undo
+    def snapshot(self) -> SceneSnapshot:
+        """Everything a call can change: to undo a call whose success could not be recorded."""
+        return SceneSnapshot({pid: p.copy() for pid, p in self.poses.items()},
+                             {gid: Group(g.id, g.name, list(g.members)) for gid, g in self.groups.items()},
+                             self._next_group, self.camera.copy())
+
+    def restore(self, snap: SceneSnapshot) -> None:
+        """Put the scene back to ``snap`` (taken by :meth:`snapshot` on this scene)."""
+        self.poses = {pid: p.copy() for pid, p in snap.poses.items()}
+        self.groups = {gid: Group(g.id, g.name, list(g.members)) for gid, g in snap.groups.items()}
+        self._next_group = snap.next_group
+        self.camera = snap.camera.copy()
 
     # ---------------------------------------------------------------- queries
     def pose_dict(self) -> dict[str, list[float]]:

@@ -29,8 +29,10 @@ name the argument and never contain geometry, targets or paths.
 from __future__ import annotations
 
 import base64
+import json
 import math
 import re
+import sys
 import threading
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -191,7 +193,7 @@ def _check(schema: dict, v: Any, path: str, out: list[str]) -> None:
         out.append(f"{path} must be {'an' if kind[0] in 'aeiou' else 'a'} {kind}, got {_json_type(v)}")
         return
     if _is_number(v):
-        if not math.isfinite(v):
+        if not _finite(v):
             out.append(f"{path} must be a finite number")
         elif "minimum" in schema and v < schema["minimum"]:
             out.append(f"{path} must be >= {schema['minimum']:g}, got {v:g}")
@@ -205,7 +207,7 @@ def _check(schema: dict, v: Any, path: str, out: list[str]) -> None:
         if "maxLength" in schema and len(v) > schema["maxLength"]:
             out.append(f"{path} must have at most {schema['maxLength']} characters, got {len(v)}")
         if "enum" in schema and v not in schema["enum"]:
-            out.append(f"{path} must be one of {', '.join(map(repr, schema['enum']))}, got {_short(v)}")
+            out.append(f"{path} must be one of {', '.join(map(repr, schema['enum']))}, got {short_repr(v)}")
     if isinstance(v, list):
         lo, hi = schema.get("minItems", 0), schema.get("maxItems")
         if lo == hi and len(v) != lo:
@@ -221,7 +223,7 @@ def _check(schema: dict, v: Any, path: str, out: list[str]) -> None:
     if isinstance(v, Mapping):
         props = schema.get("properties", {})
         if schema.get("additionalProperties") is False:
-            out.extend(f"unexpected argument {_short(k)} (allowed: {', '.join(props) or 'none'})"
+            out.extend(f"unexpected argument {short_repr(k)} (allowed: {', '.join(props) or 'none'})"
                        for k in v if k not in props)
         out.extend(f"{k} is required" for k in schema.get("required", ()) if k not in v)
         for k, x in v.items():
@@ -239,6 +241,16 @@ def check_arguments(schema: dict, arguments: Any) -> list[str]:
     return out
 
 
+def _finite(v: int | float) -> bool:
+    """Finite, and usable as a float (JSON integers may have hundreds of digits)."""
+    if isinstance(v, int):
+        return abs(v) <= _FLOAT_MAX
+    return math.isfinite(v)
+
+
+_FLOAT_MAX = int(sys.float_info.max)
+
+
 def _json_type(v: Any) -> str:
     if v is None:
         return "null"
@@ -253,9 +265,69 @@ def _json_type(v: Any) -> str:
     return "an object" if isinstance(v, Mapping) else type(v).__name__
 
 
-def _short(v: Any, limit: int = 40) -> str:
-    text = repr(v)
+def short_repr(v: Any, limit: int = 40) -> str:
+    try:
+        text = repr(v)
+    except ValueError:  # an integer beyond Python's 4300-digit text limit
+        text = f"<integer of {v.bit_length()} bits>"
     return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+# ---------------------------------------------------------------------------------------------------
+# execute_webmcp_tool's input: a JSON object encoded as text.
+
+MAX_INPUT_DEPTH = 32  # the page tools' arguments nest three levels; deeper input is refused by name
+
+
+class BadInput(ValueError):
+    """``input`` is not a usable JSON object; the message names the problem in one line."""
+
+
+def parse_tool_input(text: str) -> dict:
+    """The argument object a page-tool call's ``input`` text encodes. Refused (:class:`BadInput`):
+    text that is not JSON, NaN/Infinity, anything but an object, nesting deeper than
+    ``MAX_INPUT_DEPTH``, and lone UTF-16 surrogates (``"\\ud800"``), which no UTF-8 record can
+    hold. Integers beyond float range pass here and are refused by the argument check."""
+    try:
+        value = json.loads(text, parse_constant=_no_constant)
+    except RecursionError:
+        raise BadInput(f"input is nested more than {MAX_INPUT_DEPTH} levels deep") from None
+    except ValueError as exc:
+        if "integer string conversion" in str(exc):
+            raise BadInput("input holds a number with more than 4300 digits; numbers must be finite") from None
+        raise BadInput(f"input is not valid JSON: {exc}") from None
+    if not isinstance(value, dict):
+        raise BadInput(f"input must encode a JSON object, got {_json_kind(value)}")
+    stack: list[tuple[Any, int]] = [(value, 1)]
+    while stack:
+        v, depth = stack.pop()
+        if isinstance(v, str):
+            _check_text(v)
+        elif isinstance(v, (dict, list)):
+            if depth > MAX_INPUT_DEPTH:
+                raise BadInput(f"input is nested more than {MAX_INPUT_DEPTH} levels deep")
+            items = v.items() if isinstance(v, dict) else enumerate(v)
+            for k, x in items:
+                if isinstance(k, str):
+                    _check_text(k)
+                stack.append((x, depth + 1))
+    return value
+
+
+def _check_text(s: str) -> None:
+    try:
+        s.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        bad = s[exc.start:exc.end].encode("utf-8", "backslashreplace").decode("ascii")
+        raise BadInput(f"input holds a lone UTF-16 surrogate ({bad}); strings must be valid Unicode text") from None
+
+
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a JSON number")
+
+
+def _json_kind(v: Any) -> str:
+    return {list: "an array", str: "a string", bool: "a boolean", type(None): "null"}.get(type(v), "a number")
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -271,7 +343,7 @@ class _Refused(Exception):
 
 def _error_code(message: str) -> str:
     """The official error code of a refusal (3DWebAgent ``errorCode``, applied to our messages)."""
-    if "exhausted" in message or "has ended" in message:
+    if "exhausted" in message or "has ended" in message or "takes no further calls" in message:
         return "episode_ended"
     return "invalid_argument"
 
@@ -318,7 +390,7 @@ class WebMcpPage:
             why = " (it needs physics, which is disabled in this episode)"
         elif name in PAGE_TOOLS:
             why = " (it is not enabled in this episode)"
-        return (f"toolName {_short(name)} is not registered on the episode page{why}; "
+        return (f"toolName {short_repr(name)} is not registered on the episode page{why}; "
                 f"registered tools: {', '.join(self.tools)}")
 
     # -------------------------------------------------------------------- ids
@@ -333,7 +405,7 @@ class WebMcpPage:
                 if self._group_to_official(gid) == oid:
                     return gid
         kinds = " or ".join(k for k, on in (("object", objects), ("group", groups)) if on)
-        raise _Refused(f"unknown {kinds} id {_short(oid)}; use list_objects for the ids")
+        raise _Refused(f"unknown {kinds} id {short_repr(oid)}; use list_objects for the ids")
 
     def _official_group(self, rec: dict) -> dict:
         return {"id": self._group_to_official(rec["id"]), "name": rec["name"],
@@ -381,9 +453,9 @@ class WebMcpPage:
                     raise _Refused(f"Invalid {name} arguments: " + "; ".join(problems) + ".")
                 tool, args = self._project_call(name, arguments)
             except _Refused as exc:
-                self.episode.reject(name, arguments if isinstance(arguments, Mapping) else {"_raw": arguments},
-                                    str(exc))
-                return PageReply({"error": str(exc), "code": "invalid_argument"})
+                msg = self.episode.reject(name, arguments if isinstance(arguments, Mapping) else {"_raw": arguments},
+                                          str(exc))
+                return PageReply({"error": msg, "code": _error_code(msg) if msg != str(exc) else "invalid_argument"})
             try:
                 result = self.episode.call(tool, args)
             except EpisodeError as exc:

@@ -69,7 +69,7 @@ class EpisodeTool(Tool):
             self.fn_metadata.validate_arguments(arguments)
         except ValidationError as exc:
             msg = describe_validation_error(self.spec, exc)
-            await anyio.to_thread.run_sync(self.episode.reject, self.name, arguments, msg)
+            msg = await anyio.to_thread.run_sync(self.episode.reject, self.name, arguments, msg)
             raise ToolError(f"Error executing tool {self.name}: {msg}") from None
         return await super().run(arguments, context, convert_result)
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import base64
 import json
+import logging
 from collections.abc import Callable
 from typing import Any
 
@@ -36,8 +37,10 @@ from mcp.server.mcpserver.utilities.func_metadata import ArgModelBase, FuncMetad
 from mcp_types import CallToolResult, ImageContent, TextContent, ToolAnnotations
 
 from aw.episode import Episode
-from aw.webmcp import NotRegistered, WebMcpPage, check_arguments
+from aw.webmcp import BadInput, NotRegistered, WebMcpPage, check_arguments, parse_tool_input, short_repr
 from aw_server.tools import CONVENTIONS_TEXT
+
+log = logging.getLogger(__name__)
 
 SERVER_NAME = "assembly-browser"
 PAGE_ID = 1
@@ -90,16 +93,26 @@ class _MetaTool(Tool):
     """A tool that takes its raw arguments and returns a finished ``CallToolResult``."""
 
     handler: Any
+    episode: Any
 
     async def run(self, arguments: dict[str, Any], context: Any, convert_result: bool = False) -> Any:
-        return await anyio.to_thread.run_sync(self.handler, dict(arguments or {}))
+        return await anyio.to_thread.run_sync(self._run, dict(arguments or {}))
+
+    def _run(self, arguments: dict[str, Any]) -> CallToolResult:
+        try:
+            return self.handler(arguments)
+        except Exception as exc:  # a bug: answer in one line, record the failure, keep serving
+            log.error("internal error in %s: %s: %s", self.name, type(exc).__name__, exc)
+            message = f"{self.name} failed with an internal error"
+            return _text(self.episode.reject(self.name, arguments, message), error=True)
 
 
-def _tool(name: str, handler: Callable[[dict], CallToolResult], read_only: bool) -> _MetaTool:
+def _tool(name: str, handler: Callable[[dict], CallToolResult], read_only: bool, episode: Episode) -> _MetaTool:
     return _MetaTool(
         fn=handler, name=name, title=name.replace("_", " "), description=DESCRIPTIONS[name],
         parameters=META_SCHEMAS[name], fn_metadata=FuncMetadata(arg_model=_RawArgs), is_async=False,
         annotations=ToolAnnotations(read_only_hint=read_only, open_world_hint=False), handler=handler,
+        episode=episode,
     )
 
 
@@ -115,7 +128,7 @@ class OfficialSurface:
     def _problems(self, name: str, args: dict) -> str | None:
         problems = check_arguments(META_SCHEMAS[name], args)
         if not problems and "pageId" in META_SCHEMAS[name]["properties"] and args["pageId"] != PAGE_ID:
-            problems = [f"pageId {args['pageId']!r} is not the episode page; list_pages shows it as {PAGE_ID}"]
+            problems = [f"pageId {short_repr(args['pageId'])} is not the episode page; list_pages shows it as {PAGE_ID}"]
         return f"Invalid {name} arguments: " + "; ".join(problems) + "." if problems else None
 
     def list_pages(self, args: dict) -> CallToolResult:
@@ -132,19 +145,11 @@ class OfficialSurface:
         err = self._problems("execute_webmcp_tool", args)
         if err is None:
             try:
-                tool_input = json.loads(args.get("input", "{}"), parse_constant=_no_constant)
-                if not isinstance(tool_input, dict):
-                    err = f"input must encode a JSON object, got {_json_kind(tool_input)}"
-            except ValueError as exc:
-                err = f"input is not valid JSON: {exc}"
-        if err is None:
-            try:
-                reply = self.page.execute(args["toolName"], tool_input)
-            except NotRegistered as exc:
+                reply = self.page.execute(args["toolName"], parse_tool_input(args.get("input", "{}")))
+            except (BadInput, NotRegistered) as exc:
                 err = str(exc)
         if err is not None:
-            self.episode.reject("execute_webmcp_tool", args, err)
-            return _text(err, error=True)
+            return _text(self.episode.reject("execute_webmcp_tool", args, err), error=True)
         output = json.dumps(reply.output, separators=(",", ":"))
         if reply.png is None:
             return _text(json.dumps({"status": "Completed", "output": output, "errorText": None}))
@@ -173,17 +178,10 @@ class OfficialSurface:
                                                     mime_type=mime)])
 
     def tools(self) -> list[_MetaTool]:
-        return [_tool("list_pages", self.list_pages, True), _tool("list_webmcp_tools", self.list_webmcp_tools, True),
-                _tool("execute_webmcp_tool", self.execute_webmcp_tool, False),
-                _tool("read_manual_page", self.read_manual_page, True)]
-
-
-def _no_constant(name: str) -> Any:
-    raise ValueError(f"{name} is not a JSON number")
-
-
-def _json_kind(v: Any) -> str:
-    return {list: "an array", str: "a string", bool: "a boolean", type(None): "null"}.get(type(v), "a number")
+        return [_tool("list_pages", self.list_pages, True, self.episode),
+                _tool("list_webmcp_tools", self.list_webmcp_tools, True, self.episode),
+                _tool("execute_webmcp_tool", self.execute_webmcp_tool, False, self.episode),
+                _tool("read_manual_page", self.read_manual_page, True, self.episode)]
 
 
 def build_official_server(episode: Episode, *, log_level: str = "WARNING") -> MCPServer:

@@ -1,16 +1,22 @@
 """Fuzz aw-serve through the real MCP client over stdio, and its transport with raw lines.
 
-    python benchmarks/fuzz_server.py [--calls 100000] [--raw-lines 2000] [--seed 0] [--out fuzz.json]
+    python benchmarks/fuzz_server.py [--surface default|official] [--calls 100000] [--raw-lines 2000]
+                                     [--seed 0] [--out fuzz.json]
 
 Tool calls mix valid arguments (real ids, numbers in range) with every kind of bad input (wrong
 types, out-of-range and non-finite numbers, integers beyond 64 bits, JSON-looking strings, deep
-nesting, unknown arguments and tools). Reported:
+nesting, unknown arguments and tools). With ``--surface official`` the calls go through the
+official tools (``execute_webmcp_tool`` with the page tools' official ids and names, and the
+other three meta-tools), and ``input`` is also hostile text: not JSON, not an object, nested
+hundreds or thousands of levels deep, lone UTF-16 surrogates, integers of hundreds of digits,
+NaN. Reported:
 
 - crashes: the server process died or the session broke (it is restarted and the run goes on);
 - hangs: no reply within ``--timeout`` seconds;
 - state changes on error: an error reply after which ``get_state`` (poses, groups, camera)
   differs from before the call;
-- unrecorded calls: trajectory lines missing against the calls made;
+- unrecorded calls: trajectory lines missing against the calls made (on the official surface,
+  every ``execute_webmcp_tool`` call; the other meta-tools do not reach the episode);
 - leaks: a reply that contains an absolute path, a part file name, a target pose component or a
   mesh vertex (three consecutive numbers equal to one), i.e. hidden data;
 - memory: the server's resident memory after warm-up and at the end;
@@ -190,6 +196,168 @@ class ArgGen:
         return (tool, self.valid(tool)) if r.random() < 0.5 else (tool, self.bad(tool))
 
 
+OFFICIAL_IDS = ["part-0001", "part-0002", "part-0003"]
+OFFICIAL_MUTATIONS = {"translate_objects", "rotate_objects", "set_object_pose", "group_objects", "ungroup_objects",
+                      "move_camera"}
+OFFICIAL_NAMES = {"translate_objects": "translate_objects", "rotate_objects": "rotate_objects",
+                  "set_object_pose": "set_object_pose", "group_objects": "group_objects",
+                  "ungroup_objects": "ungroup_objects", "move_camera": "move_camera", "get_object": "get_object",
+                  "start_episode": "start_episode", "list_objects": "list_objects", "get_scene": "get_scene",
+                  "get_state": "get_state"}
+
+
+class OfficialGen(ArgGen):
+    """Random official-surface calls: page tools through execute_webmcp_tool with official ids and
+    JSON-text input (valid, bad values, or hostile text), and the other meta-tools."""
+
+    def _id(self):
+        if self.r.random() < 0.95:
+            return self.r.choice(self.ids + self.groups + ["group-x-1"])
+        return self.r.choice(["p01", "", "part-0009", "x" * 300])
+
+    def valid(self, tool: str) -> dict:
+        a = super().valid(tool)
+        if tool == "group_objects" and len(a["ids"]) < 2:
+            a["ids"] = self.r.sample(self.ids, 2)
+        if tool == "ungroup_objects":
+            a = {"ids": [self.r.choice(self.groups or ["group-x-1"])]}
+        if tool == "get_object":
+            a = {"id": self._id()}
+        return a
+
+    def hostile_text(self, tool: str) -> str:
+        r = self.r
+        valid = json.dumps(self.valid(tool))
+        kind = r.randrange(9)
+        if kind == 0:  # deep nesting: past orjson's and Python's limits
+            d = r.choice([33, 253, 254, 300, 1000, 5000, 20000])
+            return '{"ids": %s, "delta": [0, 0, 0]}' % ("[" * d + "]" * d)
+        if kind == 1:  # lone UTF-16 surrogates, in a value or a key
+            sur = "\\u%04x" % r.choice([0xD800, 0xDBFF, 0xDC00, 0xDFFF])
+            return r.choice(['{"ids": %s, "name": "a%sb"}' % (json.dumps(self.r.sample(self.ids, 2)), sur),
+                             '{"%s": 1}' % sur, '{"id": "%s"}' % sur])
+        if kind == 2:  # integers beyond float range, or beyond Python's 4300-digit text limit
+            digits = "9" * r.choice([309, 400, 4300, 4301, 6000])
+            return r.choice(['{"ids": ["part-0001"], "delta": [%s, 0, 0]}' % digits, '{"yaw": -%s}' % digits,
+                             '{"id": "part-0001", "position": [0, 0, %s]}' % digits])
+        if kind == 3:
+            return r.choice(["NaN", '{"yaw": NaN}', '{"zoom": Infinity}', '{"pitch": -Infinity}'])
+        if kind == 4:
+            return r.choice(["", "{", "[]", "null", "1", '"{}"', "{ids: 1}", "{}{}", valid[: r.randint(0, len(valid))]])
+        if kind == 5:
+            return valid + r.choice(["", " ", "\n", "x"])
+        if kind == 6:
+            return json.dumps({"x" * r.randint(1, 3): self.bad_value()}, default=str)
+        if kind == 7:
+            return "".join(chr(r.randint(1, 0x2FFF)) for _ in range(r.randint(0, 40)))
+        return json.dumps(self.valid(tool), ensure_ascii=r.random() < 0.5)
+
+    def next(self) -> tuple[str, dict]:
+        r = self.r
+        x = r.random()
+        if x < 0.004:
+            return "execute_webmcp_tool", {"pageId": 1, "toolName": "capture_scene", "input": "{}"}
+        if x < 0.014:
+            return r.choice(["reset", "capture", "", "list_objects"]), {}
+        if x < 0.06:
+            meta = r.choice(["list_pages", "list_webmcp_tools", "read_manual_page"])
+            a = {"list_pages": {}, "list_webmcp_tools": {"pageId": 1}, "read_manual_page": {"page": 1}}[meta]
+            if r.random() < 0.6:
+                a[r.choice(["pageId", "page", "x"])] = self.bad_value()
+            return meta, a
+        tool = r.choice(list(OFFICIAL_NAMES) + ["apply_force", "advance_simulation", "end_episode", "nope"])
+        call = {"pageId": 1, "toolName": tool}
+        y = r.random()
+        if y < 0.45:
+            call["input"] = json.dumps(self.valid(tool))
+        elif y < 0.75:
+            call["input"] = json.dumps(self.bad(tool) if tool in SPECS else {"x": 1}, default=str)
+        else:
+            call["input"] = self.hostile_text(tool)
+        if r.random() < 0.03:  # a bad meta-call: page id, tool name, input type, extra argument
+            k = r.choice(["pageId", "toolName", "input", "extra"])
+            call[k] = self.bad_value()
+        elif r.random() < 0.02:
+            call.pop("input")
+        return "execute_webmcp_tool", call
+
+
+class DefaultDriver:
+    """The project's own tools."""
+
+    server_args: list[str] = []
+    tools = frozenset(SPECS)
+
+    def __init__(self, seed: int):
+        self.gen = ArgGen(seed, ["p01", "p02", "p03"])
+
+    async def state(self, c) -> dict:
+        return _state(await c.call_tool("get_state", {}))
+
+    def recorded(self, tool: str, args: dict) -> int:
+        return int(tool in SPECS)  # unknown tools are refused by the SDK before the episode
+
+    def failed(self, res) -> bool:
+        return bool(res.is_error)
+
+    def succeeded(self, tool: str, args: dict, res) -> bool:
+        """Note a successful call; whether it may have changed the state."""
+        if tool == "group_objects":
+            self.gen.groups.append(res.structured_content["group"]["id"])
+        if tool == "ungroup_objects":
+            self.gen.groups = [g for g in self.gen.groups if g not in res.structured_content["removed"]]
+        return tool in OFFICIAL_MUTATIONS
+
+
+class OfficialDriver(DefaultDriver):
+    """``aw-serve --surface official``: page tools through execute_webmcp_tool."""
+
+    server_args = ["--surface", "official"]
+
+    def __init__(self, seed: int):
+        self.gen = OfficialGen(seed, list(OFFICIAL_IDS))
+
+    async def state(self, c) -> dict:
+        res = await c.call_tool("execute_webmcp_tool", {"pageId": 1, "toolName": "get_state", "input": "{}"})
+        out = json.loads(json.loads(_text(res))["output"])
+        return {k: out.get(k) for k in ("index", "objects", "groups", "camera")}
+
+    def recorded(self, tool: str, args: dict) -> int:
+        return int(tool == "execute_webmcp_tool")  # every one, refused or not; the other meta-tools never
+
+    def _output(self, res) -> dict | None:
+        try:
+            return json.loads(json.loads(_text(res))["output"])
+        except (ValueError, KeyError, TypeError):
+            return None
+
+    def failed(self, res) -> bool:
+        if res.is_error:
+            return True
+        out = self._output(res)
+        return isinstance(out, dict) and "error" in out
+
+    def succeeded(self, tool: str, args: dict, res) -> bool:
+        if tool != "execute_webmcp_tool":
+            return False
+        page_tool = args.get("toolName")
+        out = self._output(res) or {}
+        if page_tool == "group_objects" and "result" in out:
+            # groups sharing a member were dissolved: their ids stay as calls the page must refuse
+            self.gen.groups = [*self.gen.groups[-20:], out["result"]["id"]]
+        if page_tool == "ungroup_objects":
+            try:
+                gone = set(json.loads(args["input"])["ids"])
+            except (ValueError, KeyError, TypeError):
+                gone = set()
+            self.gen.groups = [g for g in self.gen.groups if g not in gone]
+        return page_tool in OFFICIAL_MUTATIONS
+
+
+def _text(res) -> str:
+    return "\n".join(getattr(b, "text", "") for b in res.content)
+
+
 RAW_INIT = {"jsonrpc": "2.0", "id": 0, "method": "initialize", "params": {
     "protocolVersion": "2025-06-18", "capabilities": {}, "clientInfo": {"name": "fuzz", "version": "0"}}}
 
@@ -254,24 +422,27 @@ def _state(result) -> dict:
 
 
 async def fuzz_calls(n: int, seed: int, timeout: float, task_dir: Path, run_root: Path, hidden: Hidden,
-                     log_every: int, max_seconds: float = math.inf) -> dict:
-    gen = ArgGen(seed, ["p01", "p02", "p03"])
-    stats = {"calls": 0, "ok": 0, "errors": 0, "crashes": 0, "hangs": 0, "state_changes_on_error": 0,
-             "unrecorded_calls": 0, "leaks": 0, "examples": [], "servers": 0, "rss_mb": {}}
+                     log_every: int, max_seconds: float = math.inf, surface: str = "default") -> dict:
+    driver = (OfficialDriver if surface == "official" else DefaultDriver)(seed)
+    gen = driver.gen
+    stats = {"surface": surface, "calls": 0, "ok": 0, "errors": 0, "crashes": 0, "hangs": 0,
+             "state_changes_on_error": 0, "unrecorded_calls": 0, "leaks": 0, "examples": [], "servers": 0,
+             "rss_mb": {}}
     t_start = time.perf_counter()
     deadline = t_start + max_seconds
     while stats["calls"] < n and time.perf_counter() < deadline:
         stats["servers"] += 1
         run = run_root / f"run{stats['servers']}"
         params = StdioServerParameters(command=sys.executable, args=["-m", "aw_server.cli", str(task_dir), "--record",
-                                                                     str(run), "--budget-minutes", "100000"],
+                                                                     str(run), "--budget-minutes", "100000",
+                                                                     *driver.server_args],
                                        env=dict(os.environ))
         made = 0
         try:
             async with Client(params) as c:
                 server = next(p for p in psutil.Process().children(recursive=True)
                               if "aw_server.cli" in " ".join(p.cmdline()) and str(run) in " ".join(p.cmdline()))
-                before = _state(await c.call_tool("get_state", {}))
+                before = await driver.state(c)
                 made += 1
                 while stats["calls"] < n and time.perf_counter() < deadline:
                     tool, args = gen.next()
@@ -282,32 +453,28 @@ async def fuzz_calls(n: int, seed: int, timeout: float, task_dir: Path, run_root
                         stats["hangs"] += 1
                         stats["examples"].append({"hang": tool, "args": repr(args)[:300]})
                         break
-                    made += tool in SPECS  # unknown tools are refused by the SDK before the episode
+                    made += driver.recorded(tool, args)
                     stats["calls"] += 1
-                    text = "\n".join(getattr(b, "text", "") for b in res.content)
+                    text = _text(res)
                     if res.structured_content is not None:
                         text += json.dumps(res.structured_content)
                     leak = hidden.leaks(text)
                     if leak:
                         stats["leaks"] += 1
                         stats["examples"].append({"leak": leak, "tool": tool, "args": repr(args)[:300]})
-                    if res.is_error:
+                    if driver.failed(res):
                         stats["errors"] += 1
-                        after = _state(await c.call_tool("get_state", {}))
+                        after = await driver.state(c)
                         made += 1
                         if after != before:
                             stats["state_changes_on_error"] += 1
-                            stats["examples"].append({"state_change": tool, "args": repr(args)[:300]})
+                            stats["examples"].append({"state_change": tool, "args": repr(args)[:300],
+                                                      "reply": text[:300]})
                         before = after
                     else:
                         stats["ok"] += 1
-                        if tool == "group_objects":
-                            gen.groups.append(res.structured_content["group"]["id"])
-                        if tool == "ungroup_objects":
-                            gen.groups = [g for g in gen.groups if g not in res.structured_content["removed"]]
-                        if tool in ("translate_objects", "rotate_objects", "set_object_pose", "group_objects",
-                                    "ungroup_objects", "move_camera"):
-                            before = _state(await c.call_tool("get_state", {}))
+                        if driver.succeeded(tool, args, res):
+                            before = await driver.state(c)
                             made += 1
                     if stats["calls"] == WARMUP_CALLS:
                         stats["rss_mb"][f"after_{WARMUP_CALLS}_calls"] = round(server.memory_info().rss / 2**20, 1)
@@ -325,6 +492,8 @@ async def fuzz_calls(n: int, seed: int, timeout: float, task_dir: Path, run_root
         traj = run / "trajectory.jsonl"
         if traj.exists():
             recorded = sum(1 for line in traj.read_bytes().splitlines() if line.startswith(b'{"type":"call"'))
+            if made != recorded:
+                stats["examples"].append({"recorded": recorded, "calls_to_record": made})
             stats["unrecorded_calls"] += max(0, made - recorded)
     stats["seconds"] = round(time.perf_counter() - t_start, 1)
     stats["calls_requested"] = n
@@ -333,6 +502,8 @@ async def fuzz_calls(n: int, seed: int, timeout: float, task_dir: Path, run_root
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--surface", choices=("default", "official"), default="default",
+                   help="the tools fuzzed: aw-serve's own (default) or the official surface's")
     p.add_argument("--calls", type=int, default=100_000, help="fuzzed tool calls (default 100000)")
     p.add_argument("--raw-lines", type=int, default=2000, help="undecodable transport lines (default 2000)")
     p.add_argument("--seed", type=int, default=0)
@@ -351,9 +522,10 @@ def main(argv: list[str] | None = None) -> int:
         task_dir, targets = suite_paths(suite, task_id)
         hidden = Hidden(Path(task_dir), Path(targets))
         stats = anyio.run(fuzz_calls, args.calls, args.seed, args.timeout, Path(task_dir), root / "runs", hidden,
-                          args.log_every, args.max_seconds)
+                          args.log_every, args.max_seconds, args.surface)
         if args.raw_lines:
-            cmd = [sys.executable, "-m", "aw_server.cli", str(task_dir), "--record", str(root / "raw")]
+            cmd = [sys.executable, "-m", "aw_server.cli", str(task_dir), "--record", str(root / "raw"),
+                   "--surface", args.surface]
             stats["raw"] = raw_lines(args.raw_lines, args.seed, cmd)
     stats["command"] = "python benchmarks/fuzz_server.py " + " ".join(argv if argv is not None else sys.argv[1:])
     stats["examples"] = stats["examples"][:20]

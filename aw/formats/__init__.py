@@ -10,6 +10,7 @@ from aw.formats.suite import SuiteEntry, SuiteManifest, read_manifest, suite_pat
 from aw.formats.targets import PartTarget, Targets, read_targets, write_targets
 from aw.formats.task import CONVENTIONS, Task, TaskPart, read_task, write_task
 from aw.formats.trajectory import (
+    RecordingError,
     Trajectory,
     TrajectoryCall,
     TrajectoryEnd,
@@ -46,6 +47,7 @@ __all__ = [
     "TrajectoryCall",
     "TrajectoryEnd",
     "TrajectoryWriter",
+    "RecordingError",
     "FinalState",
     "read_trajectory",
     "read_final",

@@ -242,10 +242,24 @@ def _resolve_times(traj: Trajectory) -> None:
         end.t = round(end.server_t - start, 6) if end.server_t is not None else 0.0
 
 
-class TrajectoryWriter:
-    """Appends records and flushes each one, so a crash loses at most the call in flight.
+class RecordingError(Exception):
+    """A record could not be written (``reason``: the OS's words, e.g. "No space left on device").
+    Nothing of that record is left in the file."""
 
-    Thread-safe; ``close`` is idempotent.
+    def __init__(self, path: Path, reason: str):
+        super().__init__(f"{path.name}: {reason}")
+        self.path = path
+        self.reason = reason
+
+
+class TrajectoryWriter:
+    """Appends records, each written whole and synced before ``call`` returns, so a crash loses at
+    most the call in flight.
+
+    Unbuffered on purpose: a buffered file keeps the bytes of a failed write (a full disk) and
+    writes them with the next record, so a call the agent was told had failed would appear later
+    as recorded. Here a record that cannot be written is cut off again (``RecordingError``) and
+    the file ends at the last complete record. Thread-safe; ``close`` is idempotent.
     """
 
     def __init__(self, path: str | Path, header: TrajectoryHeader):
@@ -254,26 +268,42 @@ class TrajectoryWriter:
         if self.path.exists() and self.path.stat().st_size > 0:
             # Appending a second episode would make the file unreadable (a second header).
             raise FormatError(self.path, "already holds a recording; a trajectory file is written once")
-        self._fh = open(self.path, "ab")
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        self._size = os.fstat(self._fd).st_size
         self._lock = threading.Lock()
         self._closed = False
-        self._write(header)
+        try:
+            self._write(header)
+        except RecordingError:
+            self.close()
+            raise
 
     def _write(self, rec: BaseModel) -> None:
-        line = orjson.dumps(rec.model_dump(mode="json", exclude_none=True), option=orjson.OPT_SERIALIZE_NUMPY)
+        line = encode_record(rec) + b"\n"
         with self._lock:
             if self._closed:
                 raise RuntimeError("trajectory already closed")
-            self._fh.write(line + b"\n")
-            self._fh.flush()
-            os.fsync(self._fh.fileno())
+            try:
+                view = memoryview(line)
+                while view:
+                    view = view[os.write(self._fd, view):]
+                os.fsync(self._fd)
+            except OSError as exc:
+                try:
+                    os.ftruncate(self._fd, self._size)  # drop the part of the line that got written
+                except OSError:
+                    pass
+                raise RecordingError(self.path, exc.strerror or type(exc).__name__) from None
+            self._size += len(line)
 
     def call(self, rec: TrajectoryCall) -> None:
         self._write(rec)
 
     def end(self, rec: TrajectoryEnd) -> None:
-        self._write(rec)
-        self.close()
+        try:
+            self._write(rec)
+        finally:
+            self.close()
 
     @property
     def closed(self) -> bool:
@@ -283,7 +313,12 @@ class TrajectoryWriter:
         with self._lock:
             if not self._closed:
                 self._closed = True
-                self._fh.close()
+                os.close(self._fd)
+
+
+def encode_record(rec: BaseModel) -> bytes:
+    """One record as a JSON line's bytes (no newline)."""
+    return orjson.dumps(rec.model_dump(mode="json", exclude_none=True), option=orjson.OPT_SERIALIZE_NUMPY)
 
 
 def read_final(path: str | Path) -> FinalState:

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import importlib
 import multiprocessing
+import os
 import shutil
+import tempfile
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -106,16 +108,25 @@ def _build_one(index: int, spec: ObjectSpec, settings: _Settings) -> ObjectResul
     )
 
 
+# What a suite consists of in its directory; the manifest last, so that a suite is complete once it appears.
+SUITE_ENTRIES = ("tasks", "targets", "eval_points", "manifest.json")
+
+
+def _existing_suite(out: Path, force: bool) -> list[Path]:
+    """The suite entries already in ``out``; an error if there are any and not ``force``."""
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"{out}: exists and is not a directory")
+    existing = [out / n for n in SUITE_ENTRIES if (out / n).exists()]
+    if existing and not force:
+        raise SuiteExistsError(f"{out}: already holds a suite ({', '.join(p.name for p in existing)}); pass --overwrite to replace it")
+    return existing
+
+
 def prepare_output_dir(out: str | Path, force: bool = False) -> Path:
     """Create ``out`` for a new suite. An existing suite there (``manifest.json``, ``tasks/``,
     ``targets/`` or ``eval_points/``) is an error unless ``force``, which removes exactly those."""
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise NotADirectoryError(f"{out}: exists and is not a directory")
-    existing = [out / n for n in ("manifest.json", "tasks", "targets", "eval_points") if (out / n).exists()]
-    if existing and not force:
-        raise SuiteExistsError(f"{out}: already holds a suite ({', '.join(p.name for p in existing)}); pass --overwrite to replace it")
-    for p in existing:
+    for p in _existing_suite(out, force):
         shutil.rmtree(p) if p.is_dir() else p.unlink()
     (out / "tasks").mkdir(parents=True, exist_ok=True)
     (out / "targets").mkdir(parents=True, exist_ok=True)
@@ -152,7 +163,35 @@ def build_suite(
     """
     if not specs:
         raise ValueError("no objects to prepare")
-    out = prepare_output_dir(out, force)
+    out = Path(out)
+    _existing_suite(out, force)  # refused before any work
+    created = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)
+    # Built in a hidden folder inside ``out`` and moved into place whole: a failure or Ctrl-C
+    # leaves no partial suite (nor half of a replaced one), and the same command can be rerun.
+    stage = Path(tempfile.mkdtemp(prefix=".partial-suite-", dir=out))
+    try:
+        manifest, done = _build_into(specs, prepare_output_dir(stage), name=name, generator=generator, seed=seed,
+                                     variants=variants, jobs=jobs, progress=progress, image_size=image_size,
+                                     manual_size=manual_size, protocol=protocol)
+        replaced = stage / ".replaced"
+        replaced.mkdir()
+        for p in reversed([out / n for n in SUITE_ENTRIES]):  # the old suite out of the way, manifest first
+            if p.exists():
+                os.replace(p, replaced / p.name)
+        for n in SUITE_ENTRIES:  # renames within one file system; the manifest last
+            if (stage / n).exists():
+                os.replace(stage / n, out / n)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+        if created and not any(out.iterdir()):
+            out.rmdir()
+    return manifest, done
+
+
+def _build_into(specs, out: Path, *, name, generator, seed, variants, jobs, progress, image_size, manual_size,
+                protocol) -> tuple[SuiteManifest, list[ObjectResult]]:
+    """:func:`build_suite`'s work, written into the empty suite folder ``out``."""
     plans = list(variants) if isinstance(variants, Sequence) else [variants] * len(specs)
     if len(plans) != len(specs):
         raise ValueError("variants must be one plan or one per spec")

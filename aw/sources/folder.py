@@ -11,11 +11,14 @@ Layout::
 Part names are the file stems. Parts may also live in a ``parts/`` subfolder (then only that
 folder is read). Every error names the offending file. Keys of ``meta.json`` that
 :class:`ObjectMeta` does not know are ignored; :func:`scan_folder` warns once per file, naming
-them (:class:`UnknownMetaKeys`).
+them (:class:`UnknownMetaKeys`), and names every mesh path it does not read (:class:`SkippedPath`:
+a directory, a link to a device, meshes beside a ``parts/`` folder). An object folder whose name
+is not valid UTF-8 is an error before anything is built.
 """
 
 from __future__ import annotations
 
+import os
 import warnings
 from pathlib import Path
 from typing import Literal
@@ -29,7 +32,8 @@ from aw.formats.io import load_json, read_model
 from aw.meshes import load_mesh
 from aw.sources.up_axis import guess_up_axis
 
-__all__ = ["MESH_SUFFIXES", "UP_AXES", "ObjectMeta", "FolderObject", "UnknownMetaKeys", "load_object", "scan_folder", "unknown_keys"]
+__all__ = ["MESH_SUFFIXES", "UP_AXES", "ObjectMeta", "FolderObject", "SkippedPath", "UnknownMetaKeys", "load_object",
+           "scan_folder", "skipped_paths", "unknown_keys"]
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
 Condition = Literal["none", "image", "manual"]
@@ -81,6 +85,10 @@ class UnknownMetaKeys(UserWarning):
     """A ``meta.json`` has keys :class:`ObjectMeta` does not know (they are ignored)."""
 
 
+class SkippedPath(UserWarning):
+    """A path named like a part mesh that is not read (see :func:`skipped_paths`)."""
+
+
 def unknown_keys(obj_dir: str | Path) -> list[str]:
     """The keys of ``obj_dir/meta.json`` that :class:`ObjectMeta` ignores, sorted."""
     path = Path(obj_dir) / "meta.json"
@@ -100,6 +108,28 @@ def _part_files(obj_dir: Path) -> list[Path]:
     if dup:
         raise FormatError(base, f"several mesh files share the part name(s) {dup}; part names are file stems and must be unique")
     return files
+
+
+def skipped_paths(obj_dir: Path) -> list[tuple[Path, str]]:
+    """Paths of ``obj_dir`` with a mesh suffix that :func:`load_object` does not read, with why."""
+    base = obj_dir / "parts" if (obj_dir / "parts").is_dir() else obj_dir
+    out = []
+    for p in sorted(base.iterdir()):
+        if p.suffix.lower() not in MESH_SUFFIXES:
+            continue
+        if p.is_dir():
+            out.append((p, "a directory, not a mesh file"))
+        elif not p.is_file():
+            out.append((p, "not a regular file (a device, a socket or a broken link)"))
+    if base != obj_dir:
+        out += [(p, "the object's parts are read from its parts/ folder")
+                for p in sorted(obj_dir.iterdir()) if p.suffix.lower() in MESH_SUFFIXES]
+    return out
+
+
+def shown(path: Path | str) -> str:
+    """``path`` for a message: bytes that are not UTF-8 written as ``\\xff`` escapes."""
+    return os.fsencode(path).decode("utf-8", "backslashreplace")
 
 
 def read_meta(obj_dir: Path) -> ObjectMeta:
@@ -193,10 +223,15 @@ def scan_folder(src: str | Path) -> list[FolderObject]:
         raise FormatError(src, "contains no object folders (one subfolder per object is expected)")
     found = []
     for d in dirs:
+        if shown(d.name) != d.name:  # task ids, manifests and JSON need text
+            raise FormatError(shown(d), "object folder name is not valid UTF-8; rename the folder")
+    for d in dirs:
         meta = read_meta(d)
         ignored = unknown_keys(d)
         if ignored:
             warnings.warn(f"{d / 'meta.json'}: unknown keys {ignored} are ignored", UnknownMetaKeys, stacklevel=2)
+        for path, why in skipped_paths(d):
+            warnings.warn(f"{shown(path)}: skipped: {why}", SkippedPath, stacklevel=2)
         found.append(FolderObject(path=str(d), object_id=meta.object_id or d.name, conditions=_conditions(meta)))
     ids = [f.object_id for f in found]
     dup = sorted({i for i in ids if ids.count(i) > 1})

@@ -232,6 +232,13 @@ def read_episode(run_dir: str | Path, task_id: str, all_part_ids: Sequence[str],
             names = {ids[a] for a in affected}
             revisit.append(bool(names & edited))
             edited |= names
+        if traj.end is not None:
+            # The end record is written from the scene like every call line, so it repeats the last
+            # recorded state; a difference means edits were made that no call line records.
+            gap = contradicting_parts(traj.end.poses, checkpoints[-1].poses, ids)
+            if gap:
+                problems.append(f"trajectory: the end record's poses contradict the last recorded call's (parts "
+                                f"{gap}): edits were made that were not recorded")
         if final is not None:
             differ = contradicting_parts(final.poses, traj.final_poses(), ids)
             if differ:

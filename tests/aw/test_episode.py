@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import os
 
 import numpy as np
 import pytest
@@ -237,3 +238,65 @@ def test_huge_integers_are_recorded_not_fatal(episode):
     traj = read_trajectory(episode.run_dir / "trajectory.jsonl")
     assert [c.args for c in traj.calls] == [{"x": str(10**30)}, {"x": str(-(10**30))}, {"x": "<integer of 16610 bits>"},
                                             {"id": str(2**64)}]
+
+
+def test_unrecordable_text_and_depth_are_recorded_escaped(episode):
+    """Lone surrogates (JSON's "\\ud800" decodes to one) and deep nesting once made the recorder
+    raise after the scene had changed: a group existed that no line recorded."""
+    group = episode.call("group_objects", {"ids": ["p01", "p02"], "name": "a\ud800b"})["group"]
+    deep: list = []
+    for _ in range(300):
+        deep = [deep]
+    episode.reject("translate_objects", {"ids": ["p01"], "delta": deep, "\udc00": 1}, "bad \ud83d")
+    with pytest.raises(EpisodeError):
+        episode.call("list_objects", {"x": deep})
+    episode.close()
+    calls = read_trajectory(episode.run_dir / "trajectory.jsonl").calls
+    assert [c.tool for c in calls] == ["group_objects", "translate_objects", "list_objects"]
+    assert calls[0].ok and calls[0].args["name"] == "a\\ud800b" and episode.scene.groups[group["id"]]
+    assert calls[1].error == "bad \\ud83d" and "\\udc00" in calls[1].args
+    level = calls[1].args["delta"]
+    for _ in range(31):
+        level = level[0]
+    assert level == "<nested deeper than 32 levels>"
+
+
+def _fail_trajectory_writes(ep: Episode) -> None:
+    """From now on the trajectory's writes fail as on a full disk (ENOSPC from /dev/full)."""
+    full = os.open("/dev/full", os.O_WRONLY)
+    os.dup2(full, ep._writer._fd)
+    os.close(full)
+
+
+@pytest.mark.parametrize("tool, args", [
+    ("translate_objects", {"ids": ["p01"], "delta": [1, 0, 0]}),
+    ("rotate_objects", {"ids": ["p01", "p02"], "angles": [0, 0, 90]}),
+    ("set_object_pose", {"id": "p02", "position": [0, 1, 0]}),
+    ("group_objects", {"ids": ["p01", "p02"], "name": "pair"}),
+    ("ungroup_objects", {"ids": ["g1"]}),
+    ("move_camera", {"yaw": 30}),
+    ("capture_scene", {}),
+])
+def test_a_call_whose_recording_fails_changes_nothing(episode, tool, args, caplog):
+    """Record first, or undo: the reply says recording failed, the scene, groups and camera are
+    as before, no capture file is left, and the episode takes no further calls."""
+    if tool == "ungroup_objects":
+        episode.call("group_objects", {"ids": ["p01", "p02"]})
+    before = episode.call("get_state")
+    n_captures = len(list((episode.run_dir / "captures").iterdir()))
+    _fail_trajectory_writes(episode)
+    with pytest.raises(EpisodeError) as info:
+        episode.call(tool, args)
+    message = str(info.value)
+    assert message.startswith("recording failed (No space left on device)") and "\n" not in message
+    assert "Errno" not in message
+    assert episode.scene.pose_dict() == {p: [float(v) for v in before["poses"][p]["position"]
+                                             + before["poses"][p]["quaternion"]] for p in episode.part_ids}
+    assert episode.scene.groups_list() == before["groups"]
+    assert episode.scene.camera.describe() == before["camera"]
+    assert len(list((episode.run_dir / "captures").iterdir())) == n_captures
+    for later in [("get_state", {}), ("translate_objects", {"ids": ["p02"], "delta": [0, 0, 1]})]:
+        with pytest.raises(EpisodeError, match="recording failed"):
+            episode.call(*later)
+    assert episode.reject("get_object", {"id": 1}, "id must be a string").startswith("recording failed")
+    assert [r.levelname for r in caplog.records if "recording" in r.getMessage()] == ["ERROR"]  # once

@@ -10,8 +10,8 @@ import trimesh
 from aw.episode import Episode
 from aw.formats import Task, TaskPart, read_trajectory
 from aw.prompt import task_prompt
-from aw.webmcp import (ENABLED_TOOLS, PAGE_TOOLS, NotRegistered, WebMcpPage, check_arguments, mesh_geom_sizes,
-                       registered_tools)
+from aw.webmcp import (ENABLED_TOOLS, PAGE_TOOLS, BadInput, NotRegistered, WebMcpPage, check_arguments, mesh_geom_sizes,
+                       parse_tool_input, registered_tools)
 
 
 class Clock:
@@ -193,3 +193,27 @@ def test_geom_sizes_do_not_depend_on_the_placement():
     # A mesh MuJoCo refuses (a single triangle) still gets a size: half its bounding box.
     tri = trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 2, 0]], [[0, 1, 2]], process=False)
     assert mesh_geom_sizes([tri]) == [[0.5, 1.0, 0.0]]
+
+
+@pytest.mark.parametrize("text, message", [
+    ('{"a": ' + "[" * 40 + "]" * 40 + "}", "input is nested more than 32 levels deep"),
+    ('{"a": ' + "[" * 5000 + "]" * 5000 + "}", "input is nested more than 32 levels deep"),
+    ('{"name": "x\\ud800"}', "input holds a lone UTF-16 surrogate (\\ud800); strings must be valid Unicode text"),
+    ('{"\\udfff": 1}', "input holds a lone UTF-16 surrogate (\\udfff)"),
+    ('{"yaw": ' + "9" * 5000 + "}", "input holds a number with more than 4300 digits; numbers must be finite"),
+    ('{"yaw": NaN}', "NaN is not a JSON number"),
+    ("[1]", "input must encode a JSON object, got an array"),
+    ("{", "input is not valid JSON"),
+])
+def test_tool_input_that_no_record_could_hold_is_refused_by_name(text, message):
+    with pytest.raises(BadInput) as info:
+        parse_tool_input(text)
+    assert message in str(info.value) and "\n" not in str(info.value)
+
+
+def test_tool_input_within_limits_passes():
+    assert parse_tool_input('{"a": ' + "[" * 30 + "]" * 30 + ', "b": "\\ud83d\\ude00"}')["b"] == "\U0001F600"
+    # integers beyond float range pass the decoding and are refused by the argument check, by name
+    big = parse_tool_input('{"ids": ["part-0001"], "delta": [%s, 0, 0]}' % ("9" * 400))
+    problems = check_arguments(PAGE_TOOLS["translate_objects"].input_schema, big)
+    assert problems == ["delta[0] must be a finite number"]

@@ -170,6 +170,25 @@ def test_final_json_contradicting_the_trajectory(tmp_path):
     assert same.final_from == "final.json" and not any("contradicts" in p for p in same.problems)
 
 
+def test_end_record_contradicting_the_recorded_calls_is_flagged(tmp_path):
+    """What a full disk used to leave: edits applied but not recorded, so the end record and
+    final.json (both the live scene) agree with each other and with no recorded call. Flagged."""
+    calls, last = _episode_calls()
+    unrecorded = {**last, "p01": _pose((1.85, 1, 0), (1, 0, 0), 0.2)}  # a further, unrecorded move of p01
+    _write(tmp_path, calls, TrajectoryEnd(reason="disconnect", t=10.0, poses=unrecorded),
+           FinalState(task_id="task-1", reason="disconnect", poses=unrecorded))
+    ep = read_episode(tmp_path, "task-1", IDS, SCORED, CENTROIDS, DIVISOR)
+    (problem,) = [p for p in ep.problems if "end record" in p]
+    assert "parts ['p01']" in problem and "not recorded" in problem
+    # a consistent run has no such problem
+    consistent = tmp_path / "ok"
+    consistent.mkdir()
+    _write(consistent, calls, TrajectoryEnd(reason="disconnect", t=10.0, poses=last),
+           FinalState(task_id="task-1", reason="disconnect", poses=last))
+    assert not [p for p in read_episode(consistent, "task-1", IDS, SCORED, CENTROIDS, DIVISOR).problems
+                if "end record" in p]
+
+
 def test_final_json_naming_an_unknown_part(tmp_path):
     calls, last = _episode_calls()
     _write(tmp_path, calls, TrajectoryEnd(reason="finished", t=10.0, poses=last),

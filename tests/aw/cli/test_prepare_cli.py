@@ -183,3 +183,57 @@ def test_entry_point_runs(tmp_path):
     assert "preparing objects" in proc.stderr  # tqdm progress goes to stderr
     assert "fantastic_breaks" in proc.stdout
     assert len(read_manifest(out).tasks) == 1
+
+
+def _no_suite(out) -> bool:
+    return not any((out / n).exists() for n in ("manifest.json", "tasks", "targets", "eval_points"))
+
+
+def test_folder_name_not_utf8_is_a_named_error_and_writes_nothing(tmp_path, capsys):
+    """It once failed with a ValidationError on object_id after the other objects' tasks were written."""
+    import os
+
+    src = _folder(tmp_path / "src")
+    (src / "lamp").rename(src / os.fsdecode(b"zz-lamp\xff"))
+    out = tmp_path / "o"
+    assert main(["folder", str(src), "--out", str(out), "--jobs", "1", "--no-progress"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "zz-lamp\\xff" in err and "not valid UTF-8" in err
+    assert _no_suite(out)
+
+
+def test_a_failed_build_leaves_no_partial_suite_and_can_be_rerun(tmp_path, capsys):
+    """Objects are written one by one; a failure late in the build (an unreadable reference image,
+    found only when it is written) left the earlier objects' tasks and no manifest."""
+    src = _folder(tmp_path / "src")
+    (src / "vase" / "photo.png").write_bytes(b"not a picture")
+    (src / "vase" / "meta.json").write_text(json.dumps({"references": {"image": ["photo.png"]}}))
+    out = tmp_path / "o"
+    args = ["folder", str(src), "--out", str(out), "--jobs", "1", "--no-progress"]
+    assert main(args) == 1
+    assert "photo.png" in capsys.readouterr().err
+    assert _no_suite(out)
+    assert not out.exists() or not any(p.name.startswith(".") for p in out.iterdir())  # no staging folder left
+    # an earlier suite survives a failed --overwrite
+    (src / "vase" / "meta.json").unlink()
+    assert main(args) == 0
+    before = _tree(out)
+    (src / "vase" / "meta.json").write_text(json.dumps({"references": {"image": ["photo.png"]}}))
+    assert main(args + ["--overwrite"]) == 1
+    assert _tree(out) == before
+    (src / "vase" / "meta.json").unlink()
+    assert main(args + ["--overwrite"]) == 0 and _tree(out) == before
+
+
+def test_skipped_mesh_paths_are_named(tmp_path, capsys):
+    """A part path that is a directory or a link to /dev/zero was skipped without a word."""
+    src = _folder(tmp_path / "src")
+    (src / "desk" / "drawer.obj").mkdir()
+    (src / "lamp" / "shade.stl").symlink_to("/dev/zero")
+    out = tmp_path / "o"
+    assert main(["folder", str(src), "--out", str(out), "--jobs", "1", "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert "aw-prepare: warning: " in err
+    assert "desk/drawer.obj: skipped: a directory, not a mesh file" in err
+    assert "lamp/shade.stl: skipped: not a regular file" in err
+    assert all(t.n_parts == 3 for t in read_manifest(out).tasks)

@@ -10,7 +10,7 @@ import trimesh
 from PIL import Image
 
 from aw.formats import FormatError
-from aw.sources.folder import load_object, scan_folder
+from aw.sources.folder import SkippedPath, load_object, scan_folder, skipped_paths
 
 
 def _box(path, size, centre):
@@ -72,6 +72,10 @@ def test_parts_subfolder(tmp_path):
     _box(d.parent / "ignored.obj", (5, 5, 5), (0, 0, 0))
     obj = load_object(d.parent)
     assert sorted(p.name for p in obj.parts) == ["x", "y"]
+    # the mesh beside parts/ is not read, and scanning says so by name
+    with pytest.warns(SkippedPath, match="thing/ignored.obj: skipped: the object's parts are read from its parts/"):
+        scan_folder(tmp_path / "src")
+    assert skipped_paths(d.parent) == [(d.parent / "ignored.obj", "the object's parts are read from its parts/ folder")]
 
 
 def _expect(path_fragment, match, fn, *args):
