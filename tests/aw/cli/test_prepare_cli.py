@@ -196,7 +196,7 @@ def test_folder_name_not_utf8_is_a_named_error_and_writes_nothing(tmp_path, caps
     src = _folder(tmp_path / "src")
     (src / "lamp").rename(src / os.fsdecode(b"zz-lamp\xff"))
     out = tmp_path / "o"
-    assert main(["folder", str(src), "--out", str(out), "--jobs", "1", "--no-progress"]) == 1
+    assert main(["folder", str(src), "--out", str(out), "--jobs", "1", "--no-progress"]) == 2  # an unusable SRC, found before any work: a usage error
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "zz-lamp\\xff" in err and "not valid UTF-8" in err
     assert _no_suite(out)
