@@ -18,7 +18,7 @@ from aw.formats.errors import FormatError
 from aw.formats.io import parse_json_text, parse_model, write_json_atomic
 from aw.formats.trajectory import FinalState
 
-__all__ = ["POSES_FORMAT", "PosesFile", "read_initial_poses", "write_poses"]
+__all__ = ["POSES_FORMAT", "PosesFile", "initial_poses_file", "read_initial_poses", "write_poses"]
 
 POSES_FORMAT = "assemblyworld.poses"
 
@@ -62,3 +62,13 @@ def read_initial_poses(path: str | Path, task_id: str, part_ids: list[str]) -> d
         raise FormatError(path, "poses must name exactly the task's parts" + (f"; missing {missing}" if missing else "")
                           + (f"; unknown {unknown}" if unknown else ""))
     return {p: list(doc.poses[p]) for p in part_ids}
+
+
+def initial_poses_file(source: str | Path, task_id: str) -> Path | None:
+    """A task's start-state file under the directory ``source``: ``source/<task_id>/final.json``
+    (a system's runs) or ``source/<task_id>.json`` (poses files); None when neither exists."""
+    source = Path(source)
+    for path in (source / task_id / "final.json", source / f"{task_id}.json"):
+        if path.is_file():
+            return path
+    return None

@@ -23,12 +23,12 @@ from aw.formats import (
     FinalState, FormatError, RunInfo, Task, TrajectoryCall, TrajectoryEnd, TrajectoryHeader, TrajectoryWriter,
     read_manifest, read_task, write_final, write_run_info,
 )
-from aw.formats.poses import read_initial_poses
+from aw.formats.poses import initial_poses_file, read_initial_poses
 from aw.formats.suite import suite_paths
 from aw.refine.base import RefineRequest, RefinerError, identity_poses
 from aw.refine.plugins import RefinerSpec, run_refiner
 
-__all__ = ["RefineConfig", "build_request", "fracture_identity", "initial_poses_file", "refine_suite", "refine_task"]
+__all__ = ["RefineConfig", "build_request", "fracture_identity", "refine_suite", "refine_task"]
 
 DEFAULT_TIMEOUT_S = 300.0
 
@@ -62,15 +62,6 @@ def build_request(task: Task, suite_dir: str | Path | None, initial: dict[str, l
     start = identity_poses(len(task.parts)) if initial is None else np.array([initial[p] for p in task.part_ids], float)
     return RefineRequest(task.task_id, task.part_ids, points, meshes, [str(task.mesh_path(p).resolve()) for p in task.part_ids],
                          start, initial is not None, seed, steps, dict(options or {}))
-
-
-def initial_poses_file(source: Path, task_id: str) -> Path | None:
-    """A task's start-state file under ``source``: ``source/<task_id>/final.json`` (a system's
-    runs) or ``source/<task_id>.json`` (poses files); None when neither exists."""
-    for path in (source / task_id / "final.json", source / f"{task_id}.json"):
-        if path.is_file():
-            return path
-    return None
 
 
 def _utc() -> str:
