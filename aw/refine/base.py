@@ -27,10 +27,11 @@ def identity_poses(n: int) -> np.ndarray:
     return poses
 
 
-def anchor_index(points: list[np.ndarray]) -> int:
-    """The anchor: the part with the most shared samples, first on ties (as the fracture
-    protocol's evaluation picks it)."""
-    return int(np.argmax([len(p) for p in points]))
+def anchor_index(points: list[np.ndarray], part_ids: list[str] | None = None) -> int:
+    """The anchor: the part with the most shared samples, on ties the first in sorted part-id
+    order (the order in which the fracture protocol's evaluation picks it)."""
+    order = sorted(range(len(points)), key=lambda i: part_ids[i]) if part_ids is not None else range(len(points))
+    return max(order, key=lambda i: (len(points[i]), -list(order).index(i)))
 
 
 @dataclass
@@ -57,7 +58,7 @@ class RefineRequest:
 
     @property
     def anchor(self) -> int:
-        return anchor_index(self.points)
+        return anchor_index(self.points, self.part_ids)
 
 
 def check_poses(name: str, request: RefineRequest, poses: Any) -> np.ndarray:
