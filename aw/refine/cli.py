@@ -4,6 +4,7 @@ bidirectional refinement study (``--refinement-study``). See docs/agents.md, "Re
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -14,14 +15,18 @@ __all__ = ["add_refiner_arguments", "run_refiner_command"]
 
 
 def _option(text: str) -> tuple[str, object]:
+    """``KEY=VALUE``, the value an int or a finite float where it reads as one, else text (so
+    ``mode=nan`` stays the word, not a NaN)."""
     if "=" not in text:
         raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
     key, value = text.split("=", 1)
     for conv in (int, float):
         try:
-            return key, conv(value)
+            number = conv(value)
         except ValueError:
-            pass
+            continue
+        if math.isfinite(number):
+            return key, number
     return key, value
 
 

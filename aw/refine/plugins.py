@@ -76,7 +76,8 @@ class RefinerSpec:
 
 
 def resolve(name: str | None, command: str | None = None) -> RefinerSpec:
-    """Check a refiner choice before anything runs: a known Python refiner, or a command line."""
+    """Check a refiner choice before anything runs: a known Python refiner, or a command line
+    (named ``name``, else its program's file name, the script's for ``python SCRIPT``)."""
     if command is not None:
         try:
             words = shlex.split(command)
@@ -84,7 +85,8 @@ def resolve(name: str | None, command: str | None = None) -> RefinerSpec:
             raise RefinerError(f"--refiner-command: {exc}") from None
         if not words:
             raise RefinerError("--refiner-command is empty")
-        return RefinerSpec(name or Path(words[0]).name, tuple(words))
+        program = words[1] if Path(words[0]).name.startswith("python") and len(words) > 1 else words[0]
+        return RefinerSpec(name or Path(program).name, tuple(words))
     if not name:
         raise RefinerError("name a refiner (--refiner) or give --refiner-command")
     load_refiner(name)

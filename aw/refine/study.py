@@ -104,7 +104,7 @@ def run_study(agent_cfg: BatchConfig, refine_cfg: RefineConfig, task_ids: list[s
             if t not in ok:
                 arms[arm].failed[t] = f"no start state: arm {first} failed on this task"
         run(arms[arm], ok, out / systems[first])
-    write_study(out, agent_cfg, refine_cfg, list(arms.values()))
+    write_study(out, agent_cfg, refine_cfg, list(arms.values()), task_ids)
     return list(arms.values())
 
 
@@ -122,13 +122,15 @@ def _note_skipped(arm: StudyArm, out: Path, skipped: list[str]) -> None:
             arm.failed[tid] = f"{info.ended}: {_first_line(info.error)}"
 
 
-def write_study(out: Path, agent_cfg: BatchConfig, refine_cfg: RefineConfig, arms: list[StudyArm]) -> Path:
+def write_study(out: Path, agent_cfg: BatchConfig, refine_cfg: RefineConfig, arms: list[StudyArm],
+                task_ids: list[str]) -> Path:
     spec: RefinerSpec = refine_cfg.spec
     doc = {
         "format": STUDY_FORMAT, "format_version": 1, "suite": str(Path(agent_cfg.suite_dir).resolve()),
         "agent": agent_cfg.agent or agent_cfg.harness, "agent_seed": agent_cfg.seed,
         "refiner": spec.name, "refiner_command": list(spec.command) if spec.command else None,
         "refiner_seed": refine_cfg.seed, "refiner_steps": refine_cfg.steps,
+        "tasks": list(task_ids),
         "arms": [a.doc() for a in arms],
         "counts": dict(Counter(a.status for a in arms)),
     }

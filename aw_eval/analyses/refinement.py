@@ -72,8 +72,9 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
         return {"error": f"{path}: arms missing: {', '.join(missing)}"}
     rows: dict[str, dict[str, Any]] = {}
     failures: dict[str, dict[str, str]] = {a: {} for a in ARMS}
+    chosen = set(study.get("tasks") or [])  # the tasks the study ran (all originals if it does not say)
     for entry in read_manifest(suite_dir).tasks:
-        if entry.variant != "original":
+        if entry.variant != "original" or (chosen and entry.task_id not in chosen):
             continue
         tid = entry.task_id
         task_dir, targets_path = suite_paths(suite_dir, tid)
