@@ -44,6 +44,7 @@ FINE_STARTS = 4
 BODY_POINTS = 2000
 LOCAL_RADIUS = 0.15
 OPPOSED = -0.5  # cosine below which two normals face each other
+PLANE_SHARE = 0.25  # of the neighbour tolerance: how far off a partner's tangent plane a point may lie
 
 
 class _Surface:
@@ -122,17 +123,22 @@ def _icp(src: _Surface, dst: _Surface, rot: np.ndarray, shift: np.ndarray, radiu
 
 
 def _coverage(a: _Surface, b: _Surface, rot: np.ndarray, shift: np.ndarray, eps: float) -> float:
-    """Share of ``b`` (moved) with an opposed partner in ``a`` within ``eps``, and of ``a`` in ``b``."""
+    """The smaller of two shares: points of ``b`` (moved) with an opposed partner in ``a`` within
+    ``eps`` that lies within ``PLANE_SHARE * eps`` of the partner's tangent plane, and the same
+    for ``a`` in ``b``. The tight plane distance tells an exact fit of rough surfaces from a
+    near-symmetric one that only comes close."""
     p, n = b.points @ rot.T + shift, b.normals @ rot.T
-    d, j = a.tree.query(p, distance_upper_bound=eps)
-    ok = np.isfinite(d)
-    hit_b = ok.copy()
-    hit_b[ok] = np.einsum("ij,ij->i", n[ok], a.normals[j[ok]]) < OPPOSED
-    d2, j2 = cKDTree(p).query(a.points, distance_upper_bound=eps)
-    ok2 = np.isfinite(d2)
-    hit_a = ok2.copy()
-    hit_a[ok2] = np.einsum("ij,ij->i", a.normals[ok2], n[j2[ok2]]) < OPPOSED
-    return float(min(hit_a.mean(), hit_b.mean()))
+
+    def share(src, src_n, dst, dst_n, tree) -> float:
+        d, j = tree.query(src, distance_upper_bound=eps)
+        ok = np.isfinite(d)
+        hit = ok.copy()
+        k = j[ok]
+        hit[ok] = (np.einsum("ij,ij->i", src_n[ok], dst_n[k]) < OPPOSED) & (
+            np.abs(np.einsum("ij,ij->i", src[ok] - dst[k], dst_n[k])) < PLANE_SHARE * eps)
+        return float(hit.mean())
+
+    return min(share(p, n, a.points, a.normals, a.tree), share(a.points, a.normals, p, n, cKDTree(p)))
 
 
 def _sunk(anchor_body: _Surface, other_body: _Surface, rot: np.ndarray, shift: np.ndarray, eps: float) -> float:
