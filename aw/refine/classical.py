@@ -14,8 +14,9 @@
    pose, restricted to the candidate regions, with the radius starting at ``LOCAL_RADIUS`` of
    the object's size.
 4. Every result is scored by how much of the two regions meet (points with an opposed partner
-   within a tolerance, the smaller of the two shares) minus twice the share of the other
-   fragment's samples that sink into the anchor; the best wins. The anchor keeps its pose.
+   within a tolerance whose tangent plane is within a quarter of it; the smaller of the two
+   shares) minus twice the share of the other fragment's samples that sink into the anchor; the
+   best wins. The anchor keeps its pose.
 """
 
 from __future__ import annotations
