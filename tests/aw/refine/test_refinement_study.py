@@ -138,3 +138,25 @@ def test_refiner_options_keep_words_that_read_as_non_finite_numbers():
     assert _option("behaviour=nan") == ("behaviour", "nan")
     assert _option("mode=inf") == ("mode", "inf")
     assert _option("dx=0.125") == ("dx", 0.125) and _option("n=3") == ("n", 3)
+
+
+def test_aw_score_outputs_carry_the_section(good, fracture_suite, tmp_path):
+    """write_outputs (aw-score's last step) adds the section to report.md, report.html and
+    scores.json when RUNS holds refinement_study.json; the rest of the report is another study."""
+    sys.path.insert(0, str(Path(__file__).parents[2] / "aw_eval"))
+    from score_helpers import table1_study
+
+    from aw_eval.report import AnalysisSettings, write_outputs
+
+    res = write_outputs(table1_study(), tmp_path / "out", AnalysisSettings(n_draws=50, n_permutations=50),
+                        suite_dir=str(fracture_suite), runs_dir=str(good), plots=True, html=True)
+    md = (tmp_path / "out" / "report.md").read_text()
+    assert "## Bidirectional refinement" in md and "| Agent -> Refiner | `idle-then-scripted` |" in md
+    assert "(plots/refinement_paired_cd.png)" in md and (tmp_path / "out" / "plots" / "refinement_paired_cd.png").is_file()
+    assert res["doc"]["refinement"]["matched"] == TASKS
+    page = (tmp_path / "out" / "report.html").read_text()
+    assert "Bidirectional refinement" in page and 'src="plots/refinement_paired_cd.png"' in page
+    plain = tmp_path / "plain"
+    write_outputs(table1_study(), plain, AnalysisSettings(n_draws=50, n_permutations=50), suite_dir=str(fracture_suite),
+                  runs_dir=str(tmp_path), plots=False, html=False)  # no study file: no section
+    assert "Bidirectional refinement" not in (plain / "report.md").read_text()
