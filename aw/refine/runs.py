@@ -11,6 +11,7 @@ fails or answers wrongly leaves the start state as the run's final state and ``e
 
 from __future__ import annotations
 
+import shutil
 import time
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -72,8 +73,6 @@ def refine_task(spec: RefinerSpec, task: Task, suite_dir: str | Path | None, run
                 start_file: Path | None = None, timeout_s: float = DEFAULT_TIMEOUT_S, seed: int = 42, steps: int = 20,
                 options: dict[str, Any] | None = None) -> RunInfo:
     """Refine one task into ``run_dir`` (replaced); returns its ``run.json`` (also written)."""
-    import shutil
-
     if run_dir.exists():
         shutil.rmtree(run_dir)
     run_dir.mkdir(parents=True)

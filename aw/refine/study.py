@@ -17,12 +17,13 @@ import dataclasses
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from aw.formats.io import write_json_atomic
-from aw.refine.plugins import RefinerSpec
-from aw.refine.runs import RefineConfig, refine_suite
-from aw.runner.batch import BatchConfig, run_batch
+
+if TYPE_CHECKING:  # the runner is imported when a study runs, not when aw-score reads one
+    from aw.refine.runs import RefineConfig
+    from aw.runner.batch import BatchConfig
 
 __all__ = ["ARMS", "STUDY_FILE", "StudyArm", "arm_systems", "run_study"]
 
@@ -63,6 +64,9 @@ def run_study(agent_cfg: BatchConfig, refine_cfg: RefineConfig, task_ids: list[s
               log: Callable[[str], None] = lambda _m: None) -> list[StudyArm]:
     """Run the four arms (``agent_cfg.system`` / ``refine_cfg.system`` label the first two) and
     write ``RUNS/refinement_study.json``. ``task_ids``: the suite's tasks to run, in order."""
+    from aw.refine.runs import refine_suite
+    from aw.runner.batch import run_batch
+
     out = agent_cfg.out_dir
     systems = arm_systems(agent_cfg.system, refine_cfg.system)
     arms = {a: StudyArm(a, systems[a], len(task_ids)) for a in ARMS}
@@ -124,7 +128,7 @@ def _note_skipped(arm: StudyArm, out: Path, skipped: list[str]) -> None:
 
 def write_study(out: Path, agent_cfg: BatchConfig, refine_cfg: RefineConfig, arms: list[StudyArm],
                 task_ids: list[str]) -> Path:
-    spec: RefinerSpec = refine_cfg.spec
+    spec = refine_cfg.spec
     doc = {
         "format": STUDY_FORMAT, "format_version": 1, "suite": str(Path(agent_cfg.suite_dir).resolve()),
         "agent": agent_cfg.agent or agent_cfg.harness, "agent_seed": agent_cfg.seed,
