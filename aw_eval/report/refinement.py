@@ -32,16 +32,16 @@ def write_refinement_plot(section: dict[str, Any], out_dir: Path) -> str | None:
         y = np.maximum(np.asarray(panel["y"], float), CD_FLOOR)
         lo, hi = float(min(x.min(), y.min())) / 2, float(max(x.max(), y.max())) * 2
         ax.plot([lo, hi], [lo, hi], color="#888888", lw=1, ls="--")
-        better = y < x
-        ax.scatter(x[better], y[better], s=18, color="#55A868", label="improved")
-        ax.scatter(x[~better], y[~better], s=18, color="#C44E52", label="not improved")
+        better = np.asarray(panel["y"], float) < np.asarray(panel["x"], float) - section["tolerance"]
+        ax.scatter(x[better], y[better], s=18, color="#55A868", label="improved (below the diagonal)")
+        ax.scatter(x[~better], y[~better], s=18, color="#C44E52", label="unchanged or worse")
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlim(lo, hi)
         ax.set_ylim(lo, hi)
         ax.set_xlabel(f"shape CD, {labels[panel['before']]}")
         ax.set_ylabel(f"shape CD, {labels[panel['after']]}")
-        ax.set_title(f"{labels[panel['before']]} -> {labels[panel['after']]}")
+        ax.set_title(f"{labels[panel['after']]} against {labels[panel['before']]}")
         ax.legend(loc="upper left", fontsize=8)
     path = out_dir / PLOT_NAME
     fig.savefig(path, dpi=110, bbox_inches="tight")
