@@ -4,7 +4,7 @@ anchor-aligned), and paired per-object changes.
 
 Reads ``RUNS/refinement_study.json`` (written by ``aw-run --refinement-study``) for the arms'
 systems. Each run's final state is its trajectory's last recorded state (``final.json`` when the
-trajectory cannot be read). The table averages over the tasks where every arm finished (the
+trajectory cannot be read); a run whose ``run.json`` says it did not finish counts as failed. The table averages over the tasks where every arm finished (the
 matched comparison); failed runs are listed per arm. Paired changes compare one arm with another
 task by task: PA improved / degraded / unchanged, and shape CD likewise (lower is better), a
 difference within ``TOLERANCE`` counting as unchanged.
@@ -96,17 +96,18 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
         row: dict[str, Any] = {"divisor": divisor, "divisor_from": divisor_from, "arms": {}}
         for arm in ARMS:
             run_dir = runs_dir / systems[arm] / tid
-            try:
-                info = read_run_info(run_dir / "run.json")
-            except FormatError as exc:
-                failures[arm][tid] = f"no run: {exc}"
-                continue
-            if info.ended != "finished":
-                failures[arm][tid] = f"{info.ended}: {(info.error or '').strip().splitlines()[0] if info.error else ''}"
-                continue
+            if (run_dir / "run.json").is_file():  # optional, as for aw-score; when present, it says how the run ended
+                try:
+                    info = read_run_info(run_dir / "run.json")
+                except FormatError as exc:
+                    failures[arm][tid] = str(exc)
+                    continue
+                if info.ended != "finished":
+                    failures[arm][tid] = f"{info.ended}: {(info.error or '').strip().splitlines()[0] if info.error else ''}"
+                    continue
             poses = _final_poses(run_dir)
             if poses is None or set(poses) != set(ids):
-                failures[arm][tid] = "no readable final state"
+                failures[arm][tid] = "no run" if not run_dir.is_dir() else "no readable final state"
                 continue
             m = fracture_metrics_from_samples(samples, np.array([poses[p] for p in ids]), target, divisor)
             row["arms"][arm] = {"re": m.re, "te": m.te, "pa": m.pa, "cd": m.cd, "anchor": ids[m.anchor]}

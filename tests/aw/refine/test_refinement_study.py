@@ -14,7 +14,7 @@ import pytest
 
 from aw.formats import read_final, read_run_info, read_trajectory
 from aw.runner.cli import main as aw_run
-from aw_eval.analyses.refinement import paired_changes, refinement_study
+from aw_eval.analyses.refinement import refinement_study
 from aw_eval.report.refinement import render_refinement, write_refinement_plot
 
 SCRIPT = Path(__file__).with_name("scripted_refiner.py")
@@ -82,10 +82,6 @@ def test_score_section_table_pairs_and_plot(good, fracture_suite, tmp_path):
     name = write_refinement_plot(section, tmp_path)
     assert (tmp_path / name).stat().st_size > 1000
 
-
-def test_paired_changes_use_the_tolerance():
-    assert paired_changes([1.0, 0.5, 0.5 + 5e-9], [0.5, 1.0, 0.5], True) == {"improved": 1, "degraded": 1, "unchanged": 1}
-    assert paired_changes([1.0, 0.5], [0.5, 1.0], False) == {"improved": 1, "degraded": 1, "unchanged": 0}
 
 
 def test_wrong_answers_fail_the_refiner_arms_and_keep_the_agent(fracture_suite, tmp_path, capsys):
