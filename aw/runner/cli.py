@@ -11,7 +11,8 @@
 Each task gets its own aw-serve (stdio) and a clean RUNS/LABEL/<task_id>/; see docs/agents.md.
 A harness batch starts with the harness check (binary, version, login, one short session that
 lists aw-serve's tools) and stops with one line if it fails. Exit status: 0 when at least one
-episode finished, 1 when none did, 2 for a usage error.
+episode finished, 1 when none did (a refiner: when it failed on every task; a study: when an arm
+is incomplete), 2 for a usage error.
 """
 
 from __future__ import annotations
