@@ -167,7 +167,9 @@ class Episode:
     ``renderer_factory(meshes)`` returns an object with ``render(poses (P, 7), camera) ->
     PIL.Image`` and ``close()``; it is called on the first capture (default:
     ``aw.render.OffscreenRenderer``). ``budget_minutes`` defaults to the task's budget.
-    ``clock`` is a monotonic seconds counter.
+    ``clock`` is a monotonic seconds counter. ``initial_poses`` (part id -> pose) starts the
+    scene from those poses instead of the task's layout (identity); ``initial_poses_from`` names
+    where they came from, recorded in the trajectory header.
     """
 
     def __init__(
@@ -181,6 +183,8 @@ class Episode:
         renderer_factory: Callable[[list], Any] | None = None,
         clock: Callable[[], float] = time.monotonic,
         overwrite: bool = False,
+        initial_poses: Mapping[str, Sequence[float]] | None = None,
+        initial_poses_from: str | None = None,
     ):
         if len(meshes) != len(task.parts):
             raise ValueError(f"{len(meshes)} meshes for {len(task.parts)} parts")
@@ -208,6 +212,9 @@ class Episode:
         self.recording_failure: str | None = None
 
         self.scene: Scene = scene_from_meshes(self.part_ids, self._meshes)
+        self._initial_poses_from = initial_poses_from
+        if initial_poses is not None:
+            self._start_from(initial_poses)
         # Held until close(): a second server on this directory is refused, --overwrite or not.
         self._run_lock = RunDirLock(self.run_dir)
         try:
@@ -241,6 +248,19 @@ class Episode:
             "start_episode": self._start,
         }
 
+    def _start_from(self, poses: Mapping[str, Sequence[float]]) -> None:
+        """Put every part at its given pose (before anything is recorded)."""
+        if set(poses) != set(self.part_ids):
+            raise ValueError(f"initial poses must name exactly the task's parts {self.part_ids}, got {sorted(poses)}")
+        for pid in self.part_ids:
+            pose = list(poses[pid])
+            if len(pose) != 7:
+                raise ValueError(f"initial pose of {pid}: 7 numbers [x, y, z, qw, qx, qy, qz], got {len(pose)}")
+            try:
+                self.scene.set_pose(pid, pose[:3], pose[3:])
+            except SceneError as exc:
+                raise ValueError(f"initial pose of {pid}: {exc}") from None
+
     # ------------------------------------------------------------------ run dir
     def _open_trajectory(self, system: str) -> TrajectoryWriter:
         header = TrajectoryHeader(
@@ -249,6 +269,7 @@ class Episode:
             started_at=_utc_now(),
             part_ids=self.part_ids,
             initial_poses=self.scene.pose_dict(),
+            initial_poses_from=self._initial_poses_from,
             camera=CameraState(**self.scene.camera.to_dict()),
         )
         return TrajectoryWriter(self.run_dir / TRAJECTORY_FILE, header)

@@ -39,14 +39,15 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from aw.official.episode import free_body_rotations
-from aw.prepare.official_protocol import fracture_divisor, rotation_of, sample_surface, stream, triangulate
+from aw.prepare.official_protocol import (
+    FRACTURE_MINIMUM as MINIMUM, FRACTURE_SEED as SEED, FRACTURE_TOTAL as TOTAL, fracture_divisor, fracture_samples,
+    rotation_of,
+)
+from aw.prepare.official_protocol import allocate_fracture_samples as allocate_samples
 
 __all__ = ["FractureMetrics", "SEED", "allocate_samples", "fracture_divisor", "fracture_metrics",
            "fracture_metrics_from_samples", "wrapped_euler_error"]
 
-SEED = 42
-TOTAL = 5000
-MINIMUM = 20
 PA_THRESHOLD = 0.01
 
 
@@ -63,17 +64,6 @@ class FractureMetrics:
     anchor: int
     scale: float  # the divisor
     counts: np.ndarray  # (P,) samples per part
-
-
-def allocate_samples(areas, total: int = TOTAL, minimum: int = MINIMUM) -> np.ndarray:
-    """Samples per part ``(P,)``: ``minimum`` each plus the area share of the rest (truncated);
-    the remainder to the part with the most."""
-    a = np.asarray(areas, dtype=float).reshape(-1)
-    if a.size == 0 or not np.isfinite(a).all() or (a <= 0).any() or total < minimum * a.size:
-        raise ValueError(f"need positive finite areas and total >= {minimum} per part, got {a.size} parts for {total}")
-    counts = minimum + ((total - minimum * a.size) * a / a.sum()).astype(int)
-    counts[np.argmax(counts)] += total - counts.sum()
-    return counts
 
 
 def wrapped_euler_error(r_pred: np.ndarray, r_target: np.ndarray) -> np.ndarray:
@@ -141,13 +131,5 @@ def fracture_metrics(meshes: Sequence[tuple[np.ndarray, Sequence[Sequence[int]]]
     """The fracture protocol for the task's part meshes ``(vertices (n_i, 3), faces)`` (the frame the
     poses act on), in ``part_ids`` order (sorted, as the official orders them); ``divisor`` from
     :func:`fracture_divisor`."""
-    if not meshes or len(meshes) != len(part_ids):
-        raise ValueError(f"need one mesh per part id, got {len(meshes)} meshes for {len(part_ids)} ids")
-    areas = []
-    for v, f in meshes:
-        xyz = np.asarray(v, dtype=np.float64)[triangulate(np.asarray(v, dtype=np.float64), f)]
-        areas.append(np.linalg.norm(np.cross(xyz[:, 1] - xyz[:, 0], xyz[:, 2] - xyz[:, 0]), axis=1).sum() / 2)
-    counts = allocate_samples(areas)
-    samples = [sample_surface(np.asarray(v, dtype=np.float64), f, int(n), stream(seed, dataset, sample_id, pid, "garf-evaluation"))
-               for (v, f), pid, n in zip(meshes, part_ids, counts)]
+    samples = fracture_samples(meshes, part_ids, dataset, sample_id, seed)
     return fracture_metrics_from_samples(samples, pred_poses, target_poses, divisor, pa_threshold)

@@ -2,7 +2,7 @@
 
     aw-serve TASK_DIR --record RUN_DIR [--system LABEL] [--budget-minutes 60]
              [--transport stdio|http] [--host 127.0.0.1] [--port 8765] [--overwrite]
-             [--surface default|official]
+             [--surface default|official] [--initial-poses FILE]
     aw-serve TASK_DIR --record-under DIR [...]   one config, many sessions: DIR/attempt-N/<task_id>/
     aw-serve TASK_DIR --print-prompt             the task text, then exit
     aw-serve TASK_DIR --print-references         absolute paths of the reference images, in order
@@ -72,6 +72,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--host", default="127.0.0.1", metavar="ADDR", help="HTTP bind address (default 127.0.0.1, loopback only)")
     p.add_argument("--port", type=_port, default=8765, help="HTTP port (default 8765)")
     add_overwrite(p, "an earlier recording in RUN_DIR")
+    p.add_argument("--initial-poses", type=Path, metavar="FILE",
+                   help="start from these poses instead of the task's layout: an assemblyworld.poses file or a "
+                   "run's final.json (recorded in the trajectory header as initial_poses_from)")
     p.add_argument("--surface", choices=("default", "official"), default="default",
                    help="tools the agent sees: the project's scene tools (default), or the official benchmark's "
                         "list_pages / list_webmcp_tools / execute_webmcp_tool / read_manual_page")
@@ -177,9 +180,15 @@ def main(argv: list[str] | None = None) -> int:
     from aw.meshes import load_task_meshes
 
     try:
+        initial = None
+        if args.initial_poses is not None:
+            from aw.formats.poses import read_initial_poses
+
+            initial = read_initial_poses(args.initial_poses, task.task_id, task.part_ids)
         meshes = load_task_meshes(task)
         episode = Episode(task, meshes, run_dir, system=args.system, budget_minutes=args.budget_minutes,
-                          overwrite=args.overwrite)
+                          overwrite=args.overwrite, initial_poses=initial,
+                          initial_poses_from=str(args.initial_poses.resolve()) if initial is not None else None)
     except (FormatError, RunDirError, ValueError) as exc:
         if args.record_under is not None:
             _remove_empty(run_dir)

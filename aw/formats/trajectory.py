@@ -42,6 +42,8 @@ class TrajectoryHeader(BaseModel):
     started_at: str = Field(description="ISO 8601 UTC time of start_episode (or of the server start)")
     part_ids: list[str] = Field(min_length=1)
     initial_poses: dict[str, PoseList]
+    initial_poses_from: str | None = Field(default=None, description="the poses file the episode started from "
+                                           "(aw-serve --initial-poses); absent: the task's layout")
     camera: CameraState | None = None
 
 

@@ -51,6 +51,9 @@ __all__ = [
     "place_parts",
     "evaluation_scale",
     "fracture_divisor",
+    "surface_area",
+    "allocate_fracture_samples",
+    "fracture_samples",
     "prepare_official",
 ]
 
@@ -58,6 +61,10 @@ SURFACE_POINTS = 4096
 FPS_POINTS = 1000
 MIN_GAP = 0.02  # the official PreparationConfig.min_gap (normalized units)
 IDENTITY_POSE = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+# The fracture protocol's shared samples (``evaluation/garf.py``): 5000 in all, at least 20 a part.
+FRACTURE_SEED = 42
+FRACTURE_TOTAL = 5000
+FRACTURE_MINIMUM = 20
 
 
 @dataclass(frozen=True)
@@ -283,6 +290,38 @@ def fracture_divisor(source_vertices: Sequence[np.ndarray], source_to_task: np.n
     the ``(4, 4)`` source -> task matrix (the task's scale)."""
     extent = max(1.0, *(float(np.ptp(np.asarray(v, dtype=np.float64), axis=0).max()) for v in source_vertices))
     return extent * float(np.linalg.norm(np.asarray(source_to_task)[:3, 0]))
+
+
+def surface_area(vertices: np.ndarray, faces) -> float:
+    """Half the summed cross-product norms of the mesh's sampling triangles (:func:`triangulate`)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    xyz = v[triangulate(v, faces)]
+    return float(np.linalg.norm(np.cross(xyz[:, 1] - xyz[:, 0], xyz[:, 2] - xyz[:, 0]), axis=1).sum() / 2)
+
+
+def allocate_fracture_samples(areas, total: int = FRACTURE_TOTAL, minimum: int = FRACTURE_MINIMUM) -> np.ndarray:
+    """Samples per part ``(P,)``: ``minimum`` each plus the area share of the rest (truncated);
+    the remainder to the part with the most (first on ties)."""
+    a = np.asarray(areas, dtype=float).reshape(-1)
+    if a.size == 0 or not np.isfinite(a).all() or (a <= 0).any() or total < minimum * a.size:
+        raise ValueError(f"need positive finite areas and total >= {minimum} per part, got {a.size} parts for {total}")
+    counts = minimum + ((total - minimum * a.size) * a / a.sum()).astype(int)
+    counts[np.argmax(counts)] += total - counts.sum()
+    return counts
+
+
+def fracture_samples(meshes: Sequence[tuple[np.ndarray, Sequence[Sequence[int]]]], part_ids: Sequence[str],
+                     dataset: str, sample_id: str, seed: int = FRACTURE_SEED) -> list[np.ndarray]:
+    """The fracture protocol's shared samples of the part meshes ``(vertices (n_i, 3), faces)``
+    (in ``part_ids`` order): a list of ``(c_i, 3)`` arrays in the meshes' frame, ``c_i`` from
+    :func:`allocate_fracture_samples`, part ``i`` drawn from the stream ``(seed, dataset,
+    sample_id, part id, "garf-evaluation")``. The anchor is the part with the most samples
+    (``argmax`` of the counts, first on ties)."""
+    if not meshes or len(meshes) != len(part_ids):
+        raise ValueError(f"need one mesh per part id, got {len(meshes)} meshes for {len(part_ids)} ids")
+    counts = allocate_fracture_samples([surface_area(v, f) for v, f in meshes])
+    return [sample_surface(np.asarray(v, dtype=np.float64), f, int(n), stream(seed, dataset, sample_id, pid, "garf-evaluation"))
+            for (v, f), pid, n in zip(meshes, part_ids, counts)]
 
 
 # ------------------------------------------------------------------ the protocol

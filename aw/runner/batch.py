@@ -86,6 +86,7 @@ class BatchConfig:
     harness_args: list[str] = field(default_factory=list)
     price_table: Path | None = None
     progress: bool = True
+    initial_poses: Path | None = None  # start states: <task_id>/final.json or <task_id>.json under it
 
     @property
     def limit_seconds(self) -> float:
@@ -99,6 +100,7 @@ class Episode:
     task_dir: Path
     targets_path: Path
     run_dir: Path
+    initial_poses: Path | None = None
 
 
 def check_config(cfg: BatchConfig) -> None:
@@ -266,7 +268,16 @@ def plan_episodes(cfg: BatchConfig) -> list[Episode]:
             raise RunnerError(f"task directory missing: {task_dir}")
         if cfg.agent == "oracle" and not targets.is_file():
             raise RunnerError(f"the oracle needs the targets file, missing: {targets}")
-        out.append(Episode(tid, task_dir.resolve(), targets.resolve(), (cfg.out_dir / cfg.system / tid).resolve()))
+        start = None
+        if cfg.initial_poses is not None:
+            from aw.formats.poses import initial_poses_file
+
+            start = initial_poses_file(cfg.initial_poses, tid)
+            if start is None:
+                raise RunnerError(f"--initial-poses {cfg.initial_poses}: no start state for {tid} "
+                                  f"({tid}/final.json or {tid}.json)")
+            start = start.resolve()
+        out.append(Episode(tid, task_dir.resolve(), targets.resolve(), (cfg.out_dir / cfg.system / tid).resolve(), start))
     return out
 
 
@@ -274,6 +285,8 @@ def _server_args(cfg: BatchConfig, ep: Episode) -> list[str]:
     args = [str(ep.task_dir), "--record", str(ep.run_dir), "--system", cfg.system]
     if cfg.budget_minutes is not None:
         args += ["--budget-minutes", f"{cfg.budget_minutes:g}"]
+    if ep.initial_poses is not None:
+        args += ["--initial-poses", str(ep.initial_poses)]
     return args
 
 
@@ -532,6 +545,8 @@ def run_episode(
     if cancel is not None and cancel.is_set():
         shutil.rmtree(ep.run_dir, ignore_errors=True)
         return info
+    if ep.initial_poses is not None:
+        info.extra["initial_poses"] = str(ep.initial_poses)
     write_run_info(ep.run_dir / "run.json", info)
     shutil.rmtree(ep.run_dir / ".runner", ignore_errors=True)
     return info

@@ -1,15 +1,18 @@
 """aw-run: run a baseline agent or an agent harness on the tasks of a suite.
 
     aw-run SUITE --agent NAME --out RUNS [--system LABEL] [--jobs J] [--tasks ID ...]
-           [--noise LEVEL] [--timeout-minutes M] [--seed S]
+           [--noise LEVEL] [--timeout-minutes M] [--seed S] [--initial-poses DIR]
     aw-run SUITE --harness claude-code|codex --out RUNS [--system LABEL] [--harness-bin PATH]
            [--harness-model MODEL] [--harness-arg ARG ...]
     aw-run SUITE --harness claude-code|codex --check     the harness check alone
+    aw-run SUITE --refiner NAME --out RUNS [--initial-poses DIR]   a geometric refiner as a system
+    aw-run SUITE --refinement-study --agent NAME --refiner NAME --out RUNS   the four arms
 
 Each task gets its own aw-serve (stdio) and a clean RUNS/LABEL/<task_id>/; see docs/agents.md.
 A harness batch starts with the harness check (binary, version, login, one short session that
 lists aw-serve's tools) and stops with one line if it fails. Exit status: 0 when at least one
-episode finished, 1 when none did, 2 for a usage error.
+episode finished, 1 when none did (a refiner: when it failed on every task; a study: when an arm
+is incomplete), 2 for a usage error.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = new_parser("aw-run", "Run a baseline agent or an agent harness on the tasks of a suite.",
                    epilog=__doc__.partition("\n\n")[2])
     p.add_argument("suite", type=Path, metavar="SUITE", help="suite directory (manifest.json, tasks/, targets/)")
-    who = p.add_mutually_exclusive_group(required=True)
+    who = p.add_mutually_exclusive_group()  # one of them, or a refiner (checked in _run)
     who.add_argument("--agent", metavar="NAME", help="baseline agent: idle, random, heuristic, oracle (calibration only)")
     who.add_argument("--harness", choices=["claude-code", "codex"], metavar="NAME",
                      help="run a real agent harness CLI: claude-code or codex")
@@ -63,6 +66,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seconds a tool call may wait for the server before the episode counts as hung (default 120)")
     p.add_argument("--agent-option", type=_agent_option, action="append", default=[], metavar="KEY=VALUE",
                    help="agent-specific setting (repeatable)")
+    p.add_argument("--initial-poses", type=Path, metavar="DIR",
+                   help="start each episode from given poses instead of the task's layout: DIR/<task_id>/final.json "
+                   "(another system's runs, e.g. a refiner's) or DIR/<task_id>.json (assemblyworld.poses files)")
     add_overwrite(p, "runs that already have a run.json (default: skip them)")
     p.add_argument("--harness-bin", metavar="PATH", help="harness executable (default: claude / codex on PATH)")
     p.add_argument("--harness-model", metavar="MODEL", help="model passed to the harness (--model / -m)")
@@ -74,6 +80,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "(0: ready, 1: not ready)")
     p.add_argument("--skip-check", action="store_true", help="with --harness: start the batch without the harness check")
     add_no_progress(p)
+    from aw.refine.cli import add_refiner_arguments
+
+    add_refiner_arguments(p)
     return p
 
 
@@ -115,12 +124,8 @@ def _check(args: argparse.Namespace) -> bool:
     return True
 
 
-def _run(args: argparse.Namespace) -> int:
-    if args.check or args.skip_check:
-        if not args.harness:
-            raise UsageError("--check and --skip-check apply to --harness runs")
-    if args.check:
-        return 0 if _check(args) else 1
+def _batch_config(args: argparse.Namespace) -> BatchConfig:
+    """The checked batch of an --agent or --harness run (UsageError for a bad choice)."""
     if args.out is None:
         raise UsageError("--out RUNS is required (unless --check)")
     check_out_dir(args.out)
@@ -135,17 +140,34 @@ def _run(args: argparse.Namespace) -> int:
     system = args.system or system_label(args.agent, args.harness,
                                          {**dict(args.agent_option), **({"noise": args.noise} if args.noise is not None else {})})
     cfg = BatchConfig(
-        suite_dir=args.suite, system=system, out_dir=args.out, agent=args.agent, harness=args.harness, jobs=args.jobs,
-        tasks=args.tasks, seed=args.seed, noise=args.noise, timeout_minutes=args.timeout_minutes,
-        budget_minutes=args.budget_minutes, think_seconds=args.think_seconds, call_timeout=args.call_timeout,
-        overwrite=args.overwrite, agent_options=dict(args.agent_option), harness_bin=harness_bin,
-        harness_model=args.harness_model, harness_args=args.harness_arg, price_table=args.price_table,
-        progress=not args.no_progress,
+        suite_dir=args.suite, system=system, out_dir=args.out, agent=args.agent,
+        harness=args.harness, jobs=args.jobs, tasks=args.tasks, seed=args.seed, noise=args.noise,
+        timeout_minutes=args.timeout_minutes, budget_minutes=args.budget_minutes, think_seconds=args.think_seconds,
+        call_timeout=args.call_timeout, overwrite=args.overwrite, agent_options=dict(args.agent_option),
+        harness_bin=harness_bin, harness_model=args.harness_model, harness_args=args.harness_arg,
+        price_table=args.price_table, progress=not args.no_progress, initial_poses=args.initial_poses,
     )
     try:
         check_config(cfg)
     except RunnerError as exc:
         raise UsageError(str(exc)) from None
+    return cfg
+
+
+def _run(args: argparse.Namespace) -> int:
+    from aw.refine.cli import run_refiner_command, wants_refiner
+
+    if not (args.agent or args.harness or wants_refiner(args)):
+        raise UsageError("give --agent NAME, --harness NAME or --refiner NAME")
+    if wants_refiner(args) and not args.check:
+        return run_refiner_command(args, lambda: _batch_config(args))
+    if args.check or args.skip_check:
+        if not args.harness:
+            raise UsageError("--check and --skip-check apply to --harness runs")
+    if args.check:
+        return 0 if _check(args) else 1
+    cfg = _batch_config(args)
+    system = cfg.system
     if args.harness and not args.skip_check and not _check(args):
         return 1
     try:

@@ -27,6 +27,14 @@ def write_json(path: Path, doc: Any) -> None:
     os.replace(tmp, path)
 
 
+def _refinement(suite_dir: str, runs_dir: str) -> dict[str, Any] | None:
+    if not (suite_dir and runs_dir):
+        return None
+    from aw_eval.analyses.refinement import refinement_study
+
+    return refinement_study(suite_dir, runs_dir)
+
+
 def write_outputs(study: Study, out_dir: str | Path, settings: AnalysisSettings, *, suite_dir: str = "",
                   runs_dir: str = "", score_stats: dict[str, Any] | None = None, plots: bool = True,
                   html: bool = True, log: Callable[[str], None] | None = None, jobs: int = 1) -> dict[str, Any]:
@@ -35,14 +43,27 @@ def write_outputs(study: Study, out_dir: str | Path, settings: AnalysisSettings,
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     doc = build_results(study, settings, suite_dir=suite_dir, runs_dir=runs_dir, score_stats=score_stats)
+    refinement = _refinement(suite_dir, runs_dir)  # only when RUNS/refinement_study.json exists
+    if refinement is not None:
+        doc["refinement"] = refinement
     files = {"scores": out / "scores.json", "tasks_csv": out / "tasks.csv", "checkpoints_csv": out / "checkpoints.csv",
              "report": out / "report.md"}
     write_task_csv(study, files["tasks_csv"])
     write_checkpoint_csv(study, files["checkpoints_csv"])
     made = write_plots(doc, out / "plots") if plots else {}
+    if refinement is not None and plots:
+        from aw_eval.report.refinement import write_refinement_plot
+
+        name = write_refinement_plot(refinement, out / "plots")
+        if name:
+            made["refinement_paired_cd"] = name
     doc["plots"] = {k: f"plots/{v}" for k, v in made.items()}
     write_json(files["scores"], doc)
     markdown = render_markdown(doc, doc["plots"])
+    if refinement is not None:
+        from aw_eval.report.refinement import render_refinement
+
+        markdown += "\n" + render_refinement(refinement, doc["plots"].get("refinement_paired_cd"))
     files["report"].write_text(markdown)
     if html:
         from aw_eval.report.html import write_html  # imports plotly only when asked

@@ -17,7 +17,18 @@ def examples() -> dict[str, str]:
 
 
 def test_every_format_has_an_example():
-    assert set(examples()) == {"task", "targets", "manifest", "trajectory", "final", "run"}
+    assert set(examples()) == {"task", "targets", "manifest", "trajectory", "final", "run", "poses", "refine_result"}
+
+
+def test_poses_and_refine_result_examples(tmp_path):
+    from aw.formats.poses import read_initial_poses
+    from aw.refine.exchange import read_result
+
+    (tmp_path / "poses.json").write_text(examples()["poses"])
+    poses = read_initial_poses(tmp_path / "poses.json", "partnet-chair_007-image", ["p01", "p02"])
+    assert poses["p02"][:3] == [0.1, -0.2, 0.05]
+    (tmp_path / "result.json").write_text(examples()["refine_result"])
+    assert read_result("r", tmp_path / "result.json", ["fragment_a", "fragment_b"])[1][3] == 0.7071
 
 
 def test_task_example(tmp_path):

@@ -1,0 +1,137 @@
+"""Finding and running refiners.
+
+A refiner is either a Python function ``refine(request: RefineRequest) -> poses (P, 7)`` (built
+in, or a plug-in registered under the ``assemblyworld.refiners`` entry-point group), or an
+external command that reads a request file and writes a result file (:mod:`aw.refine.exchange`).
+Both run in a child process, so that a refiner that hangs is killed at its time limit and one
+that crashes takes nothing else down.
+"""
+
+from __future__ import annotations
+
+import os
+import shlex
+import signal
+import subprocess
+import sys
+from dataclasses import dataclass
+from importlib import import_module
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from aw.refine.base import RefineRequest, RefinerError, check_poses
+from aw.refine.exchange import read_result, write_request
+
+__all__ = ["BUILTIN", "ENTRY_POINT_GROUP", "RefinerSpec", "available", "load_refiner", "resolve", "run_refiner"]
+
+ENTRY_POINT_GROUP = "assemblyworld.refiners"
+BUILTIN = {"classical": "aw.refine.classical:refine"}
+
+
+def _entry_points() -> dict:
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def available() -> list[str]:
+    """Names of the built-in and installed refiners."""
+    return sorted(set(BUILTIN) | set(_entry_points()))
+
+
+def load_refiner(name: str) -> Callable[[RefineRequest], object]:
+    """The Python refiner called ``name``: built in, else an installed entry point."""
+    if name in BUILTIN:
+        module, _, attr = BUILTIN[name].partition(":")
+        return getattr(import_module(module), attr)
+    eps = _entry_points()
+    if name not in eps:
+        raise RefinerError(f"unknown refiner {name!r}; available: {', '.join(available())} "
+                           f"(or an external command, --refiner-command)")
+    try:
+        fn = eps[name].load()
+    except Exception as exc:  # a broken plug-in: say which
+        raise RefinerError(f"refiner {name}: its entry point {eps[name].value} cannot be loaded "
+                           f"({type(exc).__name__}: {exc})") from None
+    return getattr(fn, "refine", fn)
+
+
+@dataclass(frozen=True)
+class RefinerSpec:
+    """A refiner to run: ``name`` labels it in messages and run.json; ``command`` is the external
+    command (``{request}`` and ``{result}`` stand for the two files, appended when absent), or
+    None for a Python refiner run through ``python -m aw.refine.worker``."""
+
+    name: str
+    command: tuple[str, ...] | None = None
+
+    def argv(self, request_path: Path, result_path: Path) -> list[str]:
+        if self.command is None:
+            return [sys.executable, "-m", "aw.refine.worker", self.name, str(request_path), str(result_path)]
+        words = [w.replace("{request}", str(request_path)).replace("{result}", str(result_path)) for w in self.command]
+        if not any("{request}" in w or "{result}" in w for w in self.command):
+            words += [str(request_path), str(result_path)]
+        return words
+
+
+def resolve(name: str | None, command: str | None = None) -> RefinerSpec:
+    """Check a refiner choice before anything runs: a known Python refiner, or a command line
+    (named ``name``, else its program's file name, the script's for ``python SCRIPT``)."""
+    if command is not None:
+        try:
+            words = shlex.split(command)
+        except ValueError as exc:
+            raise RefinerError(f"--refiner-command: {exc}") from None
+        if not words:
+            raise RefinerError("--refiner-command is empty")
+        program = words[1] if Path(words[0]).name.startswith("python") and len(words) > 1 else words[0]
+        return RefinerSpec(name or Path(program).name, tuple(words))
+    if not name:
+        raise RefinerError("name a refiner (--refiner) or give --refiner-command")
+    load_refiner(name)
+    return RefinerSpec(name)
+
+
+def run_refiner(spec: RefinerSpec, request: RefineRequest, work_dir: Path, timeout_s: float) -> np.ndarray:
+    """Run ``spec`` on ``request`` in a child process (its own session, killed with everything it
+    started after ``timeout_s``); the checked ``(P, 7)`` poses, or :class:`RefinerError`. The
+    request, result and the refiner's output stay in ``work_dir`` (``refiner.log``)."""
+    work_dir.mkdir(parents=True, exist_ok=True)
+    req, res = work_dir / "refine-request.json", work_dir / "refine-result.json"
+    res.unlink(missing_ok=True)
+    write_request(req, request)
+    log = work_dir / "refiner.log"
+    with open(log, "wb") as out:
+        try:
+            proc = subprocess.Popen(spec.argv(req, res), stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                    start_new_session=True)
+        except OSError as exc:
+            raise RefinerError(f"refiner {spec.name}: cannot start {spec.argv(req, res)[0]} ({exc.strerror or exc})") from None
+        try:
+            code = proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            _kill_group(proc)
+            raise RefinerError(f"refiner {spec.name}: timed out after {timeout_s:g} s (killed)") from None
+    if code != 0:
+        tail = _last_line(log)
+        if tail.startswith(f"refiner {spec.name}: "):  # the worker's own verdict on the answer
+            raise RefinerError(tail)
+        raise RefinerError(f"refiner {spec.name}: exited with code {code}" + (f": {tail}" if tail else ""))
+    return check_poses(spec.name, request, read_result(spec.name, res, request.part_ids))
+
+
+def _kill_group(proc: subprocess.Popen) -> None:
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        proc.kill()
+    proc.wait()
+
+
+def _last_line(path: Path) -> str:
+    try:
+        lines = [ln.strip() for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        return ""
+    return lines[-1][:300] if lines else ""

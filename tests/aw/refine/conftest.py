@@ -1,0 +1,17 @@
+"""Fixtures for refiner tests: a small fracture suite written with the format writers."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from fracture_suite import make_fracture_suite  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def fracture_suite(tmp_path_factory) -> Path:
+    return make_fracture_suite(tmp_path_factory.mktemp("fractures") / "suite")

@@ -1,0 +1,105 @@
+"""Refiners as plug-ins: an external command through the JSON exchange (a real script run as a
+subprocess), a Python entry point found by importlib.metadata, time limits and bad answers."""
+
+from __future__ import annotations
+
+import os
+import shlex
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from aw.formats import read_task
+from aw.refine.base import RefinerError
+from aw.refine.plugins import RefinerSpec, available, resolve, run_refiner
+from aw.refine.runs import build_request
+
+SCRIPT = Path(__file__).with_name("scripted_refiner.py")
+
+
+def _command() -> str:
+    return f"{shlex.quote(sys.executable)} {shlex.quote(str(SCRIPT))} {{request}} {{result}}"
+
+
+@pytest.fixture(scope="module")
+def request_(fracture_suite):
+    task = read_task(fracture_suite / "tasks" / "frac_cylinder_1")
+    return build_request(task, fracture_suite, None)
+
+
+def _with(request_, **options):
+    request_.options = dict(options)
+    return request_
+
+
+def test_external_command_round_trip(request_, tmp_path):
+    spec = resolve(None, _command())
+    poses = run_refiner(spec, _with(request_, behaviour="shift", dx=0.5), tmp_path, 60)
+    other = 1 - request_.anchor
+    assert poses.shape == (2, 7)
+    assert np.allclose(poses[other, :3], [0.5, 0, 0]) and np.allclose(poses[request_.anchor], [0, 0, 0, 1, 0, 0, 0])
+    req = (tmp_path / "refine-request.json").read_text()
+    assert '"points"' in req and "target" not in req  # the samples, never a target
+
+
+def test_command_without_placeholders_gets_both_files_appended(request_, tmp_path):
+    spec = RefinerSpec("scripted", (sys.executable, str(SCRIPT)))
+    assert run_refiner(spec, _with(request_, behaviour="shift"), tmp_path, 60).shape == (2, 7)
+
+
+@pytest.mark.parametrize("behaviour, message", [
+    ("short", "refiner scripted_refiner.py: returned 1 poses for 2 parts (missing fragment_"),
+    ("nan", "refiner scripted_refiner.py: non-finite pose for fragment_"),
+    ("move_anchor", "refiner scripted_refiner.py: moved the anchor fragment_"),
+    ("fail", "refiner scripted_refiner.py: exited with code 3: scripted refiner: model weights not found"),
+    ("silent", "refiner scripted_refiner.py: wrote no result file refine-result.json"),
+])
+def test_bad_external_answers_are_named(request_, tmp_path, behaviour, message):
+    spec = RefinerSpec("scripted_refiner.py", (sys.executable, str(SCRIPT), "{request}", "{result}"))
+    with pytest.raises(RefinerError) as err:
+        run_refiner(spec, _with(request_, behaviour=behaviour), tmp_path, 60)
+    assert str(err.value).startswith(message)
+
+
+def test_a_refiner_past_its_time_limit_is_killed_and_named(request_, tmp_path):
+    spec = RefinerSpec("slow", (sys.executable, str(SCRIPT), "{request}", "{result}"))
+    with pytest.raises(RefinerError, match=r"refiner slow: timed out after 1.5 s \(killed\)"):
+        run_refiner(spec, _with(request_, behaviour="sleep"), tmp_path, 1.5)
+
+
+def test_unknown_refiner_and_bad_command_are_refused():
+    with pytest.raises(RefinerError, match="unknown refiner 'nope'; available: classical"):
+        resolve("nope")
+    with pytest.raises(RefinerError, match="--refiner-command is empty"):
+        resolve(None, "  ")
+
+
+def test_missing_program_is_named(request_, tmp_path):
+    with pytest.raises(RefinerError, match="refiner ghost: cannot start /nonexistent/ghost"):
+        run_refiner(RefinerSpec("ghost", ("/nonexistent/ghost",)), _with(request_), tmp_path, 10)
+
+
+def test_entry_point_plug_in_is_found_and_run_in_a_child_process(request_, tmp_path, monkeypatch):
+    """A real distribution on the path: ``entry_points.txt`` registers ``shifty`` under
+    ``assemblyworld.refiners``; the worker process finds it the same way."""
+    site = tmp_path / "site"
+    dist = site / "shifty_refiner-0.1.dist-info"
+    dist.mkdir(parents=True)
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: shifty-refiner\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[assemblyworld.refiners]\nshifty = shifty_refiner:refine\n")
+    (site / "shifty_refiner.py").write_text(
+        "import numpy as np\n"
+        "def refine(request):\n"
+        "    poses = np.array(request.initial_poses)\n"
+        "    poses[1 - request.anchor, 2] += 0.125\n"
+        "    return poses if request.options.get('count', 2) == 2 else poses[:1]\n")
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]))
+    assert "shifty" in available()
+    spec = resolve("shifty")
+    poses = run_refiner(spec, _with(request_), tmp_path / "ok", 120)
+    assert np.isclose(poses[1 - request_.anchor, 2], 0.125)
+    with pytest.raises(RefinerError, match="refiner shifty: returned 1 poses for 2 parts"):
+        run_refiner(spec, _with(request_, count=1), tmp_path / "short", 120)
