@@ -77,10 +77,16 @@ def _cmd_compose(args: argparse.Namespace) -> int:
 
     if args.per_source < 1:
         raise UsageError("--per-source must be >= 1")
+    given = {"--partnet": args.partnet, "--ikea-manual": args.ikea_manual, "--assemblybench": args.assemblybench,
+             "--fantastic-breaks": args.fantastic_breaks, "--breaking-bad": args.breaking_bad,
+             **{f"--rehosted {p}": p for p in args.rehosted}}
+    for flag, path in given.items():
+        if path and not Path(path).exists():  # a usage error, said before any work
+            raise UsageError(f"{flag.split()[0]} {path}: no such file or directory")
     try:
         cats = catalogs_from_args(args)
-    except FormatError as exc:  # a dataset folder that cannot be used: said before any work
-        raise UsageError(str(exc)) from None
+    except FormatError as exc:  # a dataset whose files cannot be read: a failure naming the file
+        raise CliError(str(exc)) from None
     if not cats:
         raise UsageError("no dataset given: pass at least one of --partnet, --ikea-manual, --assemblybench, "
                        "--fantastic-breaks, --breaking-bad, --rehosted")

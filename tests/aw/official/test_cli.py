@@ -117,7 +117,7 @@ def test_a_partly_downloaded_package_converts_what_the_runs_need(tmp_path, capsy
     pkg_root, _ = _partly_downloaded(tmp_path)
     assert main(["official", str(pkg_root), "--episodes", str(tmp_path / "logs"), "--out", str(tmp_path / "suite"),
                  "--runs", str(tmp_path / "runs")]) == 0
-    assert "wrote 1 tasks" in capsys.readouterr().out
+    assert "wrote 1 task to" in capsys.readouterr().out
     assert (tmp_path / "runs" / "fixture-m" / "partnet-none--743" / "trajectory.jsonl").is_file()
 
 
