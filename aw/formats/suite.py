@@ -41,6 +41,17 @@ class SuiteManifest(BaseModel):
             raise ValueError(f"duplicate task ids {dup}")
         return self
 
+    def select(self, wanted: list[str] | None) -> list[str]:
+        """The task ids in suite order, or those of ``wanted`` (None or empty: every task);
+        :class:`ValueError` naming the ids of ``wanted`` that the suite lacks."""
+        ids = [t.task_id for t in self.tasks]
+        if not wanted:
+            return ids
+        unknown = [t for t in wanted if t not in set(ids)]
+        if unknown:
+            raise ValueError(f"tasks not in the suite: {', '.join(unknown)}")
+        return [t for t in ids if t in set(wanted)]
+
     def entry(self, task_id: str) -> SuiteEntry:
         for t in self.tasks:
             if t.task_id == task_id:

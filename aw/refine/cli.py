@@ -68,15 +68,11 @@ def run_refiner_command(args: argparse.Namespace, agent_config) -> int:
     except RefinerError as exc:
         raise UsageError(str(exc)) from None
     try:
-        manifest = read_manifest(args.suite)
+        ids = read_manifest(args.suite).select(args.tasks)
     except FormatError as exc:
         raise UsageError(str(exc)) from None
-    ids = [t.task_id for t in manifest.tasks]
-    if args.tasks:
-        unknown = [t for t in args.tasks if t not in ids]
-        if unknown:
-            raise UsageError(f"--tasks: not in the suite: {', '.join(unknown)}")
-        ids = [t for t in ids if t in set(args.tasks)]
+    except ValueError as exc:
+        raise UsageError(f"--tasks: {exc}") from None
     cfg = RefineConfig(suite_dir=args.suite, out_dir=args.out, system=spec.name, spec=spec, tasks=ids,
                        timeout_s=args.refiner_timeout, seed=args.refiner_seed, steps=args.refiner_steps,
                        options=dict(args.refiner_option), overwrite=args.overwrite, jobs=args.jobs,

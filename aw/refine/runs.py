@@ -139,13 +139,10 @@ def refine_suite(cfg: RefineConfig, on_done: Callable[[RunInfo], None] | None = 
     is missing under ``start_from`` is recorded as an error run."""
     from concurrent.futures import ThreadPoolExecutor
 
-    manifest = read_manifest(cfg.suite_dir)
-    ids = [t.task_id for t in manifest.tasks]
-    if cfg.tasks:
-        unknown = [t for t in cfg.tasks if t not in ids]
-        if unknown:
-            raise RefinerError(f"tasks not in the suite: {', '.join(unknown)}")
-        ids = [t for t in ids if t in set(cfg.tasks)]
+    try:
+        ids = read_manifest(cfg.suite_dir).select(cfg.tasks)
+    except ValueError as exc:
+        raise RefinerError(str(exc)) from None
     skipped = [t for t in ids if not cfg.overwrite and (cfg.out_dir / cfg.system / t / "run.json").is_file()]
     todo = [t for t in ids if t not in skipped]
     bar = None

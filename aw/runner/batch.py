@@ -251,16 +251,9 @@ def check_reuse(cfg: BatchConfig, planned: list[Episode]) -> None:
 def plan_episodes(cfg: BatchConfig) -> list[Episode]:
     """The suite's tasks (or the ``tasks`` subset, in suite order), checked before anything runs."""
     try:
-        manifest = read_manifest(cfg.suite_dir)
-    except FormatError as exc:
+        ids = read_manifest(cfg.suite_dir).select(cfg.tasks)
+    except ValueError as exc:  # FormatError too
         raise RunnerError(str(exc)) from None
-    ids = [t.task_id for t in manifest.tasks]
-    if cfg.tasks:
-        unknown = [t for t in cfg.tasks if t not in ids]
-        if unknown:
-            raise RunnerError(f"tasks not in the suite: {', '.join(unknown)}")
-        wanted = set(cfg.tasks)
-        ids = [t for t in ids if t in wanted]
     out = []
     for tid in ids:
         task_dir, targets = suite_paths(cfg.suite_dir, tid)
