@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import shutil
 import sys
+import tempfile
 from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -159,6 +161,8 @@ def evaluate(sources: OfficialPackage, runs_dir: str | Path, out_dir: str | Path
     out = Path(out_dir) / "official"
     if out.exists():
         raise FileExistsError(f"{out}: already holds an official evaluation (use a new --out)")
+    for stale in Path(out_dir).glob(f".{out.name}.tmp-*"):  # left by a killed run (the caller holds --out's lock)
+        shutil.rmtree(stale, ignore_errors=True)
     for inside in (root, sources.root):
         if out.resolve().is_relative_to(inside.resolve()):
             raise ValueError(f"--out {out_dir}: the evaluation must be written outside {inside}")
@@ -173,11 +177,19 @@ def evaluate(sources: OfficialPackage, runs_dir: str | Path, out_dir: str | Path
                 sources.check_run(run)
                 for attempt in read_attempts(run):
                     sources.check_attempt(attempt)
+                    attempt.tool_calls  # noqa: B018 - a conversation.jsonl that cannot be read is refused here
             by_system[name] = chosen
     summaries = {}
-    for name, attempts in by_system.items():
-        log(f"{name}: scoring {len(attempts)} attempts")
-        summaries[name] = evaluate_system(attempts, sources, out / name, jobs)
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out_dir, prefix=f".{out.name}.tmp-"))
+    try:  # every system is written beside, then the folder is renamed: a failure leaves no evaluation
+        for name, attempts in by_system.items():
+            log(f"{name}: scoring {len(attempts)} attempts")
+            summaries[name] = evaluate_system(attempts, sources, tmp / name, jobs)
+        tmp.rename(out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
     return summaries
 
 

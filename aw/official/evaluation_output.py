@@ -23,6 +23,8 @@ Facts from ``assembly_world_bench/scoring.py`` of AssemblyWorld/assembly-world-b
 from __future__ import annotations
 
 import json
+import shutil
+import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -122,9 +124,16 @@ def write_evaluation(out_dir: str | Path, rows: Sequence[Mapping[str, Any]], sum
     out = Path(out_dir)
     if out.exists():
         raise FileExistsError(f"{out}: evaluation folder already exists (use a new one)")
-    out.mkdir(parents=True)
-    (out / METRICS_FILE).write_text("".join(json.dumps(r) + "\n" for r in sort_rows(rows)), encoding="utf-8")
-    write_json(out / SUMMARY_FILE, summary)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.tmp-"))
+    try:  # written beside, then renamed: a failure leaves no folder that looks complete
+        text = "".join(json.dumps(r, allow_nan=False) + "\n" for r in sort_rows(rows))  # strict JSON lines
+        (tmp / METRICS_FILE).write_text(text, encoding="utf-8")
+        write_json(tmp / SUMMARY_FILE, summary)
+        tmp.rename(out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
     return out
 
 
