@@ -35,6 +35,7 @@ from aw.official.package import OfficialPackage, file_sha256
 from aw.official.runlog import (RunLog, SampleAttempt, archive_system, is_run_dir, read_attempts, read_run,
                                 select_attempts, systems)
 from aw_eval.study.runner import ScoringFailed
+from aw_eval.workers import stop_pool, watch_parent
 
 __all__ = ["is_official_package", "archive_attempts",
            "score_state", "score_attempt", "evaluate_system", "evaluate", "main"]
@@ -139,12 +140,18 @@ def evaluate_system(attempts: Mapping[tuple[str, str], SampleAttempt], sources: 
     items = [attempts[k] for k in sorted(attempts)]
     if jobs > 1 and len(items) > 1:
         # spawn, as the study's pool: forking a process that has started JAX's threads can deadlock
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-            try:
-                rows = list(pool.map(_score_job, [(a, sources) for a in items]))
-            except BrokenProcessPool as exc:  # a worker died: the tool failed, not the runs
-                raise ScoringFailed(f"scoring failed: a scoring worker process died ({exc}); "
-                                    "no evaluation was written") from None
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=watch_parent, initargs=(os.getpid(),))  # a killed aw-score takes its workers with it
+        try:
+            rows = list(pool.map(_score_job, [(a, sources) for a in items]))
+        except BrokenProcessPool as exc:  # a worker died: the tool failed, not the runs
+            stop_pool(pool)
+            raise ScoringFailed(f"scoring failed: a scoring worker process died ({exc}); "
+                                "no evaluation was written") from None
+        except BaseException:  # Ctrl-C, SIGTERM: end the workers now, not after their tasks
+            stop_pool(pool)
+            raise
+        pool.shutdown()
     else:
         rows = [score_attempt(a, sources) for a in items]
     rows = sort_rows(rows)

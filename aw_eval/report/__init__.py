@@ -23,8 +23,12 @@ __all__ = ["SCHEMA", "SCHEMA_VERSION", "AnalysisSettings", "build_results", "ren
 def write_json(path: Path, doc: Any) -> None:
     data = orjson.dumps(doc, option=orjson.OPT_INDENT_2 | orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS)
     tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    tmp.write_bytes(data + b"\n")
-    os.replace(tmp, path)
+    try:
+        tmp.write_bytes(data + b"\n")
+        os.replace(tmp, path)
+    except BaseException:  # a full disk or an interrupt: no partial file is left behind
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def write_outputs(study: Study, out_dir: str | Path, settings: AnalysisSettings, *, suite_dir: str = "",
