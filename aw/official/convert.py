@@ -323,6 +323,7 @@ def run_log_archives(folder: str | Path, pkg: OfficialPackage, skipped: list[str
             raise FormatError(Path(folder), f"system {name}: {exc}") from None
         for (block, sid), attempt in sorted(attempts.items()):
             pkg.check_attempt(attempt)
+            attempt.tool_calls  # noqa: B018 - a conversation.jsonl that aw-score would refuse is refused here too
             why = ("the attempt is still running" if not attempt.finished else
                    "no saved final archive" if not attempt.archive_saved else
                    "final archive differs from result.json's sha256"

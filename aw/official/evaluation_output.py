@@ -107,7 +107,9 @@ def summarize(rows: Sequence[Mapping[str, Any]], benchmark: Mapping[str, Any]) -
         def means(parts: list[Mapping[str, Any]]) -> dict[str, float | None]:
             return {m: _mean([p[m] for p in parts]) if all(p[m] is not None for p in parts) else None for m in _METRICS}
 
-        sources = {s: means([blocks[b["name"]] for b in block_list if b["source"] == s]) for s in benchmark["sources"]}
+        # a source without blocks (a package cut down to some blocks) has no mean, rather than NaN
+        sources = {s: means([blocks[b["name"]] for b in block_list if b["source"] == s]) for s in benchmark["sources"]
+                   if any(b["source"] == s for b in block_list)}
         summary["sources"] = sources
         summary["official_overall"] = means(list(sources.values()))
     summary["resources"] = {name: _reported(rows, lambda r, n=name: r.get(n))
