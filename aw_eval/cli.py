@@ -85,9 +85,13 @@ def protocol_note(final_mode: str, overrides: Sequence[tuple[str, float]] = ()) 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    if threading.current_thread() is threading.main_thread():  # SIGTERM stops as Ctrl-C does: workers ended, 130
-        signal.signal(signal.SIGTERM, _interrupt)
-    return run_main("aw-score", lambda: _locked(args))
+    if threading.current_thread() is not threading.main_thread():
+        return run_main("aw-score", lambda: _locked(args))
+    before = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops as Ctrl-C does: workers ended, exit 130
+    try:
+        return run_main("aw-score", lambda: _locked(args))
+    finally:
+        signal.signal(signal.SIGTERM, before)
 
 
 def _interrupt(signum, frame) -> None:

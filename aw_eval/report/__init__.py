@@ -26,7 +26,10 @@ def write_json(path: Path, doc: Any) -> None:
     try:
         tmp.write_bytes(data + b"\n")
         os.replace(tmp, path)
-    except BaseException:  # a full disk or an interrupt: no partial file is left behind
+    except OSError as exc:  # a full disk: no partial file is left behind, and the error names the file
+        tmp.unlink(missing_ok=True)
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+    except BaseException:  # an interrupt: the same
         tmp.unlink(missing_ok=True)
         raise
 
