@@ -42,8 +42,10 @@ def _study(root: Path) -> tuple[Path, Path]:
 
 def _popen(code: Path, study, out: Path, *extra: str, **kw) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(code)}
+    # SIGINT as in a terminal: a shell starts background jobs with SIGINT ignored, and Python keeps that
     return subprocess.Popen([sys.executable, "-m", "aw_eval.cli", str(study[0]), str(study[1]), "--out", str(out), *OPTS,
-                             *extra], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, **kw)
+                             *extra], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **kw)
 
 
 def kill_trial(code: Path, study, out: Path, sig: signal.Signals) -> dict:
@@ -59,7 +61,7 @@ def kill_trial(code: Path, study, out: Path, sig: signal.Signals) -> dict:
     proc.send_signal(sig)
     code_ = proc.wait()
     exited = time.perf_counter() - t0
-    gone, alive = psutil.wait_procs(workers, timeout=120)
+    gone, alive = psutil.wait_procs(workers, timeout=90)
     workers_gone = time.perf_counter() - t0 if not alive else None
     for w in alive:
         w.kill()
@@ -67,7 +69,7 @@ def kill_trial(code: Path, study, out: Path, sig: signal.Signals) -> dict:
     proc.stderr.close()
     return {"signal": sig.name, "exit": code_, "seconds_to_exit": round(exited, 2),
             "seconds_until_workers_gone": None if workers_gone is None else round(workers_gone, 2),
-            "workers_alive_after_120_s": len(alive), "traceback": "Traceback" in err}
+            "workers_alive_90_s_later": len(alive), "traceback": "Traceback" in err}
 
 
 def lock_trial(code: Path, study, out: Path) -> dict:

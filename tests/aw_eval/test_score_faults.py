@@ -33,7 +33,11 @@ def study(tmp_path_factory):
     return suite, root / "runs"
 
 
-def _aw_score(study, out, *extra, preexec=None, **kw) -> subprocess.Popen:
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)  # as in a terminal (a shell's background job starts with it ignored)
+
+
+def _aw_score(study, out, *extra, preexec=_default_sigint, **kw) -> subprocess.Popen:
     suite, runs = study
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
     return subprocess.Popen([sys.executable, "-m", "aw_eval.cli", str(suite), str(runs), "--out", str(out), *extra],
@@ -51,6 +55,7 @@ def test_a_busy_out_is_refused_naming_its_holder(study, tmp_path, capsys):
 
 def _limit_file_size(limit: int):
     def pre() -> None:
+        _default_sigint()
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG, as ENOSPC on a full disk
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
