@@ -245,9 +245,13 @@ def main(package_dir: str, runs_dir: str, out_dir: str, jobs: int | None = None)
     except ScoringFailed as exc:
         print(f"aw-score: error: {exc}", file=sys.stderr)
         return 1
-    except (FormatError, ValueError, FileExistsError, OSError) as exc:
+    except (FormatError, ValueError, FileExistsError, FileNotFoundError, NotADirectoryError, PermissionError) as exc:
         print(f"aw-score: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # a failure while writing (a full disk): nothing of the evaluation is left
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"aw-score: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 1
     for name, s in summaries.items():
         print(f"{name}: {s['scored']}/{s['attempted']} scored; {_overall_text(s)}")
     print(f"wrote {Path(out_dir) / 'official'}")

@@ -130,7 +130,10 @@ def write_evaluation(out_dir: str | Path, rows: Sequence[Mapping[str, Any]], sum
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.tmp-"))
     try:  # written beside, then renamed: a failure leaves no folder that looks complete
         text = "".join(json.dumps(r, allow_nan=False) + "\n" for r in sort_rows(rows))  # strict JSON lines
-        (tmp / METRICS_FILE).write_text(text, encoding="utf-8")
+        try:
+            (tmp / METRICS_FILE).write_text(text, encoding="utf-8")
+        except OSError as exc:  # a full disk: say which file
+            raise OSError(exc.errno, exc.strerror, str(out / METRICS_FILE)) from None
         write_json(tmp / SUMMARY_FILE, summary)
         tmp.rename(out)
     finally:

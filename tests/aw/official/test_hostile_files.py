@@ -97,3 +97,24 @@ def test_a_conversion_that_fails_late_leaves_no_suite_and_no_runs(package, tmp_p
                     "--runs", str(runs)]) == 1
     assert "cannot be inflated" in capsys.readouterr().err
     assert [p.name for p in suite.iterdir()] == [] and [p.name for p in runs.iterdir()] == []
+
+
+def test_a_full_disk_while_writing_the_evaluation_is_one_line_and_leaves_nothing(package, pristine, tmp_path):
+    """A file size limit stands in for a full disk: metrics.jsonl cannot be written."""
+    import os
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    def limit() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (600, 600))
+
+    out = tmp_path / "out"
+    proc = subprocess.run([sys.executable, "-m", "aw_eval.cli", str(package.root), str(pristine.parent), "--out", str(out),
+                           "--jobs", "1"], preexec_fn=limit, capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert _one_line_error(proc.stderr, "aw-score").endswith("metrics.jsonl: File too large")
+    assert [p.name for p in out.iterdir()] == [".aw-lock"]
