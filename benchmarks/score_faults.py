@@ -101,7 +101,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True, help="folder for score_faults.json")
     ap.add_argument("--baseline", default=None, help="another checkout to run the same trials with")
-    ap.add_argument("--tmpfs", default="3m", help="size of the full disk (default 3m)")
+    ap.add_argument("--tmpfs", default="512k", help="size of the full disk (default 512k)")
     args = ap.parse_args()
     target = output_file(args.out, "score_faults.json")
     work = Path(tempfile.mkdtemp(prefix="aw-faults-"))

@@ -244,3 +244,11 @@ def test_inconsistent_episodes(active, tmp_path, damage, message):
     with pytest.raises(InconsistentEpisodeError, match=message) as info:
         read_archive(out)
     assert str(out) in str(info.value)
+
+
+def test_the_json_members_are_bounded_before_inflating(active):
+    """The parsed size is bounded by the JSON text (zip headers), not only by each compressed member."""
+    text = sum(len(d) for n, d in members(active.path).items() if n.endswith((".json", ".jsonl")))
+    assert read_archive(active.path, limits=ArchiveLimits(max_json_bytes=text)).calls
+    with pytest.raises(ArchiveTooLargeError, match=f"the JSON members inflate to {text} bytes, over the limit of {text - 1}"):
+        read_archive(active.path, limits=ArchiveLimits(max_json_bytes=text - 1))
