@@ -44,7 +44,7 @@ def _popen(code: Path, study, out: Path, *extra: str, **kw) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(code)}
     # SIGINT as in a terminal: a shell starts background jobs with SIGINT ignored, and Python keeps that
     return subprocess.Popen([sys.executable, "-m", "aw_eval.cli", str(study[0]), str(study[1]), "--out", str(out), *OPTS,
-                             *extra], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                             *extra], env=env, cwd=code, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **kw)
 
 

@@ -124,6 +124,8 @@ def _worker_init(parent: int) -> None:
 def _failed(job: TaskJob, exc: BaseException, where: str) -> ScoringFailed:
     """The error for a job whose worker failed."""
     msg = f"scoring failed: {where} died or broke while scoring task {job.task_id} ({type(exc).__name__}: {exc})"
+    if isinstance(exc, OSError) and exc.filename:  # e.g. a full disk under the geometry cache
+        msg = f"scoring failed: {exc.filename}: {exc.strerror or exc} (while scoring task {job.task_id})"
     if isinstance(exc, BrokenProcessPool):
         msg += ("; if score_study is called from a script, put the call under `if __name__ == \"__main__\":` "
                 "(worker processes import the script)")

@@ -62,16 +62,18 @@ def _limit_file_size(limit: int):
     return pre
 
 
-def test_a_failed_write_is_one_line_and_leaves_no_temporary_file(study, tmp_path):
+@pytest.mark.parametrize("limit", [3_000, 20_000], ids=["geometry-cache", "scores-json"])
+def test_a_failed_write_is_one_line_and_leaves_no_temporary_file(study, tmp_path, limit):
+    """The write that fails first: the evaluator's geometry cache (a tool failure, not task errors), or scores.json."""
     out = tmp_path / "out"
     stale = out / "cache" / "runs" / "alpha" / "t" / "0123.npz.tmp999999999"  # as a killed run leaves it
     stale.parent.mkdir(parents=True)
     stale.write_bytes(b"half")
-    proc = _aw_score(study, out, "--jobs", "1", "--final-only", *FAST, preexec=_limit_file_size(20_000))
+    proc = _aw_score(study, out, "--jobs", "1", "--final-only", *FAST, preexec=_limit_file_size(limit))
     _, err = proc.communicate(timeout=600)
     assert proc.returncode == 1 and "Traceback" not in err, err
     (line,) = [x for x in err.splitlines() if "error:" in x]
-    assert line.startswith("aw-score: error: ") and str(out) in line and "File too large" in line
+    assert line.startswith("aw-score: error: ") and str(out) in line and "File too large" in line and "task_error" not in err
     assert [p for p in out.rglob("*") if ".tmp" in p.name] == []
 
 
