@@ -30,6 +30,7 @@ from aw.formats import read_manifest  # noqa: E402
 from aw_eval.study.fixtures import box_suite, write_scripted_run  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+WAIT = 180  # seconds a signalled aw-score is given to exit
 OPTS = ["--no-progress", "--no-plots", "--no-html", "--bootstrap", "200", "--permutations", "500"]
 
 
@@ -59,9 +60,13 @@ def kill_trial(code: Path, study, out: Path, sig: signal.Signals) -> dict:
     time.sleep(5)  # let them start scoring
     t0 = time.perf_counter()
     proc.send_signal(sig)
-    code_ = proc.wait()
+    try:
+        code_ = proc.wait(timeout=WAIT)
+    except subprocess.TimeoutExpired:  # before the fixes, Ctrl-C waited for the running tasks
+        proc.kill()
+        code_ = f"still running {WAIT} s later (killed)"
     exited = time.perf_counter() - t0
-    gone, alive = psutil.wait_procs(workers, timeout=90)
+    gone, alive = psutil.wait_procs(workers, timeout=90 if isinstance(code_, int) else 1)
     workers_gone = time.perf_counter() - t0 if not alive else None
     for w in alive:
         w.kill()
@@ -69,7 +74,8 @@ def kill_trial(code: Path, study, out: Path, sig: signal.Signals) -> dict:
     proc.stderr.close()
     return {"signal": sig.name, "exit": code_, "seconds_to_exit": round(exited, 2),
             "seconds_until_workers_gone": None if workers_gone is None else round(workers_gone, 2),
-            "workers_alive_90_s_later": len(alive), "traceback": "Traceback" in err}
+            "workers_alive_90_s_later": len(alive), "traceback": "Traceback" in err,
+            **({"stderr_tail": err[-2000:]} if "Traceback" in err else {})}
 
 
 def lock_trial(code: Path, study, out: Path) -> dict:
@@ -102,6 +108,7 @@ def main() -> None:
     ap.add_argument("--out", required=True, help="folder for score_faults.json")
     ap.add_argument("--baseline", default=None, help="another checkout to run the same trials with")
     ap.add_argument("--tmpfs", default="512k", help="size of the full disk (default 512k)")
+    ap.add_argument("--trials", default="kill,lock,disk", help="which trials (default kill,lock,disk)")
     args = ap.parse_args()
     target = output_file(args.out, "score_faults.json")
     work = Path(tempfile.mkdtemp(prefix="aw-faults-"))
@@ -111,10 +118,14 @@ def main() -> None:
                "study": "10 box tasks of 6 and 8 parts, 1 system, 30 jitter edits each; --jobs 2, exact checkpoints"}
         codes = {"this": ROOT, **({"baseline": Path(args.baseline).resolve()} if args.baseline else {})}
         for label, code in codes.items():
-            res = {"kill": [kill_trial(code, study, work / f"{label}-{s.name}", s)
-                            for s in (signal.SIGKILL, signal.SIGTERM, signal.SIGINT)],
-                   "second_aw_score_on_one_out": lock_trial(code, study, work / f"{label}-lock"),
-                   "disk_full": disk_full_trial(code, study, work / f"{label}-tmpfs", args.tmpfs)}
+            res = {}
+            if "kill" in args.trials:
+                res["kill"] = [kill_trial(code, study, work / f"{label}-{s.name}", s)
+                               for s in (signal.SIGKILL, signal.SIGTERM, signal.SIGINT)]
+            if "lock" in args.trials:
+                res["second_aw_score_on_one_out"] = lock_trial(code, study, work / f"{label}-lock")
+            if "disk" in args.trials:
+                res["disk_full"] = disk_full_trial(code, study, work / f"{label}-tmpfs", args.tmpfs)
             doc[label] = res
             print(label, json.dumps(res, indent=1), flush=True)
         target.write_text(json.dumps(doc, indent=1) + "\n")
