@@ -4,7 +4,8 @@ A second server (or runner) pointed at a run directory that a live process is st
 into must not delete or interleave with that recording, ``--overwrite`` or not. The lock is an
 ``fcntl.flock`` on ``RUN_DIR/.aw-lock``: the kernel drops it when the holder exits, however it
 exits (kill -9 included), so a stale lock file never blocks a later run. The file holds the
-holder's pid, host and command line, so that a refusal can say who holds it.
+holder's pid, host and command line (and still names the last holder after it ended), so that a
+refusal can say who holds it.
 """
 
 from __future__ import annotations
@@ -77,13 +78,11 @@ class RunDirLock:
         return self
 
     def release(self) -> None:
-        """Drop the lock (idempotent). The file stays: removing it could race a new holder."""
+        """Drop the lock (idempotent). The file stays, naming its last holder (removing it could
+        race a new holder); only the flock says whether it is held (:func:`holder_of`)."""
         fd, self._fd = self._fd, None
         if fd is not None:
-            try:
-                os.ftruncate(fd, 0)
-            finally:
-                os.close(fd)  # closing the descriptor releases the flock
+            os.close(fd)  # closing the descriptor releases the flock
 
     def __enter__(self) -> RunDirLock:
         return self.acquire()

@@ -14,7 +14,9 @@ changed. See docs/scoring.md.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 import time
 from collections.abc import Sequence
 
@@ -84,7 +86,33 @@ def protocol_note(final_mode: str, overrides: Sequence[tuple[str, float]] = ()) 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    return run_main("aw-score", lambda: _score(args))
+    if threading.current_thread() is not threading.main_thread():
+        return run_main("aw-score", lambda: _locked(args))
+    before = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops as Ctrl-C does: workers ended, exit 130
+    try:
+        return run_main("aw-score", lambda: _locked(args))
+    finally:
+        signal.signal(signal.SIGTERM, before)
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
+def _locked(args: argparse.Namespace) -> int:
+    """``_score`` holding ``--out``'s lock (aw.runlock): a second aw-score on the same --out is refused."""
+    from aw.runlock import RunDirBusy, RunDirLock, holder_of
+
+    out = check_out_dir(args.out)
+    try:
+        lock = RunDirLock(out).acquire()
+    except RunDirBusy:
+        raise UsageError(f"--out {out}: in use by {holder_of(out) or 'another process'}; wait for it to end or "
+                         "choose another --out") from None
+    try:
+        return _score(args)
+    finally:
+        lock.release()
 
 
 def _parse_overrides(items: Sequence[str]) -> list[tuple[str, float]]:

@@ -256,6 +256,9 @@ class TaskGeometry:
                 np.savez(fh, clouds=self.clouds, target_poses=self.target_poses, divisor=np.array(self.divisor),
                          group_labels=labels, meta=np.array(json.dumps(meta)))
             os.replace(tmp, path)
+        except OSError as exc:  # a full disk: the error names the cache entry
+            Path(tmp).unlink(missing_ok=True)
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
             raise

@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import shutil
 import sys
+import tempfile
 from collections.abc import Callable, Iterable, Mapping
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -34,6 +36,7 @@ from aw.official.package import OfficialPackage, file_sha256
 from aw.official.runlog import (RunLog, SampleAttempt, archive_system, is_run_dir, read_attempts, read_run,
                                 select_attempts, systems)
 from aw_eval.study.runner import ScoringFailed
+from aw_eval.workers import stop_pool, watch_parent
 
 __all__ = ["is_official_package", "archive_attempts",
            "score_state", "score_attempt", "evaluate_system", "evaluate", "main"]
@@ -138,12 +141,18 @@ def evaluate_system(attempts: Mapping[tuple[str, str], SampleAttempt], sources: 
     items = [attempts[k] for k in sorted(attempts)]
     if jobs > 1 and len(items) > 1:
         # spawn, as the study's pool: forking a process that has started JAX's threads can deadlock
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-            try:
-                rows = list(pool.map(_score_job, [(a, sources) for a in items]))
-            except BrokenProcessPool as exc:  # a worker died: the tool failed, not the runs
-                raise ScoringFailed(f"scoring failed: a scoring worker process died ({exc}); "
-                                    "no evaluation was written") from None
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=watch_parent, initargs=(os.getpid(),))  # a killed aw-score takes its workers with it
+        try:
+            rows = list(pool.map(_score_job, [(a, sources) for a in items]))
+        except BrokenProcessPool as exc:  # a worker died: the tool failed, not the runs
+            stop_pool(pool)
+            raise ScoringFailed(f"scoring failed: a scoring worker process died ({exc}); "
+                                "no evaluation was written") from None
+        except BaseException:  # Ctrl-C, SIGTERM: end the workers now, not after their tasks
+            stop_pool(pool)
+            raise
+        pool.shutdown()
     else:
         rows = [score_attempt(a, sources) for a in items]
     rows = sort_rows(rows)
@@ -160,6 +169,8 @@ def evaluate(sources: OfficialPackage, runs_dir: str | Path, out_dir: str | Path
     out = Path(out_dir) / "official"
     if out.exists():
         raise FileExistsError(f"{out}: already holds an official evaluation (use a new --out)")
+    for stale in Path(out_dir).glob(f".{out.name}.tmp-*"):  # left by a killed run (the caller holds --out's lock)
+        shutil.rmtree(stale, ignore_errors=True)
     for inside in (root, sources.root):
         if out.resolve().is_relative_to(inside.resolve()):
             raise ValueError(f"--out {out_dir}: the evaluation must be written outside {inside}")
@@ -174,11 +185,19 @@ def evaluate(sources: OfficialPackage, runs_dir: str | Path, out_dir: str | Path
                 sources.check_run(run)
                 for attempt in read_attempts(run):
                     sources.check_attempt(attempt)
+                    attempt.tool_calls  # noqa: B018 - a conversation.jsonl that cannot be read is refused here
             by_system[name] = chosen
     summaries = {}
-    for name, attempts in by_system.items():
-        log(f"{name}: scoring {plural(len(attempts), 'attempt')}")
-        summaries[name] = evaluate_system(attempts, sources, out / name, jobs)
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out_dir, prefix=f".{out.name}.tmp-"))
+    try:  # every system is written beside, then the folder is renamed: a failure leaves no evaluation
+        for name, attempts in by_system.items():
+            log(f"{name}: scoring {plural(len(attempts), 'attempt')}")
+            summaries[name] = evaluate_system(attempts, sources, tmp / name, jobs)
+        tmp.rename(out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
     return summaries
 
 
@@ -227,9 +246,13 @@ def main(package_dir: str, runs_dir: str, out_dir: str, jobs: int | None = None)
     except ScoringFailed as exc:
         print(f"aw-score: error: {exc}", file=sys.stderr)
         return 1
-    except (FormatError, ValueError, FileExistsError, OSError) as exc:
+    except (FormatError, ValueError, FileExistsError, FileNotFoundError, NotADirectoryError, PermissionError) as exc:
         print(f"aw-score: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # a failure while writing (a full disk): nothing of the evaluation is left
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"aw-score: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 1
     for name, s in summaries.items():
         print(f"{name}: {s['scored']}/{s['attempted']} scored; {_overall_text(s)}")
     print(f"wrote {Path(out_dir) / 'official'}")

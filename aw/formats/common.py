@@ -30,4 +30,14 @@ def _check_pose(values: list[float]) -> list[float]:
     return [float(v) for v in values]
 
 
+def pose_problem(values: list[float]) -> str | None:
+    """Why ``values`` is not a usable pose ``[x, y, z, qw, qx, qy, qz]`` (the rule every recorded
+    pose follows), or None when it is one."""
+    try:
+        _check_pose(list(values))
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
 PoseList = Annotated[list[float], AfterValidator(_check_pose)]

@@ -30,6 +30,7 @@ import math
 import re
 import stat
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path, PurePosixPath
@@ -46,6 +47,7 @@ from aw.official.errors import (
     UnsafeMemberError,
     UnsupportedEpisodeError,
 )
+from aw.official.jsonio import MAX_DEPTH, nested_deeper
 
 __all__ = [
     "FORMAT", "VERSION", "ENGINE", "CONTRACT", "MJB_MODEL", "TOOL_NAMES", "CALL_NAMES",
@@ -89,12 +91,20 @@ _EVENT_KEYS = {"index", "call_id", "kind", "timestamp", "sim_time"}
 
 @dataclass(frozen=True)
 class ArchiveLimits:
-    """What the reader accepts before inflating anything."""
+    """What the reader accepts. The sizes are checked against the zip headers before anything is
+    inflated (and the inflated bytes against the headers). The JSON limits bound what parsing
+    costs: parsed JSON takes up to about 10 times its text in memory (floats in lists), so
+    ``max_json_bytes`` (the text of manifest.json, frames.jsonl, calls.jsonl and events.jsonl
+    together) bounds the parsed records to about 1 GiB; official episodes hold a few MiB."""
 
     max_members: int = 100_000
     max_member_bytes: int = 512 << 20
     max_total_bytes: int = 1 << 30
     max_ratio: int = 1000  # inflated / compressed, for members over 1 MiB
+    max_json_bytes: int = 64 << 20  # all JSON members together, inflated
+    max_row_bytes: int = 4 << 20  # one row of a JSONL member
+    max_json_depth: int = MAX_DEPTH  # nested arrays/objects in one row (aw.official.jsonio)
+    max_state_value: float = 1e9  # |value| in an initial or state frame's vector (time, positions, ...)
 
 
 DEFAULT_LIMITS = ArchiveLimits()
@@ -220,26 +230,31 @@ def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> byte
     try:
         with zf.open(info) as fh:
             data = fh.read(info.file_size + 1)  # never more than the header promised, plus one byte
-    except (zipfile.BadZipFile, OSError, EOFError, RuntimeError, NotImplementedError) as exc:
+    except (zipfile.BadZipFile, zlib.error, OSError, EOFError, RuntimeError, NotImplementedError, ValueError) as exc:
         raise NotAnArchiveError(path, f"member {info.filename!r} cannot be inflated ({exc})") from None
     if len(data) != info.file_size:
         raise ArchiveTooLargeError(path, f"member {info.filename!r} inflates to another size than its zip header says")
     return data
 
 
-def _json(data: bytes, path: Path, where: str) -> Any:
+def _json(data: bytes, path: Path, where: str, limits: ArchiveLimits = DEFAULT_LIMITS) -> Any:
     try:
-        return orjson.loads(data)  # strict JSON: NaN and Infinity literals are refused
+        value = orjson.loads(data)  # strict JSON: NaN and Infinity literals are refused
     except orjson.JSONDecodeError as exc:
         raise InconsistentEpisodeError(path, f"{where}: not valid JSON ({exc})") from None
+    if nested_deeper(value, limits.max_json_depth):
+        raise InconsistentEpisodeError(path, f"{where}: JSON nested deeper than {limits.max_json_depth} levels")
+    return value
 
 
-def _jsonl(files: dict[str, bytes], name: str, path: Path) -> list[dict[str, Any]]:
+def _jsonl(files: dict[str, bytes], name: str, path: Path, limits: ArchiveLimits = DEFAULT_LIMITS) -> list[dict[str, Any]]:
     rows = []
     for k, line in enumerate(files[name].splitlines(), start=1):
         if not line.strip():
             continue
-        row = _json(line, path, f"{name}: line {k}")
+        if len(line) > limits.max_row_bytes:
+            raise ArchiveTooLargeError(path, f"{name}: line {k}: {len(line)} bytes, over the limit of {limits.max_row_bytes} per row")
+        row = _json(line, path, f"{name}: line {k}", limits)
         if not isinstance(row, dict):
             raise InconsistentEpisodeError(path, f"{name}: line {k}: expected a JSON object")
         rows.append(row)
@@ -259,7 +274,10 @@ def read_archive(path: str | Path, *, verify_hashes: bool = True, limits: Archiv
         infos = _members(zf, path, limits)
         if "manifest.json" not in infos:
             raise HashInventoryError(path, "manifest.json: member missing")
-        manifest = _json(_read_member(zf, infos["manifest.json"], path), path, "manifest.json")
+        json_bytes = sum(infos[n].file_size for n in ("manifest.json", *CORE_MEMBERS) if n in infos and n != "frames.bin")
+        if json_bytes > limits.max_json_bytes:
+            raise ArchiveTooLargeError(path, f"the JSON members inflate to {json_bytes} bytes, over the limit of {limits.max_json_bytes}")
+        manifest = _json(_read_member(zf, infos["manifest.json"], path), path, "manifest.json", limits)
         _check_identity(manifest, path)
         hashes = manifest.get("hashes")
         if not isinstance(hashes, dict):
@@ -281,7 +299,7 @@ def read_archive(path: str | Path, *, verify_hashes: bool = True, limits: Archiv
             if verify_hashes and hashlib.sha256(data).hexdigest() != digest:
                 raise HashInventoryError(path, f"member {name!r}: SHA-256 differs from manifest.json hashes")
             files[name] = data
-    return _episode(path, manifest, files)
+    return _episode(path, manifest, files, limits)
 
 
 def _check_identity(manifest: Any, path: Path) -> None:
@@ -293,7 +311,7 @@ def _check_identity(manifest: Any, path: Path) -> None:
             raise UnsupportedEpisodeError(path, f"manifest.json: {key} is {got!r}, expected {want!r}")
 
 
-def _episode(path: Path, manifest: dict[str, Any], files: dict[str, bytes]) -> EpisodeArchive:
+def _episode(path: Path, manifest: dict[str, Any], files: dict[str, bytes], limits: ArchiveLimits = DEFAULT_LIMITS) -> EpisodeArchive:
     bad = InconsistentEpisodeError
     _check_manifest(manifest, files, path)
     for name in files:
@@ -307,7 +325,7 @@ def _episode(path: Path, manifest: dict[str, Any], files: dict[str, bytes]) -> E
     missing = [m for m in CORE_MEMBERS if m not in files]
     if missing:
         raise bad(path, f"members missing: {missing}")
-    rows = _jsonl(files, "frames.jsonl", path)
+    rows = _jsonl(files, "frames.jsonl", path, limits)
     size = manifest["stateSize"]
     raw = files["frames.bin"]
     if len(raw) != len(rows) * size * 8:
@@ -319,12 +337,15 @@ def _episode(path: Path, manifest: dict[str, Any], files: dict[str, bytes]) -> E
     frames = {"initial": [], "state": [], "trace": []}
     for k, (row, vector) in enumerate(zip(rows, vectors), start=1):
         kind = row.get("kind")
-        if kind not in frames:
+        if not isinstance(kind, str) or kind not in frames:
             raise bad(path, f"frames.jsonl: line {k}: kind {kind!r}, expected initial, state or trace")
         if kind == "initial" and k != 1:
             raise bad(path, f"frames.jsonl: line {k}: the initial frame must be the first row")
         record = {a: b for a, b in row.items() if a != "kind"}
         _check_frame(record, kind == "trace", path, f"frames.jsonl: line {k}")
+        if kind != "trace" and not np.abs(vector).max(initial=0.0) <= limits.max_state_value:
+            # traces may hold an unstable step that was rolled back; states are what gets restored
+            raise bad(path, f"frames.bin: row {k - 1} ({kind} {record['index']}) holds a value beyond +-{limits.max_state_value:g}")
         frames[kind].append(Frame(kind, record, vector))
     if len(frames["initial"]) != 1:
         raise bad(path, f"frames.jsonl: {len(frames['initial'])} initial frames, expected exactly one")
@@ -333,7 +354,7 @@ def _episode(path: Path, manifest: dict[str, Any], files: dict[str, bytes]) -> E
         if got != list(range(first, first + len(got))):
             raise bad(path, f"frames.jsonl: {kind} indices {got[:8]}{'...' if len(got) > 8 else ''} are not {first}, {first + 1}, ... in order")
     episode = EpisodeArchive(path, manifest, files, frames["initial"][0], frames["state"], frames["trace"],
-                             _jsonl(files, "calls.jsonl", path), _jsonl(files, "events.jsonl", path))
+                             _jsonl(files, "calls.jsonl", path, limits), _jsonl(files, "events.jsonl", path, limits))
     if episode.initial.index != 0:
         raise bad(path, "frames.jsonl: the initial frame's index must be 0")
     _check_groups(episode, path)

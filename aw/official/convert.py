@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import tempfile
 from collections.abc import Iterable
 from datetime import datetime
 from pathlib import Path
@@ -37,6 +38,7 @@ from aw.official.archive import EpisodeArchive, iso_timestamp, parse_timestamp
 from aw.official.episode import PartEpisode, read_part_episode
 from aw.official.eval_points import eval_points_path, write_eval_inputs
 from aw.official.ids import sample_id_from_slug, task_id_for_sample
+from aw.official.jsonio import read_json_object
 from aw.official.package import REFERENCE_CONDITIONS, OfficialPackage
 from aw.runlock import RunDirBusy, RunDirLock
 
@@ -51,24 +53,49 @@ def initial_archive_path(suite_dir: str | Path, task_id: str) -> Path:
     return Path(suite_dir) / "official" / f"{task_id}.episode.zip"
 
 
-def convert_package(package: str | Path | OfficialPackage, suite_out: str | Path, force: bool = False,
-                    samples: Iterable[tuple[str, str]] | None = None) -> SuiteManifest:
-    """Write the scoring suite of an official package (see the module doc): its ``samples``
-    ((block, sample id) pairs, written in package order), by default every sample. Raises
-    :class:`aw.official.errors.MissingPackageFileError` naming every file those samples need
-    that the package lacks."""
-    pkg = package if isinstance(package, OfficialPackage) else OfficialPackage(package, strict=False)
+_SUITE_ITEMS = ("targets", "eval_points", "official", "tasks", "manifest.json")  # manifest.json last: it makes a suite
+_STAGING = ".aw-staging-"
+
+
+def _staging(parent: Path) -> Path:
+    """A hidden folder in ``parent`` to write into before anything is moved into place (readers
+    skip hidden folders); the ones a killed conversion left are removed first."""
+    parent.mkdir(parents=True, exist_ok=True)
+    for old in parent.glob(_STAGING + "*"):
+        pid = old.name[len(_STAGING):].split("-")[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(old, ignore_errors=True)
+    return Path(tempfile.mkdtemp(dir=parent, prefix=f"{_STAGING}{os.getpid()}-"))
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _existing_suite(out: Path, force: bool) -> None:
+    existing = [out / n for n in _SUITE_ITEMS if (out / n).exists()]
+    if existing and not force:
+        raise FileExistsError(f"{out}: already holds a suite ({', '.join(p.name for p in existing)}); pass force=True to replace it")
+
+
+def _chosen_samples(pkg: OfficialPackage, samples: Iterable[tuple[str, str]] | None) -> list[tuple[str, str]]:
+    """``samples`` ((block, sample id) pairs; None: every sample) in package order, after checking
+    that the package holds every file they need (:class:`aw.official.errors.MissingPackageFileError`
+    naming each one it lacks)."""
     listed = pkg.listed_samples()
     wanted = set(listed if samples is None else samples)
     pkg.require([key for key in listed if key in wanted], "the suite")
     blocks = {block for block, _ in wanted}
-    chosen = [(b, sid) for b in pkg.blocks if b in blocks for sid in pkg.sample_ids(b) if (b, sid) in wanted]
-    out = Path(suite_out)
-    existing = [out / n for n in ("manifest.json", "targets", "eval_points", "official", "tasks") if (out / n).exists()]
-    if existing and not force:
-        raise FileExistsError(f"{out}: already holds a suite ({', '.join(p.name for p in existing)}); pass force=True to replace it")
-    for p in existing:
-        shutil.rmtree(p) if p.is_dir() else p.unlink()
+    return [(b, sid) for b in pkg.blocks if b in blocks for sid in pkg.sample_ids(b) if (b, sid) in wanted]
+
+
+def _write_suite(pkg: OfficialPackage, out: Path, chosen: list[tuple[str, str]]) -> SuiteManifest:
     for sub in ("targets", "eval_points", "official"):
         (out / sub).mkdir(parents=True, exist_ok=True)
     entries = []
@@ -87,6 +114,39 @@ def convert_package(package: str | Path | OfficialPackage, suite_out: str | Path
                                   object_id=sid, category=sid.split("/")[0] if "/" in sid else "", n_parts=inputs.n_parts))
     manifest = SuiteManifest(name=f"official-{pkg.root.name}", generator="aw.official", tasks=entries)
     write_manifest(out, manifest)
+    return manifest
+
+
+def _commit_suite(staged: Path, out: Path) -> None:
+    """Replace ``out``'s suite by the one written in ``staged``, ``manifest.json`` last."""
+    for name in _SUITE_ITEMS:
+        old = out / name
+        if old.is_dir() and not old.is_symlink():
+            shutil.rmtree(old)
+        elif old.exists() or old.is_symlink():
+            old.unlink()
+    for name in _SUITE_ITEMS:
+        if (staged / name).exists():
+            os.replace(staged / name, out / name)
+
+
+def convert_package(package: str | Path | OfficialPackage, suite_out: str | Path, force: bool = False,
+                    samples: Iterable[tuple[str, str]] | None = None) -> SuiteManifest:
+    """Write the scoring suite of an official package (see the module doc): its ``samples``
+    ((block, sample id) pairs, written in package order), by default every sample. Raises
+    :class:`aw.official.errors.MissingPackageFileError` naming every file those samples need
+    that the package lacks. The suite is written in a hidden folder of ``suite_out`` and moved
+    into place once complete: a failure leaves no suite."""
+    pkg = package if isinstance(package, OfficialPackage) else OfficialPackage(package, strict=False)
+    chosen = _chosen_samples(pkg, samples)
+    out = Path(suite_out)
+    _existing_suite(out, force)
+    staged = _staging(out)
+    try:
+        manifest = _write_suite(pkg, staged, chosen)
+        _commit_suite(staged, out)
+    finally:
+        shutil.rmtree(staged, ignore_errors=True)
     return manifest
 
 
@@ -166,38 +226,71 @@ def write_episode_run(ep: PartEpisode, runs_out: str | Path, system: str, task_i
     """Write ``RUNS/<system>/<task_id>/`` (trajectory.jsonl, final.json, run.json) for a restored
     official episode."""
     run_dir = Path(runs_out) / system / task_id
-    traj = run_dir / "trajectory.jsonl"
-    if traj.exists() and not force:
-        raise FileExistsError(f"{traj}: already exists; pass force=True to replace it")
-    header, calls, end = episode_records(ep, task_id, system)
+    _free_run_dir(run_dir, force)
     try:  # never replace a recording that a live server is still writing
         lock = RunDirLock(run_dir).acquire()
     except RunDirBusy as exc:
         raise FileExistsError(str(exc)) from None
     try:
-        tmp = traj.with_suffix(".jsonl.tmp")
-        with open(tmp, "wb") as fh:
-            for rec in [header, *calls, end]:
-                fh.write(_dump(rec) + b"\n")
-        os.replace(tmp, traj)
-        write_final(run_dir / "final.json", FinalState(task_id=task_id, reason=end.reason, poses=end.poses))
-        info = RunInfo(system=system, task_id=task_id, started_at=header.started_at, wall_seconds=end.t,
-                       mcp_calls=len(ep.archive.calls), ended="finished",
-                       extra={"official_archive": str(ep.path), "state_index": ep.final_index, **(extra or {})})
-        write_run_info(run_dir / "run.json", info)
+        _write_run_files(ep, run_dir, system, task_id, extra)
     finally:
         lock.release()
     return run_dir
 
 
+_RUN_FILES = ("trajectory.jsonl", "final.json", "run.json")
+
+
+def _free_run_dir(run_dir: Path, force: bool) -> None:
+    traj = run_dir / "trajectory.jsonl"
+    if traj.exists() and not force:
+        raise FileExistsError(f"{traj}: already exists; pass force=True to replace it")
+
+
+def _write_run_files(ep: PartEpisode, run_dir: Path, system: str, task_id: str, extra: dict | None) -> None:
+    header, calls, end = episode_records(ep, task_id, system)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    traj = run_dir / "trajectory.jsonl"
+    tmp = traj.with_suffix(".jsonl.tmp")
+    with open(tmp, "wb") as fh:
+        for rec in [header, *calls, end]:
+            fh.write(_dump(rec) + b"\n")
+    os.replace(tmp, traj)
+    write_final(run_dir / "final.json", FinalState(task_id=task_id, reason=end.reason, poses=end.poses))
+    info = RunInfo(system=system, task_id=task_id, started_at=header.started_at, wall_seconds=end.t,
+                   mcp_calls=len(ep.archive.calls), ended="finished",
+                   extra={"official_archive": str(ep.path), "state_index": ep.final_index, **(extra or {})})
+    write_run_info(run_dir / "run.json", info)
+
+
+def _commit_run(staged: Path, run_dir: Path) -> None:
+    """Move a run written in ``staged`` to ``run_dir`` (its files replaced under the run's lock)."""
+    run_dir.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        lock = RunDirLock(run_dir).acquire()
+    except RunDirBusy as exc:
+        raise FileExistsError(str(exc)) from None
+    try:
+        for name in _RUN_FILES:
+            os.replace(staged / name, run_dir / name)
+    finally:
+        lock.release()
+
+
 def find_archives(root: str | Path) -> list[Path]:
-    """Every ``*.episode.zip`` below ``root`` (or ``root`` itself), sorted."""
+    """Every ``*.episode.zip`` below ``root`` (or ``root`` itself), sorted. An archive that is a
+    link leading out of ``root`` is refused, as the package reader refuses links leaving the package."""
     root = Path(root)
     if root.is_file():
         return [root]
     if not root.is_dir():
         raise FormatError(root, "episode folder not found")
-    return sorted(root.rglob("*.episode.zip"))
+    found = sorted(root.rglob("*.episode.zip"))
+    inside = root.resolve()
+    for path in found:
+        if not path.resolve().is_relative_to(inside):
+            raise FormatError(path, f"links outside the episode folder {root}")
+    return found
 
 
 def archive_sample(archive: Path, pkg: OfficialPackage) -> tuple[str, str]:
@@ -225,13 +318,7 @@ def _result_beside(archive: Path) -> dict:
     path = archive.parent / "result.json"
     if archive.name != "final.episode.zip" or not path.is_file():
         return {}
-    try:
-        result = orjson.loads(path.read_bytes())
-    except orjson.JSONDecodeError as exc:
-        raise FormatError(path, f"not valid JSON ({exc})") from None
-    if not isinstance(result, dict):
-        raise FormatError(path, "expected a JSON object")
-    return _official_result(result)
+    return _official_result(read_json_object(path))
 
 
 def run_log_archives(folder: str | Path, pkg: OfficialPackage, skipped: list[str] | None = None,
@@ -259,6 +346,7 @@ def run_log_archives(folder: str | Path, pkg: OfficialPackage, skipped: list[str
             pkg.check_attempt(attempt)
             if attempted is not None:
                 attempted.add((block, sid))
+            attempt.tool_calls  # noqa: B018 - a conversation.jsonl that aw-score would refuse is refused here too
             why = ("the attempt is still running" if not attempt.finished else
                    "no saved final archive" if not attempt.archive_saved else
                    "final archive differs from result.json's sha256"
@@ -284,6 +372,8 @@ def convert(package: str | Path, episodes: str | Path | Iterable[str | Path], su
     from aw.official.runlog import archive_system, is_run_dir
 
     pkg = OfficialPackage(package, strict=False)
+    suite, runs_root = Path(suite_out), Path(runs_out)
+    _existing_suite(suite, force)
     folder = Path(episodes) if isinstance(episodes, (str, Path)) else None
     attempted: set[tuple[str, str]] = set()
     if folder is not None and folder.is_dir() and (is_run_dir(folder) or any(is_run_dir(p) for p in folder.iterdir())):
@@ -298,10 +388,26 @@ def convert(package: str | Path, episodes: str | Path | Iterable[str | Path], su
     attempted.update((block, sid) for _, block, sid, _, _ in items)
     if not attempted:
         raise FormatError(folder if folder is not None else Path("."), "no attempt and no *.episode.zip archive to convert")
-    manifest = convert_package(pkg, suite_out, force=force, samples=attempted)
-    runs = []
-    for name, block, sid, arc, extra in items:
-        inputs = pkg.evaluation_inputs(block, sid)
-        ep = read_part_episode(arc, pkg.initial_archive(block, sid), inputs.part_ids)
-        runs.append(write_episode_run(ep, runs_out, system or name, task_id_for_sample(block, sid), force=force, extra=extra))
+    chosen = _chosen_samples(pkg, attempted)
+    targets = [runs_root / (system or name) / task_id_for_sample(block, sid) for name, block, sid, _, _ in items]
+    for k, run_dir in enumerate(targets):
+        if run_dir in targets[:k]:
+            raise FormatError(items[k][3], f"a second archive for {items[k][1]}/{items[k][2]} of system {run_dir.parent.name}")
+        _free_run_dir(run_dir, force)
+    # Everything is read and written in hidden folders first, then moved into place: a bad archive
+    # or a full disk leaves neither a suite nor runs that look complete.
+    staged_suite, staged_runs = _staging(suite), _staging(runs_root)
+    try:
+        manifest = _write_suite(pkg, staged_suite, chosen)
+        for (name, block, sid, arc, extra), run_dir in zip(items, targets):
+            inputs = pkg.evaluation_inputs(block, sid)
+            ep = read_part_episode(arc, pkg.initial_archive(block, sid), inputs.part_ids)
+            _write_run_files(ep, staged_runs / run_dir.relative_to(runs_root), system or name, run_dir.name, extra)
+        for run_dir in targets:
+            _commit_run(staged_runs / run_dir.relative_to(runs_root), run_dir)
+        _commit_suite(staged_suite, suite)
+    finally:
+        shutil.rmtree(staged_suite, ignore_errors=True)
+        shutil.rmtree(staged_runs, ignore_errors=True)
+    runs = targets
     return manifest, runs

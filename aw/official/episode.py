@@ -22,7 +22,8 @@ from xml.etree import ElementTree as ET
 import numpy as np
 
 from aw.official.archive import ENGINE, MJB_MODEL, EpisodeArchive, Frame, read_archive
-from aw.official.errors import EngineVersionError, EpisodeMismatchError, WorldModelError
+from aw.formats.common import pose_problem
+from aw.official.errors import EngineVersionError, EpisodeMismatchError, InconsistentEpisodeError, WorldModelError
 
 __all__ = [
     "PartEpisode", "body_name", "expected_objects", "catalogue_part_ids", "require_engine", "load_model",
@@ -177,6 +178,9 @@ def state_poses(model, ep: EpisodeArchive, frames: list[Frame], names: list[str]
                 out[f, p, :3], out[f, p, 3:] = data.xpos[b], data.xquat[b]
             else:
                 out[f, p] = data.qpos[adr:adr + 7]
+            why = pose_problem(out[f, p].tolist())
+            if why is not None:  # e.g. a zero quaternion: refused here rather than scored as some pose
+                raise InconsistentEpisodeError(ep.path, f"frames.bin: {frame.kind} {frame.index}: body {names[p]}: {why}")
     return out
 
 

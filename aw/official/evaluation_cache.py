@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from aw.official.errors import EvaluationCacheError
+from aw.official.jsonio import read_json
 
 __all__ = ["CACHE_FILE", "EVALUATION_PROTOCOL", "PREPARATION_PROTOCOL", "POINTS_PER_PART", "SIMILARITY_POLICY",
            "SIMILARITY_THRESHOLD", "similarity_protocol", "EvaluationInputs", "read_evaluation", "write_evaluation",
@@ -102,12 +103,9 @@ def read_evaluation(path: str | Path, *, sample_id: str | None = None, identity:
     the sample (config identity, initial archive digest, part count); each one given must match
     the file's key, as the official scorer requires."""
     path = Path(path)
-    try:
-        value = json.loads(path.read_text(encoding="utf-8"), parse_constant=_no_constant)
-    except FileNotFoundError:
-        raise _fail(path, "evaluation inputs not found") from None
-    except (OSError, ValueError, UnicodeDecodeError) as exc:
-        raise _fail(path, f"not valid JSON ({exc})") from None
+    if not path.is_file():
+        raise _fail(path, "evaluation inputs not found")
+    value = read_json(path, EvaluationCacheError)  # strict JSON (no NaN), bounded depth and size
     if not isinstance(value, dict) or not {"version", "key", "part_ids", "points", "gt_poses", "scale_divisor", "equivalence"} <= set(value):
         raise _fail(path, "expected an object with version, key, part_ids, points, gt_poses, scale_divisor, equivalence")
     key, equivalence = value["key"], value["equivalence"]
@@ -157,10 +155,6 @@ def read_evaluation(path: str | Path, *, sample_id: str | None = None, identity:
         poses.append(pose)
     return EvaluationInputs(key["sample_id"], list(ids), np.stack(points), np.stack(poses), float(divisor),
                             [list(g) for g in groups], key, equivalence, value.get("provenance"))
-
-
-def _no_constant(name: str) -> Any:
-    raise ValueError(f"{name} is not a JSON number")
 
 
 def write_json(path: str | Path, value: Any) -> None:

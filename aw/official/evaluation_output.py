@@ -23,6 +23,8 @@ Facts from ``assembly_world_bench/scoring.py`` of AssemblyWorld/assembly-world-b
 from __future__ import annotations
 
 import json
+import shutil
+import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -105,7 +107,9 @@ def summarize(rows: Sequence[Mapping[str, Any]], benchmark: Mapping[str, Any]) -
         def means(parts: list[Mapping[str, Any]]) -> dict[str, float | None]:
             return {m: _mean([p[m] for p in parts]) if all(p[m] is not None for p in parts) else None for m in _METRICS}
 
-        sources = {s: means([blocks[b["name"]] for b in block_list if b["source"] == s]) for s in benchmark["sources"]}
+        # a source without blocks (a package cut down to some blocks) has no mean, rather than NaN
+        sources = {s: means([blocks[b["name"]] for b in block_list if b["source"] == s]) for s in benchmark["sources"]
+                   if any(b["source"] == s for b in block_list)}
         summary["sources"] = sources
         summary["official_overall"] = means(list(sources.values()))
     summary["resources"] = {name: _reported(rows, lambda r, n=name: r.get(n))
@@ -122,9 +126,19 @@ def write_evaluation(out_dir: str | Path, rows: Sequence[Mapping[str, Any]], sum
     out = Path(out_dir)
     if out.exists():
         raise FileExistsError(f"{out}: evaluation folder already exists (use a new one)")
-    out.mkdir(parents=True)
-    (out / METRICS_FILE).write_text("".join(json.dumps(r) + "\n" for r in sort_rows(rows)), encoding="utf-8")
-    write_json(out / SUMMARY_FILE, summary)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}.tmp-"))
+    try:  # written beside, then renamed: a failure leaves no folder that looks complete
+        text = "".join(json.dumps(r, allow_nan=False) + "\n" for r in sort_rows(rows))  # strict JSON lines
+        try:
+            (tmp / METRICS_FILE).write_text(text, encoding="utf-8")
+        except OSError as exc:  # a full disk: say which file
+            raise OSError(exc.errno, exc.strerror, str(out / METRICS_FILE)) from None
+        write_json(tmp / SUMMARY_FILE, summary)
+        tmp.rename(out)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
     return out
 
 

@@ -17,7 +17,6 @@ hold the same ids. :class:`OfficialPackage` also offers what rescoring an offici
 from __future__ import annotations
 
 import hashlib
-import json
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -32,6 +31,7 @@ from aw.official.errors import MissingPackageFileError, PackageError
 from aw.official.evaluation_cache import (CACHE_FILE, EVALUATION_PROTOCOL, SIMILARITY_POLICY, SIMILARITY_THRESHOLD,
                                           EvaluationInputs, read_evaluation)
 from aw.official.ids import sample_slug
+from aw.official.jsonio import read_json
 
 __all__ = ["REPO", "REVISION", "BLOCKS", "BENCHMARK_EVALUATION", "REFERENCE_CONDITIONS", "Sample", "OfficialPackage",
            "file_sha256"]
@@ -102,7 +102,8 @@ class OfficialPackage:
             missing = [k for k in need if k not in block]
             if missing:
                 raise PackageError(path, f"block {block['name']!r}: missing {missing}")
-            if block["reference_mode"] not in REFERENCE_CONDITIONS or not isinstance(block["samples"], dict):
+            if not isinstance(block["reference_mode"], str) or block["reference_mode"] not in REFERENCE_CONDITIONS \
+                    or not isinstance(block["samples"], dict) or not all(isinstance(v, dict) for v in block["samples"].values()):
                 raise PackageError(path, f"block {block['name']!r}: reference_mode {block['reference_mode']!r} or samples malformed")
             if block["source"] not in b.get("sources", []):
                 raise PackageError(path, f"block {block['name']!r}: source {block['source']!r} is not one of sources")
@@ -132,11 +133,7 @@ class OfficialPackage:
         return path
 
     def _json(self, relative: str) -> Any:
-        path = self.path(relative)
-        try:
-            return json.loads(path.read_text(encoding="utf-8"))
-        except (ValueError, UnicodeDecodeError) as exc:
-            raise PackageError(path, f"not valid JSON ({exc})") from None
+        return read_json(self.path(relative), PackageError)  # strict, bounded (aw.official.jsonio)
 
     # --- blocks and samples -------------------------------------------------------------------
 
@@ -238,6 +235,8 @@ class OfficialPackage:
                     or reference.get("reference_mode") != b["reference_mode"] or not reference.get("pages"):
                 raise PackageError(where, "dataset, revision or reference_mode differ from the block, or no pages")
             for index, page in enumerate(reference["pages"], start=1):
+                if not isinstance(page, dict) or not isinstance(page.get("file"), str):
+                    raise PackageError(where, f"page {index}: expected an object with a file name")
                 image = self.path(f"{refdir}/{page['file']}")
                 if page.get("page") != index or file_sha256(image) != page.get("source_sha256"):
                     raise PackageError(where, f"page {index}: out of order or its SHA-256 differs")

@@ -33,6 +33,7 @@ from typing import Any
 from aw.formats import FormatError
 from aw.official.evaluation_cache import write_json
 from aw.official.ids import sample_slug
+from aw.official.jsonio import parse, read_json_object
 
 __all__ = ["RUN_KIND", "RUN_FILE", "FINAL_ARCHIVE", "RunLog", "SampleAttempt", "sample_slug", "new_run_id", "utc_now",
            "read_run", "is_run_dir", "find_runs", "read_attempts", "select_attempts", "count_tool_calls",
@@ -57,20 +58,36 @@ def new_run_id() -> str:
 # --- reading -----------------------------------------------------------------------------------
 
 
-def _read_json(path: Path) -> Any:
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise FormatError(path, "file not found") from None
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise FormatError(path, f"not valid JSON ({exc})") from None
-
-
 def _json_object(path: Path) -> dict[str, Any]:
-    value = _read_json(path)
-    if not isinstance(value, dict):
-        raise FormatError(path, f"expected a JSON object, got {type(value).__name__}")
-    return value
+    return read_json_object(path)  # strict JSON, bounded depth and size (aw.official.jsonio)
+
+
+def _objects(file: Path, meta: dict[str, Any], keys: tuple[str, ...]) -> None:
+    for key in keys:
+        if meta.get(key) is not None and not isinstance(meta[key], dict):
+            raise FormatError(file, f"{key}: expected an object, got {type(meta[key]).__name__}")
+
+
+def _check_result(file: Path, result: dict[str, Any]) -> None:
+    """The parts of ``result.json`` that go into the evaluation rows: objects where objects are
+    read, numbers (or null) where means are taken."""
+    _objects(file, result, ("archive", "execution"))
+    execution = result.get("execution") or {}
+    _objects(file, execution, ("usage",))
+    numbers = {"duration_seconds": result.get("duration_seconds"), "tool_calls": result.get("tool_calls"),
+               "execution.cost_usd": execution.get("cost_usd"),
+               **{f"execution.usage.{k}": v for k, v in (execution.get("usage") or {}).items() if k.endswith("_tokens")}}
+    for key, value in numbers.items():
+        if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
+            raise FormatError(file, f"{key}: expected a number or null, got {type(value).__name__}")
+
+
+def _inside(run: Path, path: Path) -> Path:
+    """``path`` when it (links followed) lies inside the run folder ``run``; links that leave
+    the run log are refused, as the package reader refuses links that leave the package."""
+    if not path.resolve().is_relative_to(run):
+        raise FormatError(path, f"links outside the run log {run}")
+    return path
 
 
 @dataclass(frozen=True)
@@ -126,6 +143,7 @@ def read_run(path: str | Path) -> RunLog:
     src = meta.get("source_run")
     if src is not None and not isinstance(src, str):
         raise FormatError(file, "source_run: expected a path or null")
+    _objects(file, meta, ("options", "tasks", "reference_modes", "benchmark", "versions"))
     return RunLog(root, meta)
 
 
@@ -200,15 +218,24 @@ class SampleAttempt:
 
 def count_tool_calls(path: str | Path) -> int | None:
     """The ``{"type": "tool_call"}`` rows of a ``conversation.jsonl`` (every MCP call, read-only
-    and failed ones included), or None when the file is missing or a row is not a JSON object."""
+    and failed ones included), or None when the file is missing; a row that is not a JSON object
+    (by the rule of :mod:`aw.official.jsonio`) is a :class:`FormatError` naming the line."""
     file = Path(path)
     if not file.is_file():
         return None
-    try:
-        with file.open(encoding="utf-8") as fh:
-            return sum(json.loads(line).get("type") == "tool_call" for line in fh)
-    except (ValueError, AttributeError):
-        return None
+    count = 0
+    with file.open("rb") as fh:
+        for n, line in enumerate(fh, 1):
+            if not line.strip():
+                continue
+            try:
+                row = parse(line)
+            except ValueError as exc:
+                raise FormatError(file, f"line {n}: {exc}") from None
+            if not isinstance(row, dict):
+                raise FormatError(file, f"line {n}: expected a JSON object")
+            count += row.get("type") == "tool_call"
+    return count
 
 
 def read_attempts(run: RunLog, root: Path | None = None) -> list[SampleAttempt]:
@@ -216,7 +243,10 @@ def read_attempts(run: RunLog, root: Path | None = None) -> list[SampleAttempt]:
     out = []
     for block, ids in run.selection.items():
         for sid in ids:
-            directory = run.sample_dir(block, sid)
+            directory = _inside(run.path, run.sample_dir(block, sid))
+            for name in ("input.json", "result.json", "conversation.jsonl", FINAL_ARCHIVE):
+                if (directory / name).is_symlink() or (directory / name).exists():
+                    _inside(run.path, directory / name)
             inputs = _json_object(directory / "input.json")
             if inputs.get("sample_id") != sid or inputs.get("block") != block:
                 raise FormatError(directory / "input.json", f"names {inputs.get('block')!r}/{inputs.get('sample_id')!r}, "
@@ -224,6 +254,7 @@ def read_attempts(run: RunLog, root: Path | None = None) -> list[SampleAttempt]:
             result = _json_object(directory / "result.json")
             if not isinstance(result.get("status"), str):
                 raise FormatError(directory / "result.json", "status: missing")
+            _check_result(directory / "result.json", result)
             out.append(SampleAttempt(block, sid, run.path, root or run.path, directory, inputs, result))
     return out
 

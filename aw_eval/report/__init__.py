@@ -23,8 +23,15 @@ __all__ = ["SCHEMA", "SCHEMA_VERSION", "AnalysisSettings", "build_results", "ren
 def write_json(path: Path, doc: Any) -> None:
     data = orjson.dumps(doc, option=orjson.OPT_INDENT_2 | orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS)
     tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    tmp.write_bytes(data + b"\n")
-    os.replace(tmp, path)
+    try:
+        tmp.write_bytes(data + b"\n")
+        os.replace(tmp, path)
+    except OSError as exc:  # a full disk: no partial file is left behind, and the error names the file
+        tmp.unlink(missing_ok=True)
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+    except BaseException:  # an interrupt: the same
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def _refinement(suite_dir: str, runs_dir: str) -> dict[str, Any] | None:

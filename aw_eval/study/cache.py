@@ -10,6 +10,7 @@ same run. Task facts live at ``cache/tasks/<task_id>/<geometry key>.npz``.
 from __future__ import annotations
 
 import hashlib
+import os
 from pathlib import Path
 
 from aw_eval.study.model import RunScore, TaskFacts, load_npz, save_npz
@@ -55,6 +56,16 @@ def run_key(geom_key: str, run_dir: Path, settings_key: str, evaluator_version: 
     return h.hexdigest()[:_KEY_LEN]
 
 
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 def _drop_others(keep: Path) -> None:
     """Remove stale entries next to ``keep`` (same run, older keys)."""
     for old in keep.parent.glob("*.npz"):
@@ -65,6 +76,19 @@ def _drop_others(keep: Path) -> None:
 class Cache:
     def __init__(self, root: Path):
         self.root = Path(root)
+
+    def remove_stale(self) -> int:
+        """Delete the temporary files (``*.npz.tmp<pid>``) that a killed run left, those of live
+        processes excepted; returns how many."""
+        removed = 0
+        for sub in ("runs", "tasks"):
+            for tmp in (self.root / sub).rglob("*.npz.tmp*"):
+                pid = tmp.name.rpartition(".tmp")[2]
+                if pid.isdigit() and _alive(int(pid)) and int(pid) != os.getpid():
+                    continue
+                tmp.unlink(missing_ok=True)
+                removed += 1
+        return removed
 
     def _run_path(self, system: str, task_id: str, key: str) -> Path:
         return self.root / "runs" / system / task_id / f"{key}.npz"

@@ -8,6 +8,7 @@ go back to the caller, which caches them.
 
 from __future__ import annotations
 
+import errno
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -30,6 +31,7 @@ __all__ = ["ScoreSettings", "RunRequest", "TaskJob", "TaskOutput", "score_task",
 
 STATUS_ERROR = "error"  # the evaluator raised on this run (not cached; listed in the report)
 STATUS_TASK_ERROR = "task_error"  # the task's geometry could not be loaded
+_WRITE_FAULTS = (errno.ENOSPC, errno.EFBIG, errno.EDQUOT)  # a full disk or a size limit: never a task's fault
 
 
 @dataclass(frozen=True)
@@ -171,6 +173,8 @@ def score_task(job: TaskJob) -> TaskOutput:
         official = suite_eval_inputs(Path(job.targets_path).parent.parent, job.task_id)
         loaded = _load_official(job, official, t0) if official is not None else _load_native(job, t0)
     except (FormatError, ValueError, OSError) as exc:
+        if isinstance(exc, OSError) and exc.errno in _WRITE_FAULTS:
+            raise  # the geometry cache cannot be written (a full disk): the tool fails, not the task
         msg = f"task geometry could not be loaded: {exc}"
         return TaskOutput(job.task_id, None, [RunScore.unscored(r.system, job.task_id, STATUS_TASK_ERROR, [msg])
                                               for r in job.runs], error=msg)
@@ -180,6 +184,8 @@ def score_task(job: TaskJob) -> TaskOutput:
         try:
             out.results.append(_score_run(req, job.task_id, geom, all_ids, centroids, job.settings))
         except Exception as exc:  # an evaluator failure on one run must not lose the others
+            if isinstance(exc, OSError) and exc.errno in _WRITE_FAULTS:
+                raise
             detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()
             out.results.append(RunScore.unscored(req.system, job.task_id, STATUS_ERROR, [f"scoring failed: {detail}"]))
     return out

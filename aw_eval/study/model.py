@@ -134,8 +134,15 @@ def save_npz(path: str | Path, obj: RunScore | TaskFacts) -> None:
     buf = io.BytesIO()
     np.savez_compressed(buf, __meta__=np.frombuffer(meta_bytes, dtype=np.uint8), **arrays)
     tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    tmp.write_bytes(buf.getvalue())
-    os.replace(tmp, path)
+    try:
+        tmp.write_bytes(buf.getvalue())
+        os.replace(tmp, path)
+    except OSError as exc:  # a full disk: no partial file is left behind, and the error names the entry
+        tmp.unlink(missing_ok=True)
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
+    except BaseException:  # an interrupt: the same
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def load_npz(path: str | Path) -> RunScore | TaskFacts:

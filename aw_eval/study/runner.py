@@ -27,6 +27,7 @@ from aw_eval.study.cache import Cache, file_digest, geometry_key, run_key
 from aw_eval.study.job import STATUS_ERROR, RunRequest, ScoreSettings, TaskJob, TaskOutput, score_task
 from aw_eval.study.model import STATUS_MISSING, RunScore
 from aw_eval.study.table import RunRecord, Study
+from aw_eval.workers import stop_pool, watch_parent
 
 __all__ = ["StudyError", "ScoringFailed", "Coverage", "discover_runs", "score_study", "ScoreStats", "default_jobs"]
 
@@ -176,24 +177,28 @@ def _progress(total: int, enabled: bool, desc: str):
     return progress(total, desc, "task", enabled=enabled)
 
 
-def _worker_init() -> None:
+def _worker_init(parent: int) -> None:
     # One XLA thread per worker process: the pool already spreads work over the cores.
     os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
+    watch_parent(parent)  # a killed aw-score takes its workers with it
 
 
 def _failed(job: TaskJob, exc: BaseException, where: str) -> ScoringFailed:
     """The error for a job whose worker failed."""
     msg = f"scoring failed: {where} died or broke while scoring task {job.task_id} ({type(exc).__name__}: {exc})"
+    if isinstance(exc, OSError) and exc.filename:  # e.g. a full disk under the geometry cache
+        msg = f"scoring failed: {exc.filename}: {exc.strerror or exc} (while scoring task {job.task_id})"
     if isinstance(exc, BrokenProcessPool):
         msg += ("; if score_study is called from a script, put the call under `if __name__ == \"__main__\":` "
                 "(worker processes import the script)")
     return ScoringFailed(msg + "; tasks scored before it are cached, and a rerun resumes from them")
 
 
-def _run_jobs(jobs: list[TaskJob], *, scheduler: str | None, n_jobs: int) -> tuple[Iterator[TaskOutput], str, Callable[[], None]]:
-    """Yield outputs as they complete; returns (iterator, executor name, closer)."""
+def _run_jobs(jobs: list[TaskJob], *, scheduler: str | None, n_jobs: int) -> tuple[Iterator[TaskOutput], str, Callable[[bool], None]]:
+    """Yield outputs as they complete; returns (iterator, executor name, closer). ``closer(True)``
+    abandons the work (an interrupt or a failure): local workers are terminated at once."""
     if not jobs:
-        return iter(()), "none", lambda: None
+        return iter(()), "none", lambda abort: None
     if scheduler:
         try:
             from distributed import Client
@@ -215,7 +220,7 @@ def _run_jobs(jobs: list[TaskJob], *, scheduler: str | None, n_jobs: int) -> tup
                     raise _failed(job_of[fut.key], exc, "a Dask worker") from None
                 yield out
 
-        return gen_dask(), f"dask:{scheduler}", client.close
+        return gen_dask(), f"dask:{scheduler}", lambda abort: client.close()
     if n_jobs <= 1 or len(jobs) == 1:
         def gen_inline() -> Iterator[TaskOutput]:
             for j in jobs:
@@ -225,9 +230,9 @@ def _run_jobs(jobs: list[TaskJob], *, scheduler: str | None, n_jobs: int) -> tup
                     raise _failed(j, exc, "the scoring code") from exc
                 yield out
 
-        return gen_inline(), "in-process", lambda: None
+        return gen_inline(), "in-process", lambda abort: None
     pool = ProcessPoolExecutor(max_workers=min(n_jobs, len(jobs)), mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_worker_init)
+                               initializer=_worker_init, initargs=(os.getpid(),))
     futs = {pool.submit(score_task, j): j for j in jobs}
 
     def gen_pool() -> Iterator[TaskOutput]:
@@ -238,7 +243,13 @@ def _run_jobs(jobs: list[TaskJob], *, scheduler: str | None, n_jobs: int) -> tup
                 raise _failed(futs[f], exc, "a scoring worker process") from None
             yield out
 
-    return gen_pool(), f"processes:{min(n_jobs, len(jobs))}", lambda: pool.shutdown(cancel_futures=True)
+    def close(abort: bool) -> None:
+        if abort:
+            stop_pool(pool)
+        else:
+            pool.shutdown(cancel_futures=True)
+
+    return gen_pool(), f"processes:{min(n_jobs, len(jobs))}", close
 
 
 def _read_info(run_dir: Path | None) -> tuple[Any, str | None]:
@@ -283,6 +294,7 @@ def score_study(suite_dir: str | Path, runs_dir: str | Path, out_dir: str | Path
         for line in coverage.warnings(manifest.name):
             log(f"warning: {line}")
     cache = Cache(out_dir / "cache")
+    cache.remove_stale()
     ev_version = evaluator.evaluator_version()
     stats = ScoreStats(coverage=coverage)
     scores: dict[tuple[str, str], RunScore] = {}
@@ -321,6 +333,7 @@ def score_study(suite_dir: str | Path, runs_dir: str | Path, out_dir: str | Path
     if log and jobs:
         log(f"scoring {plural(sum(len(j.runs) for j in jobs), 'run')} of {plural(len(jobs), 'task')} ({stats.executor}); "
             f"{plural(stats.cached, 'run')} from the cache")
+    aborted = True
     try:
         with _progress(len(jobs), progress and len(jobs) > 0, "scoring") as bar:
             for out in outputs:
@@ -338,8 +351,9 @@ def score_study(suite_dir: str | Path, runs_dir: str | Path, out_dir: str | Path
                     else:
                         cache.put_run(r, keys[(r.system, r.task_id)])
                 bar.update(1)
+        aborted = False
     finally:
-        close()
+        close(aborted)
     runs: dict[tuple[str, str], RunRecord] = {}
     for (s, t), sc in scores.items():
         run_dir = found.get((s, t))

@@ -77,3 +77,16 @@ def test_lock_is_exclusive_within_a_process_too(tmp_path):
             RunDirLock(tmp_path / "r").acquire()
     with RunDirLock(tmp_path / "r"):
         pass
+
+
+def test_the_lock_file_names_its_holder_during_and_after(tmp_path):
+    """docs/harnesses.md: ``.aw-lock`` names pid, host and command (it used to be emptied on release)."""
+    import json
+    import socket
+
+    lock = RunDirLock(tmp_path / "run", command="aw-score suite runs --out x").acquire()
+    during = json.loads((tmp_path / "run" / LOCK_FILE).read_text())
+    lock.release()
+    after = json.loads((tmp_path / "run" / LOCK_FILE).read_text())
+    assert during == after == {"pid": os.getpid(), "host": socket.gethostname(), "command": "aw-score suite runs --out x"}
+    assert holder_of(tmp_path / "run") is None  # the record of an ended holder holds nothing

@@ -261,3 +261,9 @@ def test_events_are_checked_as_the_official_scorer_checks_them(active, tmp_path,
     no sequence of schema-valid events makes an episode unreadable."""
     out = rezip(active.path, tmp_path / "events.zip", edit_jsonl(members(active.path), "events.jsonl", edit))
     assert read_archive(out).final_state().index == 3
+def test_the_json_members_are_bounded_before_inflating(active):
+    """The parsed size is bounded by the JSON text (zip headers), not only by each compressed member."""
+    text = sum(len(d) for n, d in members(active.path).items() if n.endswith((".json", ".jsonl")))
+    assert read_archive(active.path, limits=ArchiveLimits(max_json_bytes=text)).calls
+    with pytest.raises(ArchiveTooLargeError, match=f"the JSON members inflate to {text} bytes, over the limit of {text - 1}"):
+        read_archive(active.path, limits=ArchiveLimits(max_json_bytes=text - 1))
