@@ -277,3 +277,45 @@ def test_geometry_groups_join_congruent_parts_only():
     clouds = np.stack([shape, other, moved])
     groups = geometry_groups(ids, clouds, list(clouds), 1.0)
     assert sorted(sorted(g) for g in groups) == [["a", "c"], ["b"]]
+
+
+def _placed_boxes(extents, n_points, seed):
+    """Official-style inputs: points ``(P, n, 3)`` and mesh vertices of turned, spread-out boxes."""
+    import trimesh
+
+    rng = np.random.default_rng(seed)
+    points, verts = [], []
+    for k, e in enumerate(extents):
+        box = trimesh.creation.box(extents=e)
+        pts, _ = trimesh.sample.sample_surface(box, n_points, seed=100 + k)
+        turn = Rotation.random(random_state=rng).as_matrix()
+        points.append(np.asarray(pts) @ turn.T + [2.0 * k, 0, 0])
+        verts.append(np.asarray(box.vertices) @ turn.T + [2.0 * k, 0, 0])
+    return np.stack(points), verts
+
+
+def test_geometry_groups_equal_registering_every_pair(monkeypatch):
+    import aw.prepare.official_similarity as sim
+
+    rng = np.random.default_rng(8)
+    objects = {
+        "pegs": [(3.0, 3.0, 0.05)] + [(0.1, 0.1, 0.3)] * 9,  # many identical small parts
+        "near": [(4.0, 4.0, 0.05), (0.6, 0.2, 0.1), (0.63, 0.2, 0.1), (0.66, 0.21, 0.1), (0.7, 0.2, 0.1),
+                 (0.6, 0.2, 0.14), (0.75, 0.25, 0.1)],  # pairs on both sides of 1e-4
+        "distinct": [tuple(sorted(rng.uniform(0.05, 1.0, 3), reverse=True)) for _ in range(8)],
+    }
+    calls = []
+    real = sim.register
+    monkeypatch.setattr(sim, "register", lambda *a, **k: calls.append(1) or real(*a, **k))
+    sizes = set()
+    for name, extents in objects.items():
+        points, verts = _placed_boxes(extents, 64, seed=len(name))
+        ids = [f"p{k:02d}" for k in range(len(extents))]
+        divisor = max(float(np.linalg.norm(e)) for e in extents)
+        calls.clear()
+        fast = sim.geometry_groups(ids, points, verts, divisor)
+        n_fast = len(calls)
+        assert fast == sim.geometry_groups_all_pairs(ids, points, verts, divisor), name
+        assert n_fast < len(calls) - n_fast, name
+        sizes |= {len(g) for g in fast}
+    assert max(sizes) >= 5 and 1 in sizes

@@ -1,0 +1,218 @@
+"""Part-count sweep: every per-task step's time and peak memory from 2 to 500 parts.
+
+    nice .venv/bin/python benchmarks/bench_parts.py --out /tmp/parts [--parts 2,10,20,50,100,200,500]
+        [--kinds distinct,identical,replicas] [--replicas-max 20] [--official-max 500] [--limit-s 900]
+
+Objects are generated as meshes, one folder per object (``aw-prepare folder`` layout), in a grid
+so that no two parts touch:
+
+- ``distinct``: boxes of seeded random extents in [0.05, 1]^3 (sorted, so no two are the same box);
+- ``identical``: a 1 x 1 x 0.05 base plate and ``n - 1`` identical 0.1 x 0.1 x 0.3 pegs (the
+  pegs group: two samplings of a small part are within the protocol's 1e-4);
+- ``replicas``: ``n`` copies of one 0.6 x 0.25 x 0.1 box, the largest part itself. Two samplings
+  of it are about 5e-4 apart, above 1e-4, so no shape bound can rule a pair out and every pair
+  is registered in full: the quadratic worst case, run up to ``--replicas-max`` parts.
+
+Steps, each in a fresh process (its peak resident memory is the process's ``ru_maxrss``):
+``prepare`` (``aw-prepare folder``), ``geometry`` (``aw_eval.load_task_geometry`` without the cache,
+split into mesh loading, surface sampling, FPS, the divisor, the equivalence groups and the
+task's search structures), ``render`` (the scene's renderer: start and one 1024 x 768 picture),
+``score`` (one checkpoint: the initial poses), and ``official`` (``aw-prepare folder --protocol
+official``). A step that runs past ``--limit-s`` is stopped and recorded as such. Writes
+``parts_sweep.json`` in ``--out`` (never over an existing file).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _output import output_file  # noqa: E402
+
+KINDS = ("distinct", "identical", "replicas")
+
+
+def part_extents(n: int, kind: str) -> list[tuple[float, float, float]]:
+    """Box extents of the ``n`` parts of a generated object of ``kind``."""
+    if kind == "distinct":
+        rng = np.random.default_rng(20261126)
+        return [tuple(float(v) for v in sorted(rng.uniform(0.05, 1.0, 3), reverse=True)) for _ in range(n)]
+    if kind == "identical":
+        return [(1.0, 1.0, 0.05)] + [(0.1, 0.1, 0.3)] * (n - 1)
+    if kind == "replicas":
+        return [(0.6, 0.25, 0.1)] * n
+    raise ValueError(f"unknown kind {kind!r}")
+
+
+def make_object(root: Path, n: int, kind: str) -> Path:
+    """Write ``root/<kind><n>/p000.obj ...`` (assembled frame, parts on a grid) and return it."""
+    import trimesh
+
+    folder = root / f"{kind}{n:03d}"
+    folder.mkdir(parents=True, exist_ok=True)
+    side = int(np.ceil(np.sqrt(n)))
+    for k, extents in enumerate(part_extents(n, kind)):
+        box = trimesh.creation.box(extents=extents)
+        box.apply_translation([1.5 * (k % side), 1.5 * (k // side), 0.0])
+        box.export(folder / f"p{k:03d}.obj")
+    return folder
+
+
+# ---------------------------------------------------------------- steps (each in its own process)
+
+
+def _task(suite: Path) -> tuple[Path, Path]:
+    task = next(p for p in (suite / "tasks").iterdir() if p.is_dir())
+    return task, suite / "targets" / f"{task.name}.json"
+
+
+def step_geometry(suite: Path) -> dict:
+    from aw.formats import read_targets, read_task
+    from aw.meshes import load_mesh
+    from aw_eval.equivalence import equivalence_groups
+    from aw_eval.geometry import TaskGeometry, part_divisor
+    from aw_eval.sampling import fps_jax, part_seed, surface_samples
+    from aw_eval.settings import ProtocolSettings
+
+    task_dir, targets_path = _task(suite)
+    st = ProtocolSettings()
+    out, t = {}, time.perf_counter()
+    task, targets = read_task(task_dir), read_targets(targets_path)
+    ids = [pid for pid in task.part_ids if not targets.parts[pid].distractor]
+    paths = {p.id: task_dir / p.mesh for p in task.parts}
+    meshes = [load_mesh(paths[pid]) for pid in ids]
+    out["load_s"], t = time.perf_counter() - t, time.perf_counter()
+    cands = np.stack([surface_samples(m, st.n_surface, part_seed(st.seed, i)) for i, m in enumerate(meshes)])
+    out["sampling_s"], t = time.perf_counter() - t, time.perf_counter()
+    idx = fps_jax(cands, st.n_fps)
+    clouds = np.take_along_axis(cands, idx[..., None], axis=1)
+    out["fps_s"], t = time.perf_counter() - t, time.perf_counter()
+    divisor = targets.eval_divisor or max(part_divisor(np.asarray(m.vertices)) for m in meshes)
+    out["divisor_s"], t = time.perf_counter() - t, time.perf_counter()
+    groups = equivalence_groups(clouds, divisor, st, show_progress=False)
+    out["groups_s"], t = time.perf_counter() - t, time.perf_counter()
+    poses = np.asarray([targets.parts[pid].pose for pid in ids])
+    geom = TaskGeometry(tuple(ids), clouds, poses, divisor, groups, st)
+    geom.index  # noqa: B018 (built on first use)
+    out["index_s"] = time.perf_counter() - t
+    out["total_s"] = sum(v for k, v in out.items() if k.endswith("_s"))
+    out["group_sizes"] = sorted((len(g) for g in groups), reverse=True)[:5]
+    out["n_groups"] = len(groups)
+    return out
+
+
+def step_render(suite: Path) -> dict:
+    from aw.formats import read_task
+    from aw.meshes import load_mesh
+    from aw.render import OffscreenRenderer
+
+    task_dir, _ = _task(suite)
+    t = time.perf_counter()
+    meshes = [load_mesh(task_dir / p.mesh) for p in read_task(task_dir).parts]
+    load = time.perf_counter() - t
+    t = time.perf_counter()
+    r = OffscreenRenderer(meshes)
+    start = time.perf_counter() - t
+    t = time.perf_counter()
+    r.render()
+    picture = time.perf_counter() - t
+    r.close()
+    return {"load_s": load, "start_s": start, "picture_s": picture}
+
+
+def step_score(suite: Path) -> dict:
+    from aw_eval.geometry import load_task_geometry
+    from aw_eval.scoring import score
+
+    task_dir, targets_path = _task(suite)
+    geom = load_task_geometry(task_dir, targets_path, cache_dir=suite / "cache")
+    t = time.perf_counter()
+    score(geom, np.tile([0.0, 0, 0, 1, 0, 0, 0], (geom.n_parts, 1)))  # the baked layout: identity poses
+    return {"score_s": time.perf_counter() - t}
+
+
+STEPS = {"geometry": step_geometry, "render": step_render, "score": step_score}
+
+
+def _in_process(name: str, suite: str) -> None:
+    out = STEPS[name](Path(suite))
+    out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(json.dumps(out))
+
+
+def _prepare(src: Path, suite: Path, protocol: str, limit: float) -> dict:
+    cmd = [sys.executable, "-m", "aw.cli.prepare", "folder", str(src.parent), "--out", str(suite), "--jobs", "1",
+           "--no-progress", "--protocol", protocol]
+    return _run(cmd, limit, parse=False)
+
+
+def _run(cmd: list[str], limit: float, parse: bool = True) -> dict:
+    t = time.perf_counter()
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    try:
+        done = subprocess.run(cmd, capture_output=True, text=True, timeout=limit)
+    except subprocess.TimeoutExpired:
+        return {"error": f"stopped after {limit:.0f} s"}
+    wall = time.perf_counter() - t
+    if done.returncode != 0:
+        return {"error": (done.stderr.strip().splitlines() or ["exit %d" % done.returncode])[-1]}
+    out = json.loads(done.stdout.strip().splitlines()[-1]) if parse else {}
+    out["wall_s"] = wall
+    if not parse:  # children's high-water mark: valid when it rose (each step is the largest so far or not)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+        out["peak_rss_mb"] = after / 1024 if after > before else None
+    out["warnings"] = [line for line in done.stderr.splitlines() if "Warning" in line]
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", required=True, help="folder for the generated objects, suites and parts_sweep.json")
+    ap.add_argument("--parts", default="2,10,20,50,100,200,500", help="part counts, comma-separated")
+    ap.add_argument("--kinds", default="distinct,identical,replicas", help=f"object kinds of {KINDS}, comma-separated")
+    ap.add_argument("--replicas-max", type=int, default=20, help="largest part count of the replicas kind (default 20)")
+    ap.add_argument("--official-max", type=int, default=500, help="largest part count prepared by --protocol official")
+    ap.add_argument("--steps", default="prepare,geometry,render,score,official", help="steps to run, comma-separated")
+    ap.add_argument("--limit-s", type=float, default=900.0, help="a step running longer is stopped (default 900)")
+    args = ap.parse_args()
+    out_dir = Path(args.out)
+    result_path = output_file(out_dir, "parts_sweep.json")
+    steps = args.steps.split(",")
+    rows = []
+    for kind in args.kinds.split(","):
+        for n in (int(v) for v in args.parts.split(",")):
+            if kind == "replicas" and n > args.replicas_max:
+                continue
+            src = make_object(out_dir / "objects" / f"{kind}{n:03d}", n, kind)
+            row = {"kind": kind, "parts": n}
+            suite = out_dir / "suites" / f"{kind}{n:03d}"
+            if "prepare" in steps or {"geometry", "render", "score"} & set(steps):
+                row["prepare"] = _prepare(src, suite, "native", args.limit_s)
+            for name in ("geometry", "render", "score"):
+                if name in steps and "error" not in row.get("prepare", {}):
+                    row[name] = _run([sys.executable, __file__, "_step", name, str(suite)], args.limit_s)
+            if "official" in steps and n <= args.official_max:
+                row["official"] = _prepare(src, out_dir / "suites" / f"{kind}{n:03d}-official", "official", args.limit_s)
+            row["load_average"] = os.getloadavg()[0]
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    meta = {"command": " ".join([Path(sys.executable).name, *sys.argv]), "cpus": os.cpu_count(),
+            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+    result_path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1) + "\n")
+    print(f"wrote {result_path}")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) == 4 and sys.argv[1] == "_step":
+        _in_process(sys.argv[2], sys.argv[3])
+    else:
+        main()
