@@ -319,3 +319,18 @@ def test_geometry_groups_equal_registering_every_pair(monkeypatch):
         assert n_fast < len(calls) - n_fast, name
         sizes |= {len(g) for g in fast}
     assert max(sizes) >= 5 and 1 in sizes
+
+
+def test_batched_farthest_point_samples_pick_the_single_version_indices():
+    from aw.prepare.official_protocol import farthest_point_sample, farthest_point_samples, stream
+
+    rng = np.random.default_rng(12)
+    clouds = rng.normal(size=(7, 300, 3)) * [1.0, 0.3, 0.1]
+    clouds[3, 150:] = clouds[3, :150]  # duplicates: ties among equal distances
+    clouds[5, :, 2] = 0.0  # flat
+    clouds[6] = np.round(clouds[6], 1)  # many exact ties
+    firsts = [int(stream(0, "d", "s", str(k), "fps").integers(300)) for k in range(7)]
+    single = np.stack([farthest_point_sample(c, 200, stream(0, "d", "s", str(k), "fps")) for k, c in enumerate(clouds)])
+    assert np.array_equal(farthest_point_samples(clouds, 200, firsts, chunk=3), single)
+    with pytest.raises(ValueError, match="count"):
+        farthest_point_samples(clouds, 301, firsts)
