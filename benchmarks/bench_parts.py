@@ -104,6 +104,7 @@ def step_geometry(suite: Path) -> dict:
     geom = TaskGeometry(tuple(ids), clouds, poses, divisor, groups, st)
     geom.index  # noqa: B018 (built on first use)
     out["index_s"] = time.perf_counter() - t
+    geom.save(suite / "geometry.npz")  # for the score step
     out["total_s"] = sum(v for k, v in out.items() if k.endswith("_s"))
     out["group_sizes"] = sorted((len(g) for g in groups), reverse=True)[:5]
     out["n_groups"] = len(groups)
@@ -130,46 +131,52 @@ def step_render(suite: Path) -> dict:
 
 
 def step_score(suite: Path) -> dict:
-    from aw_eval.geometry import load_task_geometry
+    from aw_eval.geometry import TaskGeometry
     from aw_eval.scoring import score
 
-    task_dir, targets_path = _task(suite)
-    geom = load_task_geometry(task_dir, targets_path, cache_dir=suite / "cache")
+    geom = TaskGeometry.load(suite / "geometry.npz")
     t = time.perf_counter()
     score(geom, np.tile([0.0, 0, 0, 1, 0, 0, 0], (geom.n_parts, 1)))  # the baked layout: identity poses
     return {"score_s": time.perf_counter() - t}
 
 
+def step_prepare(argv: list[str]) -> dict:
+    """``aw-prepare`` with ``argv``, in this process (``--jobs 1``)."""
+    from aw.cli.prepare import main as prepare
+
+    t = time.perf_counter()
+    code = prepare(argv)
+    if code:
+        raise SystemExit(f"aw-prepare exited with {code}")
+    return {"prepare_s": time.perf_counter() - t}
+
+
 STEPS = {"geometry": step_geometry, "render": step_render, "score": step_score}
 
 
-def _in_process(name: str, suite: str) -> None:
-    out = STEPS[name](Path(suite))
+def _in_process(name: str, arg: str) -> None:
+    out = step_prepare(json.loads(arg)) if name == "prepare" else STEPS[name](Path(arg))
     out["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(json.dumps(out))
 
 
 def _prepare(src: Path, suite: Path, protocol: str, limit: float) -> dict:
-    cmd = [sys.executable, "-m", "aw.cli.prepare", "folder", str(src.parent), "--out", str(suite), "--jobs", "1",
-           "--no-progress", "--protocol", protocol]
-    return _run(cmd, limit, parse=False)
+    argv = ["folder", str(src.parent), "--out", str(suite), "--jobs", "1", "--no-progress", "--protocol", protocol]
+    return _run([sys.executable, __file__, "_step", "prepare", json.dumps(argv)], limit)
 
 
-def _run(cmd: list[str], limit: float, parse: bool = True) -> dict:
+def _run(cmd: list[str], limit: float) -> dict:
     t = time.perf_counter()
-    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     try:
         done = subprocess.run(cmd, capture_output=True, text=True, timeout=limit)
-    except subprocess.TimeoutExpired:
-        return {"error": f"stopped after {limit:.0f} s"}
+    except subprocess.TimeoutExpired as exc:
+        err = exc.stderr.decode() if isinstance(exc.stderr, bytes) else (exc.stderr or "")
+        return {"error": f"stopped after {limit:.0f} s", "warnings": [x for x in err.splitlines() if "Warning" in x]}
     wall = time.perf_counter() - t
     if done.returncode != 0:
         return {"error": (done.stderr.strip().splitlines() or ["exit %d" % done.returncode])[-1]}
-    out = json.loads(done.stdout.strip().splitlines()[-1]) if parse else {}
+    out = json.loads(done.stdout.strip().splitlines()[-1])
     out["wall_s"] = wall
-    if not parse:  # children's high-water mark: valid when it rose (each step is the largest so far or not)
-        after = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-        out["peak_rss_mb"] = after / 1024 if after > before else None
     out["warnings"] = [line for line in done.stderr.splitlines() if "Warning" in line]
     return out
 
@@ -198,6 +205,8 @@ def main() -> None:
             if "prepare" in steps or {"geometry", "render", "score"} & set(steps):
                 row["prepare"] = _prepare(src, suite, "native", args.limit_s)
             for name in ("geometry", "render", "score"):
+                if name == "score" and "error" in row.get("geometry", {}):
+                    continue
                 if name in steps and "error" not in row.get("prepare", {}):
                     row[name] = _run([sys.executable, __file__, "_step", name, str(suite)], args.limit_s)
             if "official" in steps and n <= args.official_max:
