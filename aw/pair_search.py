@@ -10,8 +10,10 @@ the order edges are found in, so the search here registers, in order of increasi
 - only a candidate whose parts are not connected yet: its edge could not change the components.
 
 So the components equal those of testing every pair. Registrations are timed as they go: when
-the ones left would take long on this machine, a :class:`LongWorkWarning` says so with the
-estimate, and a progress display (:func:`aw.progress.progress`) shows them.
+the ones left would take long on this machine (their mean time, the first one left out as it
+may load compiled code, times the candidates left that are not yet connected: an upper bound on
+the registrations to come), a :class:`LongWorkWarning` says so with the estimate, and a
+progress display (:func:`aw.progress.progress`) shows them.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from aw.shape_bounds import SAFETY
 __all__ = ["LongWorkWarning", "candidate_pairs", "components", "WARN_AFTER_S"]
 
 WARN_AFTER_S = 300.0  # an estimate above this (seconds) is worth a warning
-_SAMPLE_S = 2.0  # time the first registrations this long before estimating
+_SAMPLE_S = 10.0  # first estimate after this long (then after twice as long, and so on)
 _BAR_FROM = 20  # fewer candidates than this need no progress display
 
 
@@ -62,24 +64,29 @@ def components(n: int, candidates: np.ndarray, is_edge: Callable[[int, int], boo
         return i
 
     total = len(candidates)
+    pairs = candidates.tolist()
     bar = progress(total, what, unit="pair", enabled=show_progress and total >= _BAR_FROM, leave=False)
     started = time.monotonic()
-    registered, warned = 0, False
+    check_at, warned = _SAMPLE_S, False
+    timed, timed_s = 0, 0.0  # registrations after the first (which may load compiled code) and their time
     with bar:
-        for k, (i, j) in enumerate(candidates.tolist()):
+        for k, (i, j) in enumerate(pairs):
             a, b = root(i), root(j)
             if a != b:
-                registered += 1
+                t = time.monotonic()
                 if is_edge(i, j):
                     parent[max(a, b)] = min(a, b)
+                if k:
+                    timed, timed_s = timed + 1, timed_s + time.monotonic() - t
             bar.update(1)
-            spent = time.monotonic() - started
-            if not warned and registered and spent >= _SAMPLE_S:
-                warned = True
-                estimate = spent / registered * (total - k - 1)
+            if not warned and timed and time.monotonic() - started >= check_at:
+                check_at *= 2  # estimates at 10, 20, 40 ... s: the count below walks the candidates left
+                left = sum(1 for i2, j2 in pairs[k + 1 :] if root(i2) != root(j2))
+                estimate = timed_s / timed * left
                 if estimate > WARN_AFTER_S:
-                    warnings.warn(f"{what}: {total - k - 1} candidate pairs left to register, up to about "
-                                  f"{estimate / 60:.0f} min on this machine ({spent / registered:.2f} s a pair)",
+                    warned = True
+                    warnings.warn(f"{what}: up to {left} of {total} candidate pairs left to register, about "
+                                  f"{estimate / 60:.0f} min on this machine ({timed_s / timed:.2f} s a pair)",
                                   LongWorkWarning, stacklevel=2)
     groups: dict[int, list[int]] = {}
     for i in range(n):
