@@ -198,6 +198,7 @@ def main() -> None:
     steps = args.steps.split(",")
     rows = []
     for kind in args.kinds.split(","):
+        stopped: set[str] = set()  # a step stopped at some part count is not run at larger ones
         for n in (int(v) for v in args.parts.split(",")):
             if kind == "replicas" and n > args.replicas_max:
                 continue
@@ -207,12 +208,17 @@ def main() -> None:
             if "prepare" in steps or {"geometry", "render", "score"} & set(steps):
                 row["prepare"] = _prepare(src, suite, "native", args.limit_s)
             for name in ("geometry", "render", "score"):
-                if name == "score" and "error" in row.get("geometry", {}):
-                    continue
-                if name in steps and "error" not in row.get("prepare", {}):
+                if name in stopped or (name == "score" and "error" in row.get("geometry", {})):
+                    row[name] = {"error": "not run (stopped at fewer parts)"} if name in stopped else row.get(name)
+                elif name in steps and "error" not in row.get("prepare", {}):
                     row[name] = _run([sys.executable, __file__, "_step", name, str(suite)], args.limit_s)
             if "official" in steps and n <= args.official_max:
-                row["official"] = _prepare(src, out_dir / "suites" / f"{kind}{n:03d}-official", "official", args.limit_s)
+                if "official" in stopped:
+                    row["official"] = {"error": "not run (stopped at fewer parts)"}
+                else:
+                    row["official"] = _prepare(src, out_dir / "suites" / f"{kind}{n:03d}-official", "official", args.limit_s)
+            row = {k: v for k, v in row.items() if v is not None}
+            stopped |= {k for k, v in row.items() if isinstance(v, dict) and str(v.get("error", "")).startswith("stopped")}
             row["load_average"] = os.getloadavg()[0]
             rows.append(row)
             print(json.dumps(row), flush=True)

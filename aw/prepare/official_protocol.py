@@ -28,6 +28,7 @@ import hashlib
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -196,26 +197,45 @@ def farthest_point_sample(points: np.ndarray, count: int, rng: np.random.Generat
     return chosen
 
 
-def farthest_point_samples(points: np.ndarray, count: int, firsts: Sequence[int], chunk: int = 64) -> np.ndarray:
+@lru_cache(maxsize=1)
+def _einsum_sums_x_z_then_y() -> bool:
+    """Whether this NumPy's ``einsum("ij,ij->i", d, d)`` rounds as ``(x x + z z) + y y`` (its
+    two-lane loop does here), checked on spread-out random rows, once per process."""
+    d = np.random.default_rng(0).normal(size=(4096, 3)) * [1.0, 30.0, 0.01] + 7.0
+    return bool(np.array_equal(np.einsum("ij,ij->i", d, d), (d[:, 0] * d[:, 0] + d[:, 2] * d[:, 2]) + d[:, 1] * d[:, 1]))
+
+
+def farthest_point_samples(points: np.ndarray, count: int, firsts: Sequence[int], chunk: int = 16) -> np.ndarray:
     """:func:`farthest_point_sample` of many clouds ``points (P, n, 3)`` at once, from given first
     indices ``firsts (P,)`` (each drawn from its own part's stream): indices ``(P, count)``, the same
-    ones. One vectorized step serves ``chunk`` clouds, so a 500-part object pays the Python
-    overhead of 1000 steps per chunk instead of per part. A point once chosen keeps ``-inf``
-    (``minimum`` cannot raise it), as the mask of the single version does."""
+    ones (the tests compare them index for index). Each step serves ``chunk`` clouds, with the
+    coordinates in separate rows and the squared distance rounded as the single version's
+    ``einsum`` rounds it (:func:`_einsum_sums_x_z_then_y`; else that ``einsum``, batched): about
+    3.5x less CPU time than one cloud at a time. A point once chosen keeps ``-inf`` (``minimum``
+    cannot raise it), as the mask there does."""
     points = np.asarray(points, dtype=np.float64)
     n_clouds, n = points.shape[:2]
     if not 0 < count <= n:
         raise ValueError(f"farthest-point sampling needs 0 < count <= {n}, got {count}")
+    rowwise = _einsum_sums_x_z_then_y()
     chosen = np.empty((n_clouds, count), dtype=np.int64)
     for lo in range(0, n_clouds, chunk):
-        pts = points[lo : lo + chunk]
-        rows = np.arange(len(pts))
-        nearest = np.full(pts.shape[:2], np.inf)
+        block = points[lo : lo + chunk]
+        xs, ys, zs = (np.ascontiguousarray(block[..., c]) for c in range(3))
+        rows = np.arange(len(block))
+        nearest = np.full(block.shape[:2], np.inf)
         current = np.asarray(firsts[lo : lo + chunk], dtype=np.int64)
         for k in range(count):
             chosen[lo : lo + chunk, k] = current
-            d = pts - pts[rows, current][:, None, :]
-            nearest = np.minimum(nearest, np.einsum("pij,pij->pi", d, d))
+            if rowwise:
+                dx = xs - xs[rows, current][:, None]
+                dy = ys - ys[rows, current][:, None]
+                dz = zs - zs[rows, current][:, None]
+                squared = dx * dx + dz * dz + dy * dy
+            else:
+                d = block - block[rows, current][:, None, :]
+                squared = np.einsum("pij,pij->pi", d, d)
+            np.minimum(nearest, squared, out=nearest)
             nearest[rows, current] = -np.inf
             current = np.argmax(nearest, axis=1)
     return chosen

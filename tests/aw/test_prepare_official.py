@@ -321,16 +321,35 @@ def test_geometry_groups_equal_registering_every_pair(monkeypatch):
     assert max(sizes) >= 5 and 1 in sizes
 
 
-def test_batched_farthest_point_samples_pick_the_single_version_indices():
+class _Fixed:
+    """A stand-in stream whose one ``integers`` draw is given (the batched version takes the draws)."""
+
+    def __init__(self, value):
+        self.value = int(value)
+
+    def integers(self, n):
+        return self.value
+
+
+def test_batched_farthest_point_samples_pick_the_single_version_indices(monkeypatch):
+    from aw.prepare import official_protocol
     from aw.prepare.official_protocol import farthest_point_sample, farthest_point_samples, stream
 
     rng = np.random.default_rng(12)
-    clouds = rng.normal(size=(7, 300, 3)) * [1.0, 0.3, 0.1]
+    clouds = rng.normal(size=(7, 300, 3)) * [1.0, 0.3, 0.1] + rng.normal(size=3) * 100  # far off: rounding
     clouds[3, 150:] = clouds[3, :150]  # duplicates: ties among equal distances
     clouds[5, :, 2] = 0.0  # flat
     clouds[6] = np.round(clouds[6], 1)  # many exact ties
     firsts = [int(stream(0, "d", "s", str(k), "fps").integers(300)) for k in range(7)]
     single = np.stack([farthest_point_sample(c, 200, stream(0, "d", "s", str(k), "fps")) for k, c in enumerate(clouds)])
     assert np.array_equal(farthest_point_samples(clouds, 200, firsts, chunk=3), single)
+    first_single = single
+    many = rng.uniform(-1, 1, size=(40, 4096, 3)) * rng.uniform(0.01, 10, size=(40, 1, 3))
+    starts = rng.integers(4096, size=40)
+    single = [farthest_point_sample(c, 1000, _Fixed(s)) for c, s in zip(many, starts)]
+    assert np.array_equal(farthest_point_samples(many, 1000, starts), np.stack(single))
+    # the batched einsum, where NumPy rounds its sum in another order, picks them too
+    monkeypatch.setattr(official_protocol, "_einsum_sums_x_z_then_y", lambda: False)
+    assert np.array_equal(farthest_point_samples(clouds, 200, firsts, chunk=3), first_single)
     with pytest.raises(ValueError, match="count"):
         farthest_point_samples(clouds, 301, firsts)
