@@ -2,6 +2,7 @@
 
     nice .venv/bin/python benchmarks/bench_parts.py --out /tmp/parts [--parts 2,10,20,50,100,200,500]
         [--kinds distinct,identical,replicas] [--replicas-max 20] [--official-max 500] [--limit-s 900]
+    .venv/bin/python benchmarks/bench_parts.py --table benchmarks/results/parts_sweep.json
 
 Objects are generated as meshes, one folder per object (``aw-prepare folder`` layout), in a grid
 so that no two parts touch:
@@ -183,7 +184,36 @@ def _run(cmd: list[str], limit: float) -> dict:
     return out
 
 
+def _cell(step: dict, key: str) -> str:
+    if not step:
+        return "-"
+    if "error" in step:
+        return "stopped" if step["error"].startswith("stopped") else ("not run" if "not run" in step["error"] else "error")
+    value = step.get(key)
+    return "-" if value is None else (f"{value:.1f}" if value < 100 else f"{value:.0f}")
+
+
+def table(path: Path) -> str:
+    """A Markdown table of a ``parts_sweep.json``: seconds per step and the geometry's peak memory."""
+    rows = json.loads(Path(path).read_text())["rows"]
+    head = ["kind", "parts", "prepare s", "sampling s", "FPS s", "groups s", "search structures s", "geometry peak MB",
+            "render start + picture s", "score s", "official prepare s", "groups (largest)"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in rows:
+        g, rd, sc, of, pr = (r.get(k, {}) for k in ("geometry", "render", "score", "official", "prepare"))
+        render = _cell(rd, "start_s") if not rd or "error" in rd else f"{rd['start_s']:.1f} + {rd['picture_s']:.1f}"
+        groups = "-" if not g or "error" in g else f"{g['n_groups']} ({g['group_sizes'][0]})"
+        cells = [r["kind"], str(r["parts"]), _cell(pr, "prepare_s"), _cell(g, "sampling_s"), _cell(g, "fps_s"),
+                 _cell(g, "groups_s"), _cell(g, "index_s"), _cell(g, "peak_rss_mb"), render, _cell(sc, "score_s"),
+                 _cell(of, "prepare_s"), groups]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main() -> None:
+    if len(sys.argv) == 3 and sys.argv[1] == "--table":
+        print(table(Path(sys.argv[2])))
+        return
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True, help="folder for the generated objects, suites and parts_sweep.json")
     ap.add_argument("--parts", default="2,10,20,50,100,200,500", help="part counts, comma-separated")
