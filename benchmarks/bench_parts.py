@@ -3,6 +3,7 @@
     nice .venv/bin/python benchmarks/bench_parts.py --out /tmp/parts [--parts 2,10,20,50,100,200,500]
         [--kinds distinct,identical,replicas] [--replicas-max 20] [--official-max 500] [--limit-s 900]
     .venv/bin/python benchmarks/bench_parts.py --table benchmarks/results/parts_sweep.json
+    .venv/bin/python benchmarks/bench_parts.py --candidates distinct 100,500
 
 Objects are generated as meshes, one folder per object (``aw-prepare folder`` layout), in a grid
 so that no two parts touch:
@@ -210,9 +211,34 @@ def table(path: Path) -> str:
     return "\n".join(lines)
 
 
+def candidates(kind: str, n: int) -> tuple[int, int]:
+    """``(candidate pairs, pairs)`` of the equivalence search on an object of ``kind`` (the boxes
+    sampled directly, in their own frames: the groups do not depend on the layout)."""
+    import trimesh
+
+    from aw.pair_search import candidate_pairs
+    from aw.shape_bounds import cloud_bounds, lower_bounds
+    from aw_eval.equivalence import part_frames
+    from aw_eval.geometry import part_divisor
+    from aw_eval.sampling import part_clouds
+    from aw_eval.settings import ProtocolSettings
+
+    meshes = [trimesh.creation.box(extents=e) for e in part_extents(n, kind)]
+    clouds = part_clouds(meshes, ProtocolSettings())
+    divisor = max(part_divisor(np.asarray(m.vertices)) for m in meshes)
+    found = candidate_pairs(lower_bounds(cloud_bounds(np.stack(part_frames(clouds, divisor)))), ProtocolSettings().equiv_cd)
+    return len(found), n * (n - 1) // 2
+
+
 def main() -> None:
     if len(sys.argv) == 3 and sys.argv[1] == "--table":
         print(table(Path(sys.argv[2])))
+        return
+    if len(sys.argv) == 4 and sys.argv[1] == "--candidates":
+        for n in (int(v) for v in sys.argv[3].split(",")):
+            t = time.perf_counter()
+            found, pairs = candidates(sys.argv[2], n)
+            print(f"{sys.argv[2]} {n} parts: {found} candidate pairs of {pairs} ({time.perf_counter() - t:.1f} s with sampling)")
         return
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True, help="folder for the generated objects, suites and parts_sweep.json")
