@@ -10,10 +10,10 @@ the order edges are found in, so the search here registers, in order of increasi
 - only a candidate whose parts are not connected yet: its edge could not change the components.
 
 So the components equal those of testing every pair. Registrations are timed as they go: when
-the ones left would take long on this machine (their mean time, the first one left out as it
-may load compiled code, times the candidates left that are not yet connected: an upper bound on
-the registrations to come), a :class:`LongWorkWarning` says so with the estimate, and a
-progress display (:func:`aw.progress.progress`) shows them.
+the ones left would take long on this machine (the lower of: their mean time, the first one
+left out as it may load compiled code, times the candidates left that are not yet connected;
+the time so far per candidate passed, times the candidates left), a :class:`LongWorkWarning`
+says so with the estimate, and a progress display (:func:`aw.progress.progress`) shows them.
 """
 
 from __future__ import annotations
@@ -82,7 +82,10 @@ def components(n: int, candidates: np.ndarray, is_edge: Callable[[int, int], boo
             if not warned and timed and time.monotonic() - started >= check_at:
                 check_at *= 2  # estimates at 10, 20, 40 ... s: the count below walks the candidates left
                 left = sum(1 for i2, j2 in pairs[k + 1 :] if root(i2) != root(j2))
-                estimate = timed_s / timed * left
+                # the lower of: each pair left not yet connected registered; the pace so far
+                # (pairs joined meanwhile are skipped: a group of many identical parts forms fast)
+                pace = (time.monotonic() - started) / (k + 1) * (total - k - 1)
+                estimate = min(timed_s / timed * left, pace)
                 if estimate > WARN_AFTER_S:
                     warned = True
                     warnings.warn(f"{what}: up to {left} of {total} candidate pairs left to register, about "
