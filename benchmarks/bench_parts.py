@@ -4,6 +4,7 @@
         [--kinds distinct,identical,replicas] [--replicas-max 20] [--official-max 500] [--limit-s 900]
     .venv/bin/python benchmarks/bench_parts.py --table benchmarks/results/parts_sweep.json
     .venv/bin/python benchmarks/bench_parts.py --candidates distinct 100,500
+    PYTHONPATH=CHECKOUT .venv/bin/python benchmarks/bench_parts.py --time-groups OUT/suites/distinct050/geometry.npz
 
 Objects are generated as meshes, one folder per object (``aw-prepare folder`` layout), in a grid
 so that no two parts touch:
@@ -230,7 +231,25 @@ def candidates(kind: str, n: int) -> tuple[int, int]:
     return len(found), n * (n - 1) // 2
 
 
+def time_groups(path: Path) -> dict:
+    """CPU and wall seconds of ``aw_eval.equivalence.equivalence_groups`` on the clouds a geometry
+    step saved, with whichever checkout ``PYTHONPATH`` names (older ones included)."""
+    import aw_eval.equivalence as eq
+
+    with np.load(path) as z:
+        clouds, divisor = z["clouds"], float(z["divisor"])
+    quiet = {"show_progress": False} if "show_progress" in eq.equivalence_groups.__code__.co_varnames else {}
+    eq.equivalence_groups(clouds[:2], divisor, **quiet)  # compiled kernels loaded before the clock starts
+    cpu, wall = time.process_time(), time.perf_counter()
+    groups = eq.equivalence_groups(clouds, divisor, **quiet)
+    return {"module": eq.__file__, "cpu_s": time.process_time() - cpu, "wall_s": time.perf_counter() - wall,
+            "groups": groups}
+
+
 def main() -> None:
+    if len(sys.argv) == 3 and sys.argv[1] == "--time-groups":
+        print(json.dumps(time_groups(Path(sys.argv[2]))))
+        return
     if len(sys.argv) == 3 and sys.argv[1] == "--table":
         print(table(Path(sys.argv[2])))
         return
