@@ -47,7 +47,8 @@ import numpy as np
 __all__ = ["CloudBounds", "cloud_bounds", "lower_bounds", "SAFETY"]
 
 # Relative and absolute slack on a comparison with a threshold, far above the rounding of the
-# sums here (~1e-14), so that rounding can never rule out a true edge.
+# sums here (~1e-14) and of an ICP state's rotation (orthonormal to ~1e-15, so its distances are
+# the rigid ones to that precision): rounding can never rule out a true edge.
 SAFETY = (1e-9, 1e-12)
 
 
