@@ -29,6 +29,7 @@ import hashlib
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -48,6 +49,7 @@ __all__ = [
     "triangulate",
     "sample_surface",
     "farthest_point_sample",
+    "farthest_point_samples",
     "place_parts",
     "evaluation_scale",
     "fracture_divisor",
@@ -217,11 +219,59 @@ def farthest_point_sample(points: np.ndarray, count: int, rng: np.random.Generat
     return chosen
 
 
+@lru_cache(maxsize=1)
+def _einsum_sums_x_z_then_y() -> bool:
+    """Whether this NumPy's ``einsum("ij,ij->i", d, d)`` rounds as ``(x x + z z) + y y`` (its
+    two-lane loop does here), checked on spread-out random rows, once per process."""
+    d = np.random.default_rng(0).normal(size=(4096, 3)) * [1.0, 30.0, 0.01] + 7.0
+    return bool(np.array_equal(np.einsum("ij,ij->i", d, d), (d[:, 0] * d[:, 0] + d[:, 2] * d[:, 2]) + d[:, 1] * d[:, 1]))
+
+
+def farthest_point_samples(points: np.ndarray, count: int, firsts: Sequence[int], chunk: int = 16) -> np.ndarray:
+    """:func:`farthest_point_sample` of many clouds ``points (P, n, 3)`` at once, from given first
+    indices ``firsts (P,)`` (each drawn from its own part's stream): indices ``(P, count)``, the same
+    ones (the tests compare them index for index). Each step serves ``chunk`` clouds, with the
+    coordinates in separate rows and the squared distance rounded as the single version's
+    ``einsum`` rounds it (:func:`_einsum_sums_x_z_then_y`; else that ``einsum``, batched): about
+    3.5x less CPU time than one cloud at a time. A point once chosen keeps ``-inf`` (``minimum``
+    cannot raise it), as the mask there does."""
+    points = np.asarray(points, dtype=np.float64)
+    n_clouds, n = points.shape[:2]
+    if not 0 < count <= n:
+        raise ValueError(f"farthest-point sampling needs 0 < count <= {n}, got {count}")
+    rowwise = _einsum_sums_x_z_then_y()
+    chosen = np.empty((n_clouds, count), dtype=np.int64)
+    for lo in range(0, n_clouds, chunk):
+        block = points[lo : lo + chunk]
+        xs, ys, zs = (np.ascontiguousarray(block[..., c]) for c in range(3))
+        rows = np.arange(len(block))
+        nearest = np.full(block.shape[:2], np.inf)
+        current = np.asarray(firsts[lo : lo + chunk], dtype=np.int64)
+        for k in range(count):
+            chosen[lo : lo + chunk, k] = current
+            if rowwise:
+                dx = xs - xs[rows, current][:, None]
+                dy = ys - ys[rows, current][:, None]
+                dz = zs - zs[rows, current][:, None]
+                squared = dx * dx + dz * dz + dy * dy
+            else:
+                d = block - block[rows, current][:, None, :]
+                squared = np.einsum("pij,pij->pi", d, d)
+            np.minimum(nearest, squared, out=nearest)
+            nearest[rows, current] = -np.inf
+            current = np.argmax(nearest, axis=1)
+    return chosen
+
+
 # ------------------------------------------------------------------ layout and scale
 
 
-def _apart(a: np.ndarray, b: np.ndarray, gap: float) -> bool:
-    return bool(np.any(a[1] + gap <= b[0]) or np.any(b[1] + gap <= a[0]))
+def _apart_from_all(box: np.ndarray, others: np.ndarray, gap: float) -> bool:
+    """Whether the XY box ``box (2, 2)`` (``[min, max]``) keeps ``gap`` from every box of ``others
+    (k, 2, 2)`` along X or Y; one NumPy call, since placing P parts makes P^2 comparisons."""
+    if not len(others):
+        return True
+    return bool(np.all(np.any(box[1] + gap <= others[:, 0], axis=1) | np.any(others[:, 1] + gap <= box[0], axis=1)))
 
 
 def place_parts(local: dict[str, np.ndarray], dataset: str, sample_id: str, seed: int, gap: float = MIN_GAP,
@@ -243,14 +293,14 @@ def place_parts(local: dict[str, np.ndarray], dataset: str, sample_id: str, seed
     side = (widest + gap) * np.ceil(np.sqrt(len(ids)))
     where: dict[str, np.ndarray] = {}
     for _ in range(expansions):
-        placed, where = [], {}
+        placed, where = np.empty((len(ids), 2, 2)), {}
         for pid in order:
             for _try in range(attempts):
                 xy = rng.uniform(-side / 2, side / 2, size=2)
                 box = boxes[pid] + xy
-                if all(_apart(box, other, gap) for other in placed):
+                if _apart_from_all(box, placed[: len(where)], gap):
+                    placed[len(where)] = box
                     where[pid] = xy
-                    placed.append(box)
                     break
             else:
                 break
@@ -265,9 +315,9 @@ def place_parts(local: dict[str, np.ndarray], dataset: str, sample_id: str, seed
     final = [boxes[pid] + where[pid] for pid in ids]
     middle = (np.min([b[0] for b in final], axis=0) + np.max([b[1] for b in final], axis=0)) / 2
     poses = {pid: pose_of(np.r_[where[pid] - middle, -yawed[pid][:, 2].min()], turns[pid]) for pid in ids}
-    shifted = [boxes[pid] + poses[pid][:2] for pid in ids]
+    shifted = np.stack([boxes[pid] + poses[pid][:2] for pid in ids])
     for i, box in enumerate(shifted):
-        if any(not _apart(box, other, gap - 1e-12) for other in shifted[:i]):
+        if not _apart_from_all(box, shifted[:i], gap - 1e-12):
             raise ValueError("the initial layout failed its final non-overlap check")
     return poses
 
@@ -362,7 +412,7 @@ def prepare_official(sample: OfficialSample, seed: int = 0, gap: float = MIN_GAP
     scale = 2 * max(float(np.linalg.norm(p.vertices - p.vertices.mean(0), axis=1).max()) for p in parts)
     to_task = _normalization(np.concatenate(assembled), np.asarray(sample.source_to_z_up, dtype=np.float64), scale)
 
-    local, clouds, targets = {}, {}, {}
+    local, candidates, firsts, targets = {}, {}, {}, {}
     for p, q in zip(parts, poses):
         center, basis = pca_frame(p.vertices)
         local[p.part_id] = (p.vertices - center) @ basis / scale
@@ -370,12 +420,14 @@ def prepare_official(sample: OfficialSample, seed: int = 0, gap: float = MIN_GAP
         target_basis = sample.source_to_z_up @ rotation_of(q[3:]) @ basis
         where = (sample.dataset, sample.sample_id, p.part_id)
         try:
-            candidates = sample_surface(local[p.part_id], p.faces, SURFACE_POINTS, stream(seed, *where, "surface"))
-            picked = farthest_point_sample(candidates, FPS_POINTS, stream(seed, *where, "fps"))
+            candidates[p.part_id] = sample_surface(local[p.part_id], p.faces, SURFACE_POINTS, stream(seed, *where, "surface"))
         except ValueError as exc:
             raise ValueError(f"{sample.dataset}/{sample.sample_id}/{p.part_id}: {exc}") from None
-        clouds[p.part_id] = candidates[picked].copy()
+        firsts[p.part_id] = int(stream(seed, *where, "fps").integers(SURFACE_POINTS))  # farthest_point_sample's draw
         targets[p.part_id] = pose_of(target_center, target_basis)
+    stacked = np.stack([candidates[pid] for pid in ids])
+    picked = farthest_point_samples(stacked, FPS_POINTS, [firsts[pid] for pid in ids])
+    clouds = {pid: stacked[k][picked[k]].copy() for k, pid in enumerate(ids)}
 
     initial = place_parts(local, sample.dataset, sample.sample_id, seed, gap)
     baked = {}

@@ -6,6 +6,11 @@ Each part's cloud is put in its mesh's PCA frame and divided by the scale diviso
 ``(i, j)``, ``j < i`` in sorted id order, is registered ``i -> j`` by symmetric ICP from the 24
 proper PCA axis mappings; an edge joins them when the best squared Chamfer distance is at most
 ``1e-4``; the groups are the connected components, ordered by their lowest index.
+
+The groups are found without registering every pair (:func:`aw.pair_search.components`): a pair
+whose proven Chamfer lower bound (:mod:`aw.shape_bounds`) exceeds the threshold cannot be an
+edge, and a pair already connected cannot change the components. :func:`geometry_groups_all_pairs`
+registers every pair and is kept for the tests.
 """
 
 from __future__ import annotations
@@ -15,9 +20,11 @@ from itertools import permutations, product
 import numpy as np
 from scipy.spatial import cKDTree
 
+from aw.pair_search import candidate_pairs, components
 from aw.prepare.official_frame import pca_frame
+from aw.shape_bounds import cloud_bounds, lower_bounds
 
-__all__ = ["THRESHOLD", "MAX_ITERATIONS", "IMPROVEMENT_TOLERANCE", "register", "geometry_groups"]
+__all__ = ["THRESHOLD", "MAX_ITERATIONS", "IMPROVEMENT_TOLERANCE", "register", "geometry_groups", "geometry_groups_all_pairs"]
 
 THRESHOLD = 1e-4
 MAX_ITERATIONS = 100
@@ -69,14 +76,36 @@ def register(moving: np.ndarray, fixed: np.ndarray, enough: float = -np.inf) -> 
     return best
 
 
-def geometry_groups(part_ids: list[str], points: np.ndarray, vertices: list[np.ndarray], divisor: float,
-                    threshold: float = THRESHOLD) -> list[list[str]]:
-    """Groups of interchangeable parts: ``part_ids`` sorted, ``points (P, n, 3)`` and ``vertices``
-    (each part's mesh, ``(n_i, 3)``) in the same frame, ``divisor`` the scale divisor."""
+def _part_clouds(points: np.ndarray, vertices: list[np.ndarray], divisor: float) -> list[np.ndarray]:
     clouds = []
     for cloud, v in zip(points, vertices):
         center, basis = pca_frame(v)
         clouds.append((cloud - center) @ basis / divisor)
+    return clouds
+
+
+def geometry_groups(part_ids: list[str], points: np.ndarray, vertices: list[np.ndarray], divisor: float,
+                    threshold: float = THRESHOLD, show_progress: bool = False) -> list[list[str]]:
+    """Groups of interchangeable parts: ``part_ids`` sorted, ``points (P, n, 3)`` and ``vertices``
+    (each part's mesh, ``(n_i, 3)``) in the same frame, ``divisor`` the scale divisor.
+    ``show_progress``: a progress display when many pairs need registering."""
+    clouds = _part_clouds(points, vertices, divisor)
+    if not clouds:
+        return []
+    candidates = candidate_pairs(lower_bounds(cloud_bounds(np.stack(clouds))), threshold)
+
+    def is_edge(j: int, i: int) -> bool:  # the official order: the later part onto the earlier
+        return register(clouds[i], clouds[j], enough=threshold) <= threshold
+
+    found = components(len(part_ids), candidates, is_edge, what=f"geometry groups of {len(part_ids)} parts",
+                       show_progress=show_progress)
+    return [[part_ids[k] for k in g] for g in found]
+
+
+def geometry_groups_all_pairs(part_ids: list[str], points: np.ndarray, vertices: list[np.ndarray], divisor: float,
+                              threshold: float = THRESHOLD) -> list[list[str]]:
+    """:func:`geometry_groups` by registering every pair ``(i, j)``, ``j < i``, in full."""
+    clouds = _part_clouds(points, vertices, divisor)
     parent = list(range(len(part_ids)))
 
     def root(i: int) -> int:
@@ -84,12 +113,10 @@ def geometry_groups(part_ids: list[str], points: np.ndarray, vertices: list[np.n
             i = parent[i]
         return i
 
-    # Components do not depend on the order edges are found in, so a pair already connected is
-    # not registered, and a pair's registration stops at its first start within the threshold.
     for i in range(len(part_ids)):
         for j in range(i):
-            a, b = root(i), root(j)
-            if a != b and register(clouds[i], clouds[j], enough=threshold) <= threshold:
+            if register(clouds[i], clouds[j]) <= threshold:
+                a, b = root(i), root(j)
                 parent[max(a, b)] = min(a, b)
     members: dict[int, list[str]] = {}
     for i, pid in enumerate(part_ids):

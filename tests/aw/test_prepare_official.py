@@ -335,3 +335,79 @@ def test_a_pose_needs_seven_finite_numbers_and_a_nonzero_quaternion():
         bad = OfficialSample(DATASET, "s8", (OfficialPart("seat", v, faces, pose),))
         with pytest.raises(ValueError, match=f"{DATASET}/s8: a pose.*{message}"):
             prepare_official(bad, groups=False)
+
+
+def _placed_boxes(extents, n_points, seed):
+    """Official-style inputs: points ``(P, n, 3)`` and mesh vertices of turned, spread-out boxes."""
+    import trimesh
+
+    rng = np.random.default_rng(seed)
+    points, verts = [], []
+    for k, e in enumerate(extents):
+        box = trimesh.creation.box(extents=e)
+        pts, _ = trimesh.sample.sample_surface(box, n_points, seed=100 + k)
+        turn = Rotation.random(random_state=rng).as_matrix()
+        points.append(np.asarray(pts) @ turn.T + [2.0 * k, 0, 0])
+        verts.append(np.asarray(box.vertices) @ turn.T + [2.0 * k, 0, 0])
+    return np.stack(points), verts
+
+
+def test_geometry_groups_equal_registering_every_pair(monkeypatch):
+    import aw.prepare.official_similarity as sim
+
+    rng = np.random.default_rng(8)
+    objects = {
+        "pegs": [(3.0, 3.0, 0.05)] + [(0.1, 0.1, 0.3)] * 9,  # many identical small parts
+        "near": [(4.0, 4.0, 0.05), (0.6, 0.2, 0.1), (0.63, 0.2, 0.1), (0.66, 0.21, 0.1), (0.7, 0.2, 0.1),
+                 (0.6, 0.2, 0.14), (0.75, 0.25, 0.1)],  # pairs on both sides of 1e-4
+        "distinct": [tuple(sorted(rng.uniform(0.05, 1.0, 3), reverse=True)) for _ in range(8)],
+    }
+    calls = []
+    real = sim.register
+    monkeypatch.setattr(sim, "register", lambda *a, **k: calls.append(1) or real(*a, **k))
+    sizes = set()
+    for name, extents in objects.items():
+        points, verts = _placed_boxes(extents, 64, seed=len(name))
+        ids = [f"p{k:02d}" for k in range(len(extents))]
+        divisor = max(float(np.linalg.norm(e)) for e in extents)
+        calls.clear()
+        fast = sim.geometry_groups(ids, points, verts, divisor)
+        n_fast = len(calls)
+        assert fast == sim.geometry_groups_all_pairs(ids, points, verts, divisor), name
+        assert n_fast < len(calls) - n_fast, name
+        sizes |= {len(g) for g in fast}
+    assert max(sizes) >= 5 and 1 in sizes
+
+
+class _Fixed:
+    """A stand-in stream whose one ``integers`` draw is given (the batched version takes the draws)."""
+
+    def __init__(self, value):
+        self.value = int(value)
+
+    def integers(self, n):
+        return self.value
+
+
+def test_batched_farthest_point_samples_pick_the_single_version_indices(monkeypatch):
+    from aw.prepare import official_protocol
+    from aw.prepare.official_protocol import farthest_point_sample, farthest_point_samples, stream
+
+    rng = np.random.default_rng(12)
+    clouds = rng.normal(size=(7, 300, 3)) * [1.0, 0.3, 0.1] + rng.normal(size=3) * 100  # far off: rounding
+    clouds[3, 150:] = clouds[3, :150]  # duplicates: ties among equal distances
+    clouds[5, :, 2] = 0.0  # flat
+    clouds[6] = np.round(clouds[6], 1)  # many exact ties
+    firsts = [int(stream(0, "d", "s", str(k), "fps").integers(300)) for k in range(7)]
+    single = np.stack([farthest_point_sample(c, 200, stream(0, "d", "s", str(k), "fps")) for k, c in enumerate(clouds)])
+    assert np.array_equal(farthest_point_samples(clouds, 200, firsts, chunk=3), single)
+    first_single = single
+    many = rng.uniform(-1, 1, size=(40, 4096, 3)) * rng.uniform(0.01, 10, size=(40, 1, 3))
+    starts = rng.integers(4096, size=40)
+    single = [farthest_point_sample(c, 1000, _Fixed(s)) for c, s in zip(many, starts)]
+    assert np.array_equal(farthest_point_samples(many, 1000, starts), np.stack(single))
+    # the batched einsum, where NumPy rounds its sum in another order, picks them too
+    monkeypatch.setattr(official_protocol, "_einsum_sums_x_z_then_y", lambda: False)
+    assert np.array_equal(farthest_point_samples(clouds, 200, firsts, chunk=3), first_single)
+    with pytest.raises(ValueError, match="count"):
+        farthest_point_samples(clouds, 301, firsts)

@@ -69,20 +69,20 @@ def _in_frame(c):
 
 
 def test_cd_lower_bound_holds_for_every_rigid_motion_and_the_registration():
+    from aw.shape_bounds import cloud_bounds, lower_bounds
     from aw_eval.chamfer import chamfer as cd
-    from aw_eval.equivalence import cd_lower_bound, shape_bounds
 
     rng = np.random.default_rng(11)
     st = ProtocolSettings(n_surface=200, n_fps=200, max_iters=30)
     shapes = [(0.6, 0.1, 0.05), (0.6, 0.1, 0.08), (0.5, 0.12, 0.05), (0.3, 0.3, 0.02), (0.2, 0.2, 0.2), (0.62, 0.1, 0.05)]
     clouds = [_in_frame(_box_cloud(e, 200, k)) for k, e in enumerate(shapes)]
-    bounds = [shape_bounds(q) for q in clouds]
+    bound = lower_bounds(cloud_bounds(np.stack(clouds)))
     excluded = 0
     for i in range(len(clouds)):
         for j in range(len(clouds)):
             if i == j:
                 continue
-            lb = cd_lower_bound(bounds[i], bounds[j])
+            lb = bound[i, j]
             best = _pair_cd(clouds[i], clouds[j], st)
             assert lb <= best * (1 + 1e-12) + 1e-15, (i, j, lb, best)
             for _ in range(20):
@@ -91,7 +91,7 @@ def test_cd_lower_bound_holds_for_every_rigid_motion_and_the_registration():
                 assert lb <= float(cd(clouds[i] @ r.T + t, clouds[j])) + 1e-15
             excluded += lb > 1e-4
     # the bound does real work: a plate against a stick or a cube is excluded without registration
-    assert cd_lower_bound(bounds[3], bounds[0]) > 1e-4 and cd_lower_bound(bounds[4], bounds[0]) > 1e-4
+    assert bound[3, 0] > 1e-4 and bound[4, 0] > 1e-4
     assert excluded >= 10
 
 
@@ -102,3 +102,69 @@ def test_bounded_groups_equal_reference_on_near_identical_boxes():
     got = equivalence_groups(clouds, 1.0, st)
     assert got == ref.equivalence_groups(clouds, 1.0, st)
     assert [0, 4] in got
+
+
+def _boxes_object(extents, n_points, seed=0):
+    """Clouds ``(P, n_points, 3)`` of boxes placed apart and turned, each sampled with its own seed."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k, e in enumerate(extents):
+        rot = quat_to_matrix(random_rotation_quat(rng))
+        out.append(_box_cloud(e, n_points, 100 + k) @ rot.T + [2.0 * k, 0, 0])
+    return np.stack(out)
+
+
+def _objects():
+    rng = np.random.default_rng(5)
+    # a base and many identical small parts (small next to the base: two samplings of one are
+    # within 1e-4), then boxes a few percent apart next to a base (pairs on both sides of 1e-4)
+    pegs = [(3.0, 3.0, 0.05)] + [(0.1, 0.1, 0.3)] * 14
+    near = [(4.0, 4.0, 0.05)] + [(0.6, 0.2, 0.1), (0.63, 0.2, 0.1), (0.66, 0.21, 0.1), (0.7, 0.2, 0.1), (0.6, 0.2, 0.14),
+                                 (0.75, 0.25, 0.1)]
+    distinct = [tuple(sorted(rng.uniform(0.05, 1.0, 3), reverse=True)) for _ in range(14)]
+    mixed = pegs[:6] + near[:4] + distinct[:4] + [(0.1, 0.1, 0.3)] * 3
+    return {"pegs": pegs, "near": near, "distinct": distinct, "mixed": mixed}
+
+
+def test_candidate_search_equals_registering_every_pair(monkeypatch):
+    import aw_eval.equivalence as eq
+
+    st = ProtocolSettings(n_surface=96, n_fps=96, max_iters=30)
+    calls = []
+    real = eq.pair_cd
+
+    def counted(*args, **kwargs):
+        calls.append(kwargs.get("decide", False))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(eq, "pair_cd", counted)
+    seen_sizes = set()
+    for name, extents in _objects().items():
+        clouds = _boxes_object(extents, 96, seed=len(name))
+        divisor = max(float(np.linalg.norm(e)) for e in extents)
+        calls.clear()
+        fast = eq.equivalence_groups(clouds, divisor, st, show_progress=False)
+        n_fast = len(calls)
+        assert fast == eq.equivalence_groups_all_pairs(clouds, divisor, st), name
+        assert n_fast < len(calls) - n_fast, name  # fewer registrations than the all-pairs path's
+        seen_sizes |= {len(g) for g in fast}
+        if name == "near":  # pair CDs from 0.7e-4 to 1.5e-4: joined by a chain of edges under 1e-4
+            assert fast == [[0], [1, 2, 3, 4, 5, 6]]
+    assert max(seen_sizes) >= 10 and 1 in seen_sizes  # a big group of identical parts, and loners
+
+
+def test_near_threshold_chain_is_joined_as_by_every_pair():
+    # a ~ b and b ~ c within 1e-4, a and c not: the candidate order must not split the chain
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(30, 3)) * [1.0, 0.5, 0.25]
+    b = a.copy()
+    b[0, 0] += 0.034
+    c = b.copy()
+    c[1, 0] += 0.034
+    far = rng.normal(size=(30, 3)) * [0.3, 0.3, 0.3]
+    st = ProtocolSettings(n_surface=30, n_fps=30, max_iters=30)
+    clouds = np.stack([c, far, a, b])
+    from aw_eval.equivalence import equivalence_groups_all_pairs
+
+    assert equivalence_groups(clouds, 1.0, st, show_progress=False) == [[0, 2, 3], [1]] == \
+        equivalence_groups_all_pairs(clouds, 1.0, st)

@@ -1,0 +1,88 @@
+"""Components from candidate pairs: the same as testing every pair; progress and the slow-work warning."""
+
+from __future__ import annotations
+
+import io
+import itertools
+import warnings
+
+import numpy as np
+
+from aw import pair_search
+from aw.pair_search import LongWorkWarning, candidate_pairs, components
+
+
+def _all_pairs(n, edge):
+    parent = list(range(n))
+
+    def root(i):
+        while parent[i] != i:
+            i = parent[i]
+        return i
+
+    for i, j in itertools.combinations(range(n), 2):
+        if edge(i, j):
+            a, b = root(i), root(j)
+            parent[max(a, b)] = min(a, b)
+    groups = {}
+    for i in range(n):
+        groups.setdefault(root(i), []).append(i)
+    return sorted(groups.values(), key=lambda g: g[0])
+
+
+def test_components_equal_every_pair_and_skip_connected_pairs():
+    rng = np.random.default_rng(0)
+    for trial in range(30):
+        n = int(rng.integers(1, 25))
+        edges = {(i, j) for i, j in itertools.combinations(range(n), 2) if rng.random() < 0.15}
+        lower = rng.random((n, n)) * 2e-4
+        lower = np.minimum(lower, lower.T)
+        for i, j in edges:  # a true edge always has a bound under the threshold
+            lower[i, j] = lower[j, i] = min(lower[i, j], 1e-4)
+        asked = []
+
+        def edge(i, j):
+            asked.append((i, j))
+            return (i, j) in edges
+
+        got = components(n, candidate_pairs(lower, 1e-4), edge, what="test", show_progress=False)
+        assert got == _all_pairs(n, lambda i, j: (i, j) in edges), trial
+        assert len(asked) == len(set(asked)) and all(i < j and lower[i, j] <= 1e-4 for i, j in asked)
+        assert len(asked) <= len(candidate_pairs(lower, 1e-4))
+
+
+def test_candidates_come_by_increasing_bound_and_keep_the_threshold_inclusive():
+    lower = np.array([[0, 3e-5, 1e-4, 2e-4], [3e-5, 0, 0, 5e-5], [1e-4, 0, 0, 1e-4], [2e-4, 5e-5, 1e-4, 0]])
+    assert candidate_pairs(lower, 1e-4).tolist() == [[1, 2], [0, 1], [1, 3], [0, 2], [2, 3]]
+
+
+def test_slow_work_warns_with_an_estimate_and_shows_progress(monkeypatch):
+    monkeypatch.setattr(pair_search, "_SAMPLE_S", 0.0)
+    monkeypatch.setattr(pair_search, "WARN_AFTER_S", 0.0)
+    monkeypatch.setattr(pair_search, "_BAR_FROM", 1)
+    monkeypatch.setattr(pair_search, "progress", _recording_progress)
+    lower = np.zeros((6, 6))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        got = components(6, candidate_pairs(lower, 1e-4), lambda i, j: False, what="groups of 6 parts")
+    assert got == [[k] for k in range(6)]
+    slow = [w for w in caught if issubclass(w.category, LongWorkWarning)]
+    assert len(slow) == 1 and "groups of 6 parts: up to 13 of 15 candidate pairs left" in str(slow[0].message)
+    assert "min on this machine" in str(slow[0].message)
+    assert "groups of 6 parts: 15/15 pair" in _OUT.getvalue()
+
+
+def test_fast_work_does_not_warn():
+    lower = np.zeros((5, 5))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert components(5, candidate_pairs(lower, 1e-4), lambda i, j: True, what="t") == [[0, 1, 2, 3, 4]]
+
+
+_OUT = io.StringIO()
+
+
+def _recording_progress(total, desc, unit="it", *, enabled=True, leave=True):
+    from aw.progress import progress
+
+    return progress(total, desc, unit, enabled=enabled, file=_OUT, interval=0.0, leave=leave)
