@@ -19,6 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from aw_eval.kernels.cellgrid import PartGrids, build_part_grids
 from aw_eval.kernels.jaxcfg import jax_modules
 
 __all__ = ["accelerator_present", "icp_batch", "part_cd_batch", "fit_tile", "DEFAULT_TILE"]
@@ -72,64 +73,221 @@ def _kabsch(jnp, src, dst):
     return r, cd - r @ cs
 
 
+# Slack of the lower-bound test that skips a part whose grid does not answer a query: the part
+# is searched (brute force) unless its box is farther than the best candidate by more than this
+# relative margin (and an absolute one far above the rounding of O(1) squared distances).
+_LB_REL, _LB_ABS = 1e-9, 1e-15
+# Flagged queries brute-forced per step of the fallback loop (all lanes together).
+FALLBACK_ROWS = 256
+# ICP iterations per round; between rounds the lanes that have stopped are dropped and the
+# remaining ones packed into the smallest bucket (a power of two, at least MIN_LANES).
+ROUND_ITERS = 8
+MIN_LANES = 8
+
+
+def _grid_candidates(jnp, g, y, x, ref):
+    """Grid lookup of one lane's queries in every part: ``y (P, q, 3)`` the queries in each
+    part's grid frame, ``x (q, 3)`` the same queries in the reference frame, ``ref (M, 3)`` the
+    joined clouds in that frame (distances are computed there, as the protocol computes them).
+    Returns ``(index (q,), answered (q,))``: the first minimum over the parts' candidate lists, and
+    whether it is certainly the brute-force first minimum (every part's grid answered, or its
+    box is farther than the best found)."""
+    lo, inv_h, dims, child, cand, over, box_lo, box_hi, depth = g
+    scale = inv_h * float(1 << depth)
+    f = jnp.floor((y - lo[:, None, :]) * scale[:, None, None])
+    fine_dims = (dims * (1 << depth))[:, None, :]
+    inside = jnp.all((f >= 0) & (f < fine_dims), axis=-1)  # (P, q)
+    fine = jnp.clip(f, 0, fine_dims - 1).astype(jnp.int32)
+    root = fine >> depth
+    node = (root[..., 0] * dims[:, None, 1] + root[..., 1]) * dims[:, None, 2] + root[..., 2]
+    parts = jnp.arange(lo.shape[0])[:, None]
+    for lev in range(1, depth + 1):
+        bits = (fine >> (depth - lev)) & 1
+        c = child[parts, node]
+        node = jnp.where(c >= 0, c + 4 * bits[..., 0] + 2 * bits[..., 1] + bits[..., 2], node)
+    ok = inside & ~over[parts, node]  # (P, q)
+    cands = cand[parts, node]  # (P, q, K)
+    yc = ref[cands]  # (P, q, K, 3)
+    d = ((x[None, :, None, 0] - yc[..., 0]) ** 2 + (x[None, :, None, 1] - yc[..., 1]) ** 2) + (x[None, :, None, 2] - yc[..., 2]) ** 2
+    k = jnp.argmin(d, axis=-1)  # (P, q): first minimum within a part (ascending indices)
+    best_d = jnp.where(ok, jnp.take_along_axis(d, k[..., None], -1)[..., 0], jnp.inf)
+    best_i = jnp.take_along_axis(cands, k[..., None], -1)[..., 0]
+    q = jnp.argmin(best_d, axis=0)  # first part: parts hold ascending index ranges
+    dmin = jnp.min(best_d, axis=0)
+    idx = jnp.take_along_axis(best_i, q[None], 0)[0]
+    g2 = jnp.maximum(jnp.maximum(box_lo[:, None, :] - y, y - box_hi[:, None, :]), 0.0)
+    lb = jnp.sum(g2 * g2, axis=-1)  # (P, q) squared distance to each part's box
+    unsure = ~ok & (lb * (1 - _LB_REL) - _LB_ABS <= dmin[None])
+    return idx, ~jnp.any(unsure, axis=0)
+
+
+def _brute_fix(jnp, lax, idx, answered, x, refs, lane_ref):
+    """Replace the unanswered entries of ``idx (L, q)`` by brute-force first minima: query
+    ``x[l, i]`` against ``refs[lane_ref[l]] (M, 3)``, FALLBACK_ROWS flagged queries at a time."""
+    lanes, q = idx.shape
+    flat = ~answered.reshape(-1)
+    count = jnp.sum(flat)
+    rows = min(FALLBACK_ROWS, flat.shape[0])
+    order = jnp.concatenate([jnp.nonzero(flat, size=flat.shape[0], fill_value=0)[0].astype(jnp.int32),
+                             jnp.zeros(rows, jnp.int32)])
+    xs = x.reshape(-1, 3)
+
+    def body(c):
+        s, out = c
+        pick = lax.dynamic_slice(order, (s,), (rows,))
+        valid = s + jnp.arange(rows) < count
+        ref = refs[lane_ref[pick // q]]  # (rows, M, 3)
+        xq = xs[pick]
+        d = ((xq[:, None, 0] - ref[..., 0]) ** 2 + (xq[:, None, 1] - ref[..., 1]) ** 2) + (xq[:, None, 2] - ref[..., 2]) ** 2
+        j = jnp.argmin(d, axis=1).astype(out.dtype)
+        out = out.at[jnp.where(valid, pick, flat.shape[0])].set(j, mode="drop")
+        return s + rows, out
+
+    _, out = lax.while_loop(lambda c: c[0] < count, body, (jnp.asarray(0, order.dtype), idx.reshape(-1)))
+    return out.reshape(lanes, q), count
+
+
 @lru_cache(maxsize=None)
-def _compiled_icp(max_iters: int, tol: float, tile: int):
+def _compiled_round(max_iters: int, tol: float, depth_t: int, depth_p: int, has_pred_grids: bool):
+    """One round of the ICP of ``L`` lanes: at most ROUND_ITERS iterations of every active lane
+    (and a first call with ``init=True`` evaluates every lane at its start)."""
     jax, jnp = jax_modules()
     lax = jax.lax
 
-    def objective(p, tgt, r, t):
-        x = p @ r.T + t
-        fwd, dfwd = _nearest(jnp, lax, x, tgt, tile)
-        bwd, dbwd = _nearest(jnp, lax, tgt, x, tile)
-        return dfwd.mean() + dbwd.mean(), fwd, bwd
+    def nearest(preds, target, tg, pg, maps, ck, r, t):
+        """Both directions' neighbours and the objective of every lane at ``(r (L, 3, 3), t (L, 3))``."""
+        p = preds[ck]  # (L, n, 3)
+        x = jnp.einsum("lnk,ljk->lnj", p, r) + t[:, None, :]  # moved predictions
+        tg_ = tuple(tg) + (depth_t,)
+        n_tp = tg[0].shape[0]
+        fwd, f_ok = jax.vmap(lambda xl: _grid_candidates(jnp, tg_, jnp.broadcast_to(xl[None], (n_tp,) + xl.shape), xl,
+                                                         target))(x)
+        fwd, nf = _brute_fix(jnp, lax, fwd, f_ok, x, target[None], jnp.zeros(x.shape[0], jnp.int32))
+        if has_pred_grids:
+            pg_ = tuple(pg) + (depth_p,)
+            # target points into each part's grid frame: part maps after the inverse registration
+            a, b = maps[ck, :, :, :3], maps[ck, :, :, 3]  # (L, P, 3, 3), (L, P, 3)
+            z = jnp.einsum("mk,lkj->lmj", target, r) - jnp.einsum("lk,lkj->lj", t, r)[:, None, :]  # R^T (T - t)
+            y = jnp.einsum("lmk,lpjk->lpmj", z, a) + b[:, :, None, :]
+            bwd, b_ok = jax.vmap(lambda yl, xl: _grid_candidates(jnp, pg_, yl, target, xl))(y, x)
+        else:
+            bwd = jnp.zeros((x.shape[0], target.shape[0]), jnp.int32)
+            b_ok = jnp.zeros(bwd.shape, bool)
+        tq = jnp.broadcast_to(target[None], (x.shape[0],) + target.shape)
+        bwd, nb = _brute_fix(jnp, lax, bwd, b_ok, tq, x, jnp.arange(x.shape[0]))
+        dfwd = jnp.sum((x - target[fwd]) ** 2, axis=-1).mean(axis=1)
+        xb = jnp.take_along_axis(x, bwd[..., None], 1)
+        dbwd = jnp.sum((target[None] - xb) ** 2, axis=-1).mean(axis=1)
+        return dfwd + dbwd, fwd, bwd, nf + nb
 
-    def lane_step(p, tgt, fwd, bwd):
-        r, t = _kabsch(jnp, jnp.concatenate([p, p[bwd]]), jnp.concatenate([tgt[fwd], tgt]))
-        new, fwd, bwd = objective(p, tgt, r, t)
-        return r, t, new, fwd, bwd
+    def init(preds, target, tg, pg, maps, ck, r0, t0):
+        obj, fwd, bwd, nflag = nearest(preds, target, tg, pg, maps, ck, r0, t0)
+        return obj, fwd, bwd, nflag
 
-    # lanes: (C, S); p is per checkpoint, the target shared
-    starts_objective = jax.vmap(jax.vmap(objective, (None, None, 0, 0)), (0, None, 0, 0))
-    step = jax.vmap(jax.vmap(lane_step, (None, None, 0, 0)), (0, None, 0, 0))
-
-    def run(preds, target, r0, t0):
-        obj, fwd, bwd = starts_objective(preds, target, r0, t0)
-        carry = (jnp.asarray(0), jnp.ones(obj.shape, bool), obj, fwd, bwd, obj, r0, t0)
-
+    def round_(preds, target, tg, pg, maps, ck, state):
         def cond(c):
-            return (c[0] < max_iters) & c[1].any()
+            return (c[0] < ROUND_ITERS) & c[1][0].any()
 
         def body(c):
-            it, active, prev, fwd, bwd, best, br, bt = c
-            r, t, new, nfwd, nbwd = step(preds, target, fwd, bwd)
+            k, (active, its, prev, fwd, bwd, best, br, bt), nflag = c
+            p = preds[ck]
+            src = jnp.concatenate([p, jnp.take_along_axis(p, bwd[..., None], 1)], axis=1)
+            dst = jnp.concatenate([target[fwd], jnp.broadcast_to(target[None], bwd.shape + (3,))], axis=1)
+            r, t = jax.vmap(lambda a_, b_: _kabsch(jnp, a_, b_))(src, dst)
+            new, nfwd, nbwd, nf = nearest(preds, target, tg, pg, maps, ck, r, t)
             better = active & (new < best)
             best = jnp.where(better, new, best)
-            br = jnp.where(better[..., None, None], r, br)
-            bt = jnp.where(better[..., None], t, bt)
-            keep = active[..., None]
+            br = jnp.where(better[:, None, None], r, br)
+            bt = jnp.where(better[:, None], t, bt)
+            keep = active[:, None]
             fwd, bwd = jnp.where(keep, nfwd, fwd), jnp.where(keep, nbwd, bwd)
-            still = active & ~(prev - new < tol)
+            its = its + active
+            still = active & ~(prev - new < tol) & (its < max_iters)
             prev = jnp.where(active, new, prev)
-            return it + 1, still, prev, fwd, bwd, best, br, bt
+            return k + 1, (still, its, prev, fwd, bwd, best, br, bt), nflag + nf
 
-        out = lax.while_loop(cond, body, carry)
-        return out[5], out[6], out[7]
+        _, state, nflag = lax.while_loop(cond, body, (jnp.asarray(0), state, jnp.asarray(0, jnp.int64)))
+        return state, nflag
 
-    return jax.jit(run)
+    return jax.jit(init), jax.jit(round_)
+
+
+def _bucket(n: int) -> int:
+    return max(MIN_LANES, 1 << max(n - 1, 0).bit_length())
 
 
 def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float,
-              tile: int = DEFAULT_TILE) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              target_grids: PartGrids | None = None, pred_grids: PartGrids | None = None,
+              pred_maps: np.ndarray | None = None, stats: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The protocol's ICP of every checkpoint from every start.
 
     ``preds (C, n, 3)`` normalized predictions of one task, ``target (m, 3)``, starts
-    ``r0 (C, S, 3, 3)``, ``t0 (C, S, 3)``. Returns each lane's best state: ``objective (C, S)``,
-    ``rotation (C, S, 3, 3)``, ``translation (C, S, 3)`` (NumPy float64).
+    ``r0 (C, S, 3, 3)``, ``t0 (C, S, 3)``. Neighbours: ``target_grids`` (:class:`PartGrids` of
+    the target's parts, their points in ``target``'s order; default: one grid of the whole
+    target) for the forward direction; for the backward one ``pred_grids`` of the clouds every
+    prediction moves rigidly (``P`` clouds, ``preds[c]`` = cloud ``q`` mapped into the
+    prediction frame, part after part) with ``pred_maps (C, P, 3, 4)``: ``[A | b]`` taking a
+    point of prediction ``c``'s frame into cloud ``q``'s frame (default: brute force). Either
+    way the neighbours are the brute-force first minima. Returns each lane's best state:
+    ``objective (C, S)``, ``rotation (C, S, 3, 3)``, ``translation (C, S, 3)`` (NumPy float64).
+    ``stats``: filled with ``lanes_iterated`` (sum over rounds of the lanes computed, padding
+    included), ``lane_iterations`` (fits the protocol needed) and ``brute_queries``.
     """
-    _, jnp = jax_modules()
-    run = _compiled_icp(int(max_iters), float(tol), fit_tile(r0.shape[0] * r0.shape[1], len(target), tile))
-    obj, r, t = run(*(jnp.asarray(a, dtype=jnp.float64) for a in (preds, target, r0, t0)))
-    return np.asarray(obj), np.asarray(r), np.asarray(t)
+    jax, jnp = jax_modules()
+    target = np.ascontiguousarray(target, dtype=np.float64)
+    if target_grids is None:
+        target_grids = build_part_grids(target[None])
+    c, s = r0.shape[:2]
+    has_pg = pred_grids is not None
+    init, round_ = _compiled_round(int(max_iters), float(tol), target_grids.depth,
+                                   pred_grids.depth if has_pg else 0, has_pg)
+    dev = lambda a: jnp.asarray(a)  # noqa: E731
+    tg = tuple(dev(a) for a in target_grids[:8])
+    pg = tuple(dev(a) for a in pred_grids[:8]) if has_pg else ()
+    maps = dev(pred_maps if has_pg else np.zeros((c, 1, 3, 4)))
+    pr, tgt = dev(np.asarray(preds, np.float64)), dev(target)
+    lanes = c * s
+    ck_all = np.repeat(np.arange(c), s)
+    r_all, t_all = np.asarray(r0, np.float64).reshape(-1, 3, 3), np.asarray(t0, np.float64).reshape(-1, 3)
+    best_obj, best_r, best_t = np.empty(lanes), r_all.copy(), t_all.copy()
+    counters = {"lanes_iterated": 0, "lane_iterations": 0, "brute_queries": 0, "rounds": 0}
+    # the starts' objectives, in buckets; then rounds over the lanes still running
+    live: list[tuple] = []
+    for lo in range(0, lanes, 1 << 12):
+        ids = np.arange(lo, min(lanes, lo + (1 << 12)))
+        pad = _pad(ids)
+        obj, fwd, bwd, nflag = init(pr, tgt, tg, pg, maps, dev(ck_all[pad]), dev(r_all[pad]), dev(t_all[pad]))
+        counters["brute_queries"] += int(nflag)
+        obj = np.asarray(obj)[: len(ids)]
+        best_obj[ids] = obj
+        live.append((ids, np.ones(len(ids), bool), np.zeros(len(ids), np.int64), obj, np.asarray(fwd)[: len(ids)],
+                     np.asarray(bwd)[: len(ids)], obj.copy(), r_all[ids], t_all[ids]))
+    ids, active, its, prev, fwd, bwd, best, br, bt = (np.concatenate(z) for z in zip(*live))
+    active &= max_iters > 0
+    while active.any():
+        keep = np.flatnonzero(active)
+        ids, active, its, prev, fwd, bwd, best, br, bt = (a[keep] for a in (ids, active, its, prev, fwd, bwd, best, br, bt))
+        pad = _pad(np.arange(len(ids)))
+        state = (active[pad] & (pad < len(ids)), its[pad], prev[pad], fwd[pad], bwd[pad], best[pad], br[pad], bt[pad])
+        state = tuple(dev(a) for a in state)
+        out, nflag = round_(pr, tgt, tg, pg, maps, dev(ck_all[ids][pad]), state)
+        n = len(ids)
+        new_its = np.asarray(out[1])[:n]
+        counters["lanes_iterated"] += len(pad) * int((new_its - its).max())
+        counters["rounds"] += 1
+        counters["lane_iterations"] += int((new_its - its).sum())
+        counters["brute_queries"] += int(nflag)
+        active, its, prev, fwd, bwd, best, br, bt = (np.asarray(a)[:n] for a in out)
+        best_obj[ids], best_r[ids], best_t[ids] = best, br, bt
+    if stats is not None:
+        stats.update(counters)
+    return best_obj.reshape(c, s), best_r.reshape(c, s, 3, 3), best_t.reshape(c, s, 3)
+
+
+def _pad(ids: np.ndarray) -> np.ndarray:
+    """``ids`` padded to its bucket with copies of its last entry."""
+    size = _bucket(len(ids))
+    return np.concatenate([ids, np.full(size - len(ids), ids[-1] if len(ids) else 0, ids.dtype)])
 
 
 @lru_cache(maxsize=None)
