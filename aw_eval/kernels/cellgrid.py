@@ -38,16 +38,22 @@ from numba import njit
 
 from aw_eval.kernels.kdtree import STACK, build_tree, nearest2
 
-__all__ = ["CellGrid", "PartGrids", "build_cell_grid", "build_part_grids", "grid_shape", "brute_first_min", "grid_lookup",
+__all__ = ["CellGrid", "PartGrids", "JOINED_K", "JOINED_MARGIN_CELLS", "build_cell_grid", "build_part_grids", "grid_shape", "brute_first_min", "grid_lookup",
            "leaf_of", "DEFAULT_K"]
 
 DEFAULT_K = 32
+# A whole assembly's cloud in one grid (the jax backend's forward searches, built once per
+# task): longer lists and a wider margin, so that queries of misaligned starts, far from any
+# surface, are still answered by the grid (measured: 98% of the queries at the starts of an
+# 8-part checkpoint, all at its registration; per-part grids with K = 32 answered about half).
+JOINED_K = 128
+JOINED_MARGIN_CELLS = 4
 # Grid cells per cloud point (over the widened bounding box) and the margin around the box, in
 # cells. More cells: shorter lists, more cells to build and store.
 CELLS_PER_POINT = 1.0
 MARGIN_CELLS = 2
-DEPTH = 3  # splits of a root cell at most
-NODES_PER_POINT = 16  # node budget per cloud point
+DEPTH = 4  # splits of a root cell at most
+NODES_PER_POINT = 64  # node budget per cloud point
 ENUM_PER_K = 8  # a list longer than ENUM_PER_K * K is not split (far from the cloud: it would not fit)
 _WIDEN = 1e-9  # cell box widening, in cells
 _REL = 1e-9  # slack of the candidate test, relative to u^2 ...
@@ -181,37 +187,43 @@ def _build(tree, lo, h, dims, k_max, enum_cap, depth, max_nodes):
                 row = (a * dims[1] + b) * dims[2] + c
                 cell[row, 0], cell[row, 1], cell[row, 2] = a, b, c
     n_nodes = g_total
-    node = 0
-    while node < n_nodes:
-        hl = h / (1 << level[node])
-        widen = _WIDEN * hl
-        b0 = lo[0] + cell[node, 0] * hl - widen
-        b1 = lo[1] + cell[node, 1] * hl - widen
-        b2 = lo[2] + cell[node, 2] * hl - widen
-        e0 = lo[0] + (cell[node, 0] + 1) * hl + widen
-        e1 = lo[1] + (cell[node, 1] + 1) * hl + widen
-        e2 = lo[2] + (cell[node, 2] + 1) * hl + widen
-        n = _cell_list(tree, b0, b1, b2, e0, e1, e2, hl, enum_cap, found, bd, stack, bounds, nstack)
-        count[node] = n
-        if n > k_max:
-            if n <= enum_cap and level[node] < depth and n_nodes + 8 <= cap:
-                child[node] = n_nodes
-                for o in range(8):
-                    q = n_nodes + o
-                    level[q] = level[node] + 1
-                    cell[q, 0] = 2 * cell[node, 0] + (o >> 2)
-                    cell[q, 1] = 2 * cell[node, 1] + ((o >> 1) & 1)
-                    cell[q, 2] = 2 * cell[node, 2] + (o & 1)
-                n_nodes += 8
-            else:
+    first, stop = 0, g_total  # the nodes of the current level
+    while first < stop:
+        for node in range(first, stop):
+            hl = h / (1 << level[node])
+            widen = _WIDEN * hl
+            b0 = lo[0] + cell[node, 0] * hl - widen
+            b1 = lo[1] + cell[node, 1] * hl - widen
+            b2 = lo[2] + cell[node, 2] * hl - widen
+            e0 = lo[0] + (cell[node, 0] + 1) * hl + widen
+            e1 = lo[1] + (cell[node, 1] + 1) * hl + widen
+            e2 = lo[2] + (cell[node, 2] + 1) * hl + widen
+            n = _cell_list(tree, b0, b1, b2, e0, e1, e2, hl, enum_cap, found, bd, stack, bounds, nstack)
+            count[node] = n
+            if n > k_max:
                 over[node] = True
-        else:
-            for q in range(n):
-                found[q] = index[found[q]]
-            srt = np.sort(found[:n])
-            for q in range(k_max):
-                cand[node, q] = srt[min(q, n - 1)]
-        node += 1
+            else:
+                for q in range(n):
+                    found[q] = index[found[q]]
+                srt = np.sort(found[:n])
+                for q in range(k_max):
+                    cand[node, q] = srt[min(q, n - 1)]
+        # split the overflowing nodes of this level, shortest lists first, while the budget lasts
+        # (a list longer than enum_cap is far from the cloud: splitting would not bring it to k_max)
+        order = np.argsort(count[first:stop], kind="mergesort") + first
+        for node in order:
+            if not over[node] or count[node] > enum_cap or level[node] >= depth or n_nodes + 8 > cap:
+                continue
+            over[node] = False
+            child[node] = n_nodes
+            for o in range(8):
+                q = n_nodes + o
+                level[q] = level[node] + 1
+                cell[q, 0] = 2 * cell[node, 0] + (o >> 2)
+                cell[q, 1] = 2 * cell[node, 1] + ((o >> 1) & 1)
+                cell[q, 2] = 2 * cell[node, 2] + (o & 1)
+            n_nodes += 8
+        first, stop = stop, n_nodes
     return cand[:n_nodes].copy(), over[:n_nodes].copy(), count[:n_nodes].copy(), child[:n_nodes].copy()
 
 
@@ -286,11 +298,13 @@ class PartGrids(NamedTuple):
     depth: int
 
 
-def build_part_grids(parts: np.ndarray, k: int = DEFAULT_K, depth: int = DEPTH) -> PartGrids:
+def build_part_grids(parts: np.ndarray, k: int = DEFAULT_K, depth: int = DEPTH, margin_cells: int = MARGIN_CELLS,
+                     nodes_per_point: float = NODES_PER_POINT) -> PartGrids:
     """:func:`build_cell_grid` of every cloud of ``parts (P, n, 3)``, stacked (:class:`PartGrids`)."""
     parts = np.ascontiguousarray(parts, dtype=np.float64)
     n = parts.shape[1]
-    grids = [build_cell_grid(c, k=k, depth=depth) for c in parts]
+    grids = [build_cell_grid(c, k=k, depth=depth, margin_cells=margin_cells, max_nodes=int(nodes_per_point * n))
+             for c in parts]
     nodes = max(len(g.child) for g in grids)
     child = np.full((len(grids), nodes), -1, np.int32)
     cand = np.zeros((len(grids), nodes, k), np.int32)

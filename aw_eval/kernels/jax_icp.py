@@ -3,14 +3,23 @@
 The XLA counterpart of :class:`aw_eval.kernels.ICPProblem`: the same rule from every start (both
 directions' nearest neighbours, one proper Kabsch fit of all pairs, at most ``max_iters`` fits,
 stop when the objective improves by less than ``tol``, keep the best state visited), for many
-checkpoints of one task at once. Nearest neighbours are brute force: each query tile's squared
-distances to every reference point, then the first minimum; every distance is recomputed from
-coordinates as the reference does. Everything is float64: the neighbour decisions and the
-``tol = 1e-9`` improvements need it (float32 would move nearest neighbours at near ties and
-lose the convergence test). One compiled program per ``(checkpoints, starts, points)`` shape.
+checkpoints of one task at once.
 
-Lanes (one checkpoint's one start) run in lock step; a lane that has stopped keeps its state
-while the others iterate (the loop ends when every lane has stopped or after ``max_iters``).
+Nearest neighbours, in fixed shapes: every query reads the candidate list of its grid cell
+(:mod:`aw_eval.kernels.cellgrid`; built once per task on the host), computes its squared
+distances from coordinates as the protocol does and takes the first minimum. Forward, one grid
+of the joined target; backward, one grid per part of the parts' baked clouds (a checkpoint
+moves each rigidly: the target points are mapped into each part's frame, the parts' answers
+combined by first minimum, and a part whose grid does not answer is skipped only when its box
+is farther than the best found). Every query the grids cannot answer exactly (outside a grid, an
+overflowing cell, an unskippable part) takes the brute-force path, all lanes' such queries
+compacted into tiles of FALLBACK_ROWS. So every neighbour is the brute-force first minimum, and
+every decision the numba backend's up to the rounding of near (not exact) ties.
+
+Lanes (one checkpoint's one start) stop at different iterations: the loop runs ROUND_ITERS
+iterations per round, then drops the lanes that stopped and packs the rest into the smallest
+power-of-two bucket (a few compiled shapes). Everything is float64: the neighbour decisions and
+the ``tol = 1e-9`` improvements need it.
 """
 
 from __future__ import annotations
@@ -19,10 +28,10 @@ from functools import lru_cache
 
 import numpy as np
 
-from aw_eval.kernels.cellgrid import PartGrids, build_part_grids
+from aw_eval.kernels.cellgrid import JOINED_K, JOINED_MARGIN_CELLS, PartGrids, build_part_grids
 from aw_eval.kernels.jaxcfg import jax_modules
 
-__all__ = ["accelerator_present", "icp_batch", "part_cd_batch", "fit_tile", "DEFAULT_TILE"]
+__all__ = ["accelerator_present", "icp_batch", "nearest_in_grids", "part_cd_batch", "fit_tile", "DEFAULT_TILE"]
 
 # Query rows per brute-force tile (at most): a tile holds tile x m squared distances per lane,
 # and the tile shrinks so that all lanes' tiles together stay near TILE_ELEMENTS.
@@ -121,6 +130,22 @@ def _grid_candidates(jnp, g, y, x, ref):
     return idx, ~jnp.any(unsure, axis=0)
 
 
+# Lanes whose grid lookups run together (lax.map over groups of them bounds the gathered
+# candidates held at once: lanes x queries x K x 4 float64 per group).
+LANE_GROUP = 32
+
+
+def _lanes(jax, f, *args):
+    """``vmap(f)(*args)`` over the leading (lanes) axis, LANE_GROUP lanes at a time."""
+    lanes = args[0].shape[0]
+    g = min(LANE_GROUP, lanes)
+    if lanes % g:
+        return jax.vmap(f)(*args)
+    grouped = [a.reshape((lanes // g, g) + a.shape[1:]) for a in args]
+    out = jax.lax.map(lambda xs: jax.vmap(f)(*xs), grouped)
+    return tuple(o.reshape((lanes,) + o.shape[2:]) for o in out)
+
+
 def _brute_fix(jnp, lax, idx, answered, x, refs, lane_ref):
     """Replace the unanswered entries of ``idx (L, q)`` by brute-force first minima: query
     ``x[l, i]`` against ``refs[lane_ref[l]] (M, 3)``, FALLBACK_ROWS flagged queries at a time."""
@@ -148,6 +173,29 @@ def _brute_fix(jnp, lax, idx, answered, x, refs, lane_ref):
 
 
 @lru_cache(maxsize=None)
+def _compiled_nearest(depth: int):
+    jax, jnp = jax_modules()
+
+    def run(x, ref, g):
+        n_parts = g[0].shape[0]
+        idx, ok = jax.vmap(lambda xl: _grid_candidates(jnp, tuple(g) + (depth,), jnp.broadcast_to(xl[None], (n_parts,) + xl.shape),
+                                                       xl, ref))(x)
+        return _brute_fix(jnp, jax.lax, idx, ok, x, ref[None], jnp.zeros(x.shape[0], jnp.int32))
+
+    return jax.jit(run)
+
+
+def nearest_in_grids(x: np.ndarray, ref: np.ndarray, grids: PartGrids) -> tuple[np.ndarray, int]:
+    """``(index (L, q), brute-forced)``: the nearest row of ``ref (M, 3)`` (first minimum) for
+    every query ``x (L, q, 3)``, by the grids of ``ref``'s parts (:class:`PartGrids`, their frame
+    ``ref``'s) and the brute-force path where they do not answer: the lookup ICP does."""
+    _, jnp = jax_modules()
+    idx, count = _compiled_nearest(grids.depth)(jnp.asarray(x, dtype=jnp.float64), jnp.asarray(ref, dtype=jnp.float64),
+                                                tuple(jnp.asarray(a) for a in grids[:8]))
+    return np.asarray(idx), int(count)
+
+
+@lru_cache(maxsize=None)
 def _compiled_round(max_iters: int, tol: float, depth_t: int, depth_p: int, has_pred_grids: bool):
     """One round of the ICP of ``L`` lanes: at most ROUND_ITERS iterations of every active lane
     (and a first call with ``init=True`` evaluates every lane at its start)."""
@@ -160,8 +208,8 @@ def _compiled_round(max_iters: int, tol: float, depth_t: int, depth_p: int, has_
         x = jnp.einsum("lnk,ljk->lnj", p, r) + t[:, None, :]  # moved predictions
         tg_ = tuple(tg) + (depth_t,)
         n_tp = tg[0].shape[0]
-        fwd, f_ok = jax.vmap(lambda xl: _grid_candidates(jnp, tg_, jnp.broadcast_to(xl[None], (n_tp,) + xl.shape), xl,
-                                                         target))(x)
+        fwd, f_ok = _lanes(jax, lambda xl: _grid_candidates(jnp, tg_, jnp.broadcast_to(xl[None], (n_tp,) + xl.shape), xl,
+                                                            target), x)
         fwd, nf = _brute_fix(jnp, lax, fwd, f_ok, x, target[None], jnp.zeros(x.shape[0], jnp.int32))
         if has_pred_grids:
             pg_ = tuple(pg) + (depth_p,)
@@ -169,7 +217,7 @@ def _compiled_round(max_iters: int, tol: float, depth_t: int, depth_p: int, has_
             a, b = maps[ck, :, :, :3], maps[ck, :, :, 3]  # (L, P, 3, 3), (L, P, 3)
             z = jnp.einsum("mk,lkj->lmj", target, r) - jnp.einsum("lk,lkj->lj", t, r)[:, None, :]  # R^T (T - t)
             y = jnp.einsum("lmk,lpjk->lpmj", z, a) + b[:, :, None, :]
-            bwd, b_ok = jax.vmap(lambda yl, xl: _grid_candidates(jnp, pg_, yl, target, xl))(y, x)
+            bwd, b_ok = _lanes(jax, lambda yl, xl: _grid_candidates(jnp, pg_, yl, target, xl), y, x)
         else:
             bwd = jnp.zeros((x.shape[0], target.shape[0]), jnp.int32)
             b_ok = jnp.zeros(bwd.shape, bool)
@@ -236,7 +284,7 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
     jax, jnp = jax_modules()
     target = np.ascontiguousarray(target, dtype=np.float64)
     if target_grids is None:
-        target_grids = build_part_grids(target[None])
+        target_grids = build_part_grids(target[None], k=JOINED_K, margin_cells=JOINED_MARGIN_CELLS)
     c, s = r0.shape[:2]
     has_pg = pred_grids is not None
     init, round_ = _compiled_round(int(max_iters), float(tol), target_grids.depth,
@@ -298,15 +346,26 @@ def _compiled_part_cd(tile: int):
     def pair(x, y):  # (n, 3), (n, 3) -> CD
         return _nearest(jnp, lax, x, y, tile)[1].mean() + _nearest(jnp, lax, y, x, tile)[1].mean()
 
-    every_pair = jax.vmap(jax.vmap(pair, (None, 0)), (0, None))  # (P, n, 3), (P, n, 3) -> (P, P)
-    return jax.jit(jax.vmap(every_pair, (0, None)))
+    def listed(moved, target, i, j):  # (P, n, 3), (P, n, 3), (Q,), (Q,) -> (Q,)
+        return jax.vmap(pair)(moved[i], target[j])
+
+    return jax.jit(jax.vmap(listed, (0, None, None, None)))
 
 
-def part_cd_batch(moved_parts: np.ndarray, target_parts: np.ndarray, tile: int = DEFAULT_TILE) -> np.ndarray:
+def part_cd_batch(moved_parts: np.ndarray, target_parts: np.ndarray, pairs: np.ndarray | None = None,
+                  tile: int = DEFAULT_TILE) -> np.ndarray:
     """``C (C, P, P)``: ``C[c, i, j]`` = CD(registered pred part ``i`` of checkpoint ``c``, target
-    part ``j``) for ``moved_parts (C, P, n, 3)`` and ``target_parts (P, n, 3)``."""
+    part ``j``) for ``moved_parts (C, P, n, 3)`` and ``target_parts (P, n, 3)``, for the pairs
+    ``(i, j)`` of ``pairs (Q, 2)`` (default: all; ``inf`` elsewhere). Brute force: a checkpoint
+    needs only the pairs within equivalence groups, a few per part."""
     _, jnp = jax_modules()
     c, p, n = moved_parts.shape[:3]
-    out = _compiled_part_cd(fit_tile(c * p * p, n, tile))(jnp.asarray(moved_parts, dtype=jnp.float64),
-                                       jnp.asarray(target_parts, dtype=jnp.float64))
-    return np.asarray(out)
+    if pairs is None:
+        pairs = np.array([(i, j) for i in range(p) for j in range(p)])
+    pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
+    got = _compiled_part_cd(fit_tile(c * len(pairs), n, tile))(jnp.asarray(moved_parts, dtype=jnp.float64),
+                                                              jnp.asarray(target_parts, dtype=jnp.float64),
+                                                              jnp.asarray(pairs[:, 0]), jnp.asarray(pairs[:, 1]))
+    out = np.full((c, p, p), np.inf)
+    out[:, pairs[:, 0], pairs[:, 1]] = np.asarray(got)
+    return out
