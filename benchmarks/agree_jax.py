@@ -83,8 +83,8 @@ def main() -> None:
         for sign in (-1.0, 1.0):
             if not (len(errors) and len(scds)):
                 break
-            st = dataclasses.replace(settings, threshold=float(np.median(errors)) * (1 + sign * 1e-7),
-                                     sra_threshold=float(np.median(scds)) * (1 + sign * 1e-7))
+            st = dataclasses.replace(settings, threshold=float(np.sort(errors)[len(errors) // 2]) * (1 + sign * 1e-7),
+                                     sra_threshold=float(np.sort(scds)[len(scds) // 2]) * (1 + sign * 1e-7))
             knife, _ = make_points_geometry(parts, args.n_fps, seed=parts, settings=st)
             rows.append((f"knife_edge_{'below' if sign < 0 else 'above'}", compare(knife, cks)))
         for label, r in rows:
