@@ -92,6 +92,10 @@ FALLBACK_ROWS = 256
 # remaining ones packed into the smallest bucket (a power of two, at least MIN_LANES).
 ROUND_ITERS = 8
 MIN_LANES = 8
+# Share of a grid round's queries answered by brute force above which the next rounds skip
+# the grids, and how many rounds until they are tried again.
+BRUTE_SHARE = 0.5
+PROBE_ROUNDS = 3
 
 
 def _grid_candidates(jnp, g, y, x, ref):
@@ -196,9 +200,10 @@ def nearest_in_grids(x: np.ndarray, ref: np.ndarray, grids: PartGrids) -> tuple[
 
 
 @lru_cache(maxsize=None)
-def _compiled_round(max_iters: int, tol: float, depth_t: int, depth_p: int, has_pred_grids: bool):
-    """One round of the ICP of ``L`` lanes: at most ROUND_ITERS iterations of every active lane
-    (and a first call with ``init=True`` evaluates every lane at its start)."""
+def _compiled_round(max_iters: int, tol: float, depth_t: int, depth_p: int, has_pred_grids: bool, brute: bool):
+    """``(init, round)``: every lane evaluated at its start; one round of the ICP of ``L``
+    lanes (at most ROUND_ITERS iterations of every active lane). ``brute``: the round takes the
+    brute-force path for every query (where most queries would fall back to it anyway)."""
     jax, jnp = jax_modules()
     lax = jax.lax
 
@@ -206,6 +211,11 @@ def _compiled_round(max_iters: int, tol: float, depth_t: int, depth_p: int, has_
         """Both directions' neighbours and the objective of every lane at ``(r (L, 3, 3), t (L, 3))``."""
         p = preds[ck]  # (L, n, 3)
         x = jnp.einsum("lnk,ljk->lnj", p, r) + t[:, None, :]  # moved predictions
+        if brute:
+            tile = fit_tile(x.shape[0], max(x.shape[1], target.shape[0]))
+            fwd = jax.vmap(lambda xl: _nearest(jnp, lax, xl, target, tile)[0])(x).astype(jnp.int32)
+            bwd = jax.vmap(lambda xl: _nearest(jnp, lax, target, xl, tile)[0])(x).astype(jnp.int32)
+            return _objective(jnp, x, target, fwd, bwd), fwd, bwd, jnp.asarray(fwd.size + bwd.size, jnp.int64)
         tg_ = tuple(tg) + (depth_t,)
         n_tp = tg[0].shape[0]
         fwd, f_ok = _lanes(jax, lambda xl: _grid_candidates(jnp, tg_, jnp.broadcast_to(xl[None], (n_tp,) + xl.shape), xl,
@@ -223,10 +233,7 @@ def _compiled_round(max_iters: int, tol: float, depth_t: int, depth_p: int, has_
             b_ok = jnp.zeros(bwd.shape, bool)
         tq = jnp.broadcast_to(target[None], (x.shape[0],) + target.shape)
         bwd, nb = _brute_fix(jnp, lax, bwd, b_ok, tq, x, jnp.arange(x.shape[0]))
-        dfwd = jnp.sum((x - target[fwd]) ** 2, axis=-1).mean(axis=1)
-        xb = jnp.take_along_axis(x, bwd[..., None], 1)
-        dbwd = jnp.sum((target[None] - xb) ** 2, axis=-1).mean(axis=1)
-        return dfwd + dbwd, fwd, bwd, nf + nb
+        return _objective(jnp, x, target, fwd, bwd), fwd, bwd, (nf + nb).astype(jnp.int64)
 
     def init(preds, target, tg, pg, maps, ck, r0, t0):
         obj, fwd, bwd, nflag = nearest(preds, target, tg, pg, maps, ck, r0, t0)
@@ -260,6 +267,14 @@ def _compiled_round(max_iters: int, tol: float, depth_t: int, depth_p: int, has_
     return jax.jit(init), jax.jit(round_)
 
 
+def _objective(jnp, x, target, fwd, bwd):
+    """The protocol's objective ``(L,)`` of moved predictions ``x (L, n, 3)`` with neighbours
+    ``fwd (L, n)`` into ``target (m, 3)`` and ``bwd (L, m)`` into ``x``."""
+    dfwd = jnp.sum((x - target[fwd]) ** 2, axis=-1).mean(axis=1)
+    xb = jnp.take_along_axis(x, bwd[..., None], 1)
+    return dfwd + jnp.sum((target[None] - xb) ** 2, axis=-1).mean(axis=1)
+
+
 def _bucket(n: int) -> int:
     return max(MIN_LANES, 1 << max(n - 1, 0).bit_length())
 
@@ -287,8 +302,9 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
         target_grids = build_part_grids(target[None], k=JOINED_K, margin_cells=JOINED_MARGIN_CELLS)
     c, s = r0.shape[:2]
     has_pg = pred_grids is not None
-    init, round_ = _compiled_round(int(max_iters), float(tol), target_grids.depth,
-                                   pred_grids.depth if has_pg else 0, has_pg)
+    shape = (int(max_iters), float(tol), target_grids.depth, pred_grids.depth if has_pg else 0, has_pg)
+    init, round_grid = _compiled_round(*shape, False)
+    brute, since_grid = False, 0
     dev = lambda a: jnp.asarray(a)  # noqa: E731
     tg = tuple(dev(a) for a in target_grids[:8])
     pg = tuple(dev(a) for a in pred_grids[:8]) if has_pg else ()
@@ -298,7 +314,7 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
     ck_all = np.repeat(np.arange(c), s)
     r_all, t_all = np.asarray(r0, np.float64).reshape(-1, 3, 3), np.asarray(t0, np.float64).reshape(-1, 3)
     best_obj, best_r, best_t = np.empty(lanes), r_all.copy(), t_all.copy()
-    counters = {"lanes_iterated": 0, "lane_iterations": 0, "brute_queries": 0, "rounds": 0}
+    counters = {"lanes_iterated": 0, "lane_iterations": 0, "brute_queries": 0, "rounds": 0, "brute_rounds": 0}
     # the starts' objectives, in buckets; then rounds over the lanes still running
     live: list[tuple] = []
     for lo in range(0, lanes, 1 << 12):
@@ -318,11 +334,19 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
         pad = _pad(np.arange(len(ids)))
         state = (active[pad] & (pad < len(ids)), its[pad], prev[pad], fwd[pad], bwd[pad], best[pad], br[pad], bt[pad])
         state = tuple(dev(a) for a in state)
+        round_ = _compiled_round(*shape, True)[1] if brute else round_grid
         out, nflag = round_(pr, tgt, tg, pg, maps, dev(ck_all[ids][pad]), state)
         n = len(ids)
         new_its = np.asarray(out[1])[:n]
-        counters["lanes_iterated"] += len(pad) * int((new_its - its).max())
+        iters = int((new_its - its).max())
+        counters["lanes_iterated"] += len(pad) * iters
+        # where most queries of a grid round fell back to brute force, the next rounds take the
+        # plain brute-force path (cheaper than the lookups plus the fallback), trying the grids
+        # again every PROBE_ROUNDS rounds (lanes near convergence query near the surfaces)
+        share = int(nflag) / max(len(pad) * iters * (preds.shape[1] + len(target)), 1)
+        brute, since_grid = (share > BRUTE_SHARE, 0) if not brute else (since_grid + 1 < PROBE_ROUNDS, since_grid + 1)
         counters["rounds"] += 1
+        counters["brute_rounds"] += int(round_ is not round_grid)
         counters["lane_iterations"] += int((new_its - its).sum())
         counters["brute_queries"] += int(nflag)
         active, its, prev, fwd, bwd, best, br, bt = (np.asarray(a)[:n] for a in out)

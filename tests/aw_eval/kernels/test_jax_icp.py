@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from aw_eval.kernels.cellgrid import brute_first_min, build_part_grids
+from aw_eval.kernels import jax_icp
 from aw_eval.kernels.jax_icp import fit_tile, icp_batch, nearest_in_grids, part_cd_batch
 from aw_eval.reference import chamfer as ref_chamfer
 from aw_eval.reference import icp as ref_icp
@@ -21,9 +23,12 @@ def _clouds(seed: int, n: int = 40):
     return pred, target
 
 
-def test_icp_batch_equals_the_reference_from_every_start_of_every_cloud():
-    """Two clouds x 24 starts in one call, tiles smaller than the clouds (padding exercised):
-    every lane's best objective and transform equal the reference ICP's from that start."""
+@pytest.mark.parametrize("brute_share", [1.0, 0.0])
+def test_icp_batch_equals_the_reference_from_every_start_of_every_cloud(monkeypatch, brute_share):
+    """Two clouds x 24 starts in one call: every lane's best objective and transform equal the
+    reference ICP's from that start, whether the rounds after the first look neighbours up in
+    the grids (``BRUTE_SHARE = 1``) or brute-force them all (``BRUTE_SHARE = 0``)."""
+    monkeypatch.setattr(jax_icp, "BRUTE_SHARE", brute_share)
     clouds = [_clouds(0), _clouds(1)]
     starts = [pca_starts(p, t) for p, t in clouds]
     target = clouds[0][1]
@@ -34,6 +39,7 @@ def test_icp_batch_equals_the_reference_from_every_start_of_every_cloud():
     obj, rot, trans = icp_batch(preds, target, r0, t0, max_iters=30, tol=1e-9, stats=stats)
     # rounds drop the lanes that stopped: far fewer lanes computed than 48 lanes x 30 iterations
     assert stats["lane_iterations"] <= stats["lanes_iterated"] < 48 * 30 and stats["rounds"] >= 2
+    assert (stats["brute_rounds"] == 0) == (brute_share == 1.0)
     assert obj.shape == (2, 24) and rot.shape == (2, 24, 3, 3) and trans.shape == (2, 24, 3)
     for c in range(2):
         for k in range(24):
