@@ -18,9 +18,12 @@ widened box) and the test ``box distance^2 <= u^2`` carries a relative and an ab
 above float64 rounding of squared distances of O(1) coordinates.
 
 Lists are padded to a fixed ``K`` with their last (largest) index, which never changes a first
-minimum. A cell whose list is longer than ``K`` is marked *overflowing*; queries there, and
-queries outside the grid, are not answered by the grid at all: the caller takes the brute-force
-path for them (:mod:`aw_eval.kernels.jax_icp`). Nothing is truncated.
+minimum. A cell whose list is longer than ``K`` splits into 8 (level by level, shortest lists
+first, up to ``depth`` levels and a node budget); a leaf still longer than ``K`` is marked
+*overflowing*. Queries there, and queries outside the grid, are not answered by the grid at
+all: the caller takes the brute-force path for them (:mod:`aw_eval.kernels.jax_icp`). Nothing
+is truncated. Far from the cloud a list (every point that can be nearest anywhere in the cell)
+grows with the distance times the cell's size, so there the grid answers little.
 
 Built in numba on the host: a KD-tree of the cloud (:mod:`aw_eval.kernels.kdtree`) gives each
 cell centre's nearest point ``p0``; ``maxdist(p0, box)`` bounds ``u`` from above, the points within
