@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # One-shot GPU measurement of the jax backend (`exact` on candidate-list neighbours), sized to
-# finish in about 8 minutes on one H100: 2, 8 and 20 parts at 1,000 points a part, cold and
+# finish in about 8 minutes on one H100 (an estimate: not yet run there): 2, 8 and 20 parts at
+# 1,000 points a part, 64 checkpoints each, cold and
 # warm seconds per checkpoint, the per-stage split, agreement with numba on the first 4
 # checkpoints of each, and the projection to 60,000 checkpoints. Writes
 # benchmarks/results/bench_jax_gpu.json (or $1/bench_jax_gpu.json) and prints it.
@@ -21,5 +22,5 @@ fi
 export PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
 python3 -c "import jax; print('jax', jax.__version__, jax.devices())"
 nvidia-smi --query-gpu=name,memory.total --format=csv,noheader || true
-timeout 500 python3 benchmarks/bench_jax.py --parts 2 8 20 --n-fps 1000 --checkpoints 128 --chunk 32 --numba 4 \
+timeout 500 python3 benchmarks/bench_jax.py --parts 2 8 20 --n-fps 1000 --checkpoints 64 --chunk 32 --numba 4 \
   --out "$out_dir" --name bench_jax_gpu
