@@ -112,8 +112,8 @@ def main() -> None:
     for parts in args.parts:
         out["per_part_count"].append(one_part_count(parts, args))
         print(json.dumps(out["per_part_count"][-1], indent=2), flush=True)
-    out["load_average_after"] = os.getloadavg()
-    path.write_text(json.dumps(out, indent=2) + "\n")
+        out["load_average_after"] = os.getloadavg()
+        path.write_text(json.dumps(out, indent=2) + "\n")  # after each part count: a time limit keeps the rest
     print(f"wrote {path}")
 
 
