@@ -10,8 +10,9 @@ with the lowest objective wins; on an exact tie the earlier start wins.
 
 ``exact`` runs every start at full resolution (the same numbers as :mod:`aw_eval.reference`);
 The ``jax`` backend registers many checkpoints of a task at once, every start of every
-checkpoint in lock step on an XLA device (:func:`register_exact_many`, over
-:func:`aw_eval.kernels.icp_batch`): the same rule and the same numbers to rounding.
+checkpoint batched on an XLA device (:func:`register_exact_many`, over
+:func:`aw_eval.kernels.icp_batch`; stopped starts leave the batch between rounds): the same
+rule, the same neighbours, the same numbers to rounding.
 ``fast`` prunes the starts coarse-to-fine (:func:`aw_eval.kernels.coarse_to_fine`) and refines
 further where a decision is near its threshold (agreement with ``exact`` is measured, not
 guaranteed; see docs/performance.md).
@@ -29,12 +30,13 @@ from aw_eval.results import Registration
 from aw_eval.settings import ProtocolSettings
 from aw_eval.starts import pca_starts, same_id_starts, start_frame
 
-__all__ = ["MODES", "BACKENDS", "resolve_backend", "register_exact_many", "checkpoint_starts", "register_points", "register_exact", "register_fast", "escalate", "near_threshold",
+__all__ = ["MODES", "BACKENDS", "resolve_backend", "register_exact_many", "jax_part_maps", "checkpoint_starts", "register_points", "register_exact", "register_fast", "escalate", "near_threshold",
            "register", "register_checkpoint", "CONTACT_WALKS"]
 
 MODES = ("exact", "fast")
-# numba: compiled walks on the CPU, one start at a time; jax: batched brute force on any XLA
-# device; auto: jax for exact when JAX sees an accelerator, numba otherwise
+# numba: compiled walks on the CPU, one start at a time; jax: batched candidate-list lookups on
+# any XLA device; auto: jax for exact when JAX sees an accelerator, numba otherwise (on a CPU the
+# compiled walks are far faster: docs/performance.md)
 BACKENDS = ("auto", "numba", "jax")
 
 
@@ -91,15 +93,27 @@ def _full_problem(geom: TaskGeometry, ck: Checkpoint) -> ICPProblem:
     return geom.index().assembly_problem(ck.poses, ck.rotations, ck.parts, geom.divisor)
 
 
-def register_exact_many(geom: TaskGeometry, cks: list[Checkpoint]) -> list[Registration]:
+def jax_part_maps(geom: TaskGeometry, cks: list[Checkpoint]) -> np.ndarray:
+    """``(C, P, 3, 4)``: ``[A | b]`` taking a point of checkpoint ``c``'s normalized prediction
+    frame into part ``q``'s baked cloud over the divisor (``A = R_q^T``, ``b = -R_q^T t_q / divisor``)."""
+    rt = np.swapaxes(np.stack([ck.rotations for ck in cks]), 2, 3)  # (C, P, 3, 3)
+    t = np.stack([ck.poses[:, :3] for ck in cks]) / geom.divisor  # (C, P, 3)
+    return np.concatenate([rt, -(rt @ t[..., None])], axis=3)
+
+
+def register_exact_many(geom: TaskGeometry, cks: list[Checkpoint], stats: dict | None = None) -> list[Registration]:
     """The protocol's registration of every checkpoint of ``cks`` at once (``jax`` backend): all
-    starts of all checkpoints run in lock step; per checkpoint the lowest objective wins, ties
-    to the earlier start (``argmin`` takes the first)."""
+    starts of all checkpoints batched, neighbours from the task's cell grids
+    (:meth:`aw_eval.kernels.TaskIndex.part_grids`: target parts forward, the parts' baked clouds
+    backward, exact); per checkpoint the lowest objective wins, ties to the earlier start
+    (``argmin`` takes the first). ``stats``: see :func:`aw_eval.kernels.icp_batch`."""
     st = geom.settings
     starts = [checkpoint_starts(geom, ck) for ck in cks]
     preds = np.stack([ck.points for ck in cks])
+    target_grids, baked_grids = geom.index().part_grids(geom.divisor)
     obj, rot, trans = icp_batch(preds, geom.index().target, np.stack([s[0] for s in starts]),
-                                np.stack([s[1] for s in starts]), st.max_iters, st.tol)
+                                np.stack([s[1] for s in starts]), st.max_iters, st.tol, target_grids=target_grids,
+                                pred_grids=baked_grids, pred_maps=jax_part_maps(geom, cks), stats=stats)
     best = np.argmin(obj, axis=1)
     return [Registration(float(obj[c, k]), rot[c, k], trans[c, k], int(k), obj[c]) for c, k in enumerate(best)]
 

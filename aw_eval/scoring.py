@@ -50,15 +50,28 @@ def score(geom: TaskGeometry, poses, mode: str = "exact", backend: str = "auto")
     return _score_one(geom, geom.checkpoint(poses), mode, None)[0]
 
 
-def _score_many_jax(geom: TaskGeometry, cks: list[Checkpoint], mode: str) -> list[ScoreResult]:
-    """``exact`` scores of ``cks`` on the jax backend: registration and every part pair's CD
-    batched over the checkpoints; the Hungarian step and the metrics on the host."""
+def _score_many_jax(geom: TaskGeometry, cks: list[Checkpoint], mode: str, stats: dict | None = None) -> list[ScoreResult]:
+    """``exact`` scores of ``cks`` on the jax backend: registration and the part CDs within
+    equivalence groups batched over the checkpoints; the Hungarian step and the metrics on the
+    host. ``stats``: adds seconds per stage (``structures``, ``icp``, ``part_cd``, ``host``) and
+    the ICP's counters (:func:`aw_eval.kernels.icp_batch`)."""
+    t0 = time.perf_counter()
     size = 1 << (len(cks) - 1).bit_length()  # padded with copies of the last checkpoint
     padded = cks + [cks[-1]] * (size - len(cks))
-    regs = register_exact_many(geom, padded)
+    geom.index().part_grids(geom.divisor)  # built once per task
+    t1 = time.perf_counter()
+    icp_stats: dict = {}
+    regs = register_exact_many(geom, padded, icp_stats)
+    t2 = time.perf_counter()
     moved = np.stack([ck.parts @ r.rotation.T + r.translation for ck, r in zip(padded, regs)])
-    costs = part_cd_batch(moved, geom.target_parts())
-    return [finalize_costs(geom, r, c, mode) for r, c in zip(regs[: len(cks)], costs)]
+    costs = part_cd_batch(moved, geom.target_parts(), [(i, j) for g in geom.groups for i in g for j in g])
+    t3 = time.perf_counter()
+    out = [finalize_costs(geom, r, c, mode) for r, c in zip(regs[: len(cks)], costs)]
+    if stats is not None:
+        t4 = time.perf_counter()
+        for key, v in (("structures", t1 - t0), ("icp", t2 - t1), ("part_cd", t3 - t2), ("host", t4 - t3), *icp_stats.items()):
+            stats[key] = stats.get(key, 0) + v
+    return out
 
 
 def _score_one(geom: TaskGeometry, ck: Checkpoint, mode: str, warm: Registration | None) -> tuple[ScoreResult, Registration | None]:
@@ -91,7 +104,9 @@ def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None, b
     into other batches may change the last digits of a refined row.
 
     ``progress``: optional callable ``(done, total)`` called after each unique row (on the
-    ``jax`` backend, after each call of up to :data:`JAX_CHUNK` of them).
+    ``jax`` backend, after each call of up to :data:`JAX_CHUNK` of them). The result's ``stats``
+    hold ``seconds`` and, on the ``jax`` backend, ``jax``: seconds per stage and the ICP's
+    counters (:func:`_score_many_jax`).
     """
     check_mode(mode)
     backend = resolve_backend(backend, mode)
@@ -109,10 +124,12 @@ def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None, b
     results = {}
     warm = None
     order = sorted(first)
+    stats = {"seconds": 0.0}
     if backend == "jax":
+        stats["jax"] = {}
         for lo in range(0, len(order), JAX_CHUNK):
             keys = order[lo: lo + JAX_CHUNK]
-            results.update(zip(keys, _score_many_jax(geom, [geom.checkpoint(poses[k]) for k in keys], mode)))
+            results.update(zip(keys, _score_many_jax(geom, [geom.checkpoint(poses[k]) for k in keys], mode, stats["jax"])))
             if progress is not None:
                 progress(lo + len(keys), len(first))
     for done, k in enumerate(order if backend == "numba" else []):
@@ -121,7 +138,8 @@ def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None, b
             progress(done + 1, len(first))
     by_unique = [results[k] for k in first]
     rows = [by_unique[u] for u in np.asarray(inverse).reshape(-1)]
-    return BatchScores.stack(rows, mode, len(first), {"seconds": time.perf_counter() - t0})
+    stats["seconds"] = time.perf_counter() - t0
+    return BatchScores.stack(rows, mode, len(first), stats)
 
 
 @dataclass

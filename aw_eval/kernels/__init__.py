@@ -12,7 +12,8 @@ The protocol asks two things of it, and only through the names exported here:
 Inside: compiled KD-trees (``kdtree``), Delaunay walks with Voronoi certificates
 (``delaunay``), walks through a posed assembly's parts (``partwalk``), the fused ICP kernel
 (``icp``) and the coarse stage (``fast``); and their XLA counterpart for accelerators
-(``jax_icp``: the same ICP batched over checkpoints x starts with brute-force neighbours). Nothing here decides what is scored: every result is
+(``jax_icp``: the same ICP batched over checkpoints x starts, its neighbours from fixed-shape
+candidate lists of cell grids built by ``cellgrid``, exact). Nothing here decides what is scored: every result is
 the protocol's (``fast`` excepted, whose agreement is measured).
 """
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["prepare_thread", "protocol_settings", "load_geometry", "score_states", "final_diagnostics", "evaluator_version", "MODES",
+__all__ = ["prepare_thread", "protocol_settings", "load_geometry", "batched_backend", "prescore", "score_states", "final_diagnostics", "evaluator_version", "MODES",
            "BACKENDS"]
 
 MODES = ("exact", "fast")
@@ -75,16 +75,44 @@ def load_geometry(task_dir: Path, targets_path: Path, cache_dir: Path | None, ov
     return aw_eval.load_task_geometry(task_dir, targets_path, cache_dir=cache_dir, settings=settings)
 
 
-def score_states(geom, poses: np.ndarray, mode: str, backend: str = "auto") -> dict[str, np.ndarray]:
+def batched_backend(mode: str, backend: str) -> bool:
+    """True where ``mode`` scores on the jax backend: a task's runs are then scored together
+    (:func:`prescore`), so that every call fills the device with checkpoints of all of them."""
+    from aw_eval.registration import resolve_backend
+
+    return mode == "exact" and resolve_backend(backend, mode) == "jax"
+
+
+def prescore(geom, poses: list[np.ndarray], mode: str, backend: str) -> dict[bytes, Any]:
+    """Every distinct state of the ``(N_i, P, 7)`` arrays of ``poses`` (a task's runs) scored in
+    one batch; returns the memo :func:`score_states` takes (state bytes -> its scores)."""
+    import aw_eval
+
+    rows = [np.asarray(p, dtype=np.float64).reshape(-1, geom.n_parts, 7) for p in poses]
+    allp = np.concatenate(rows) if rows else np.zeros((0, geom.n_parts, 7))
+    if len(allp) == 0:
+        return {}
+    allp = np.unique(allp, axis=0)
+    b = aw_eval.score_batch(geom, allp, mode=mode, backend=backend)
+    return {allp[i].tobytes(): b.row(i) for i in range(len(allp))}
+
+
+def score_states(geom, poses: np.ndarray, mode: str, backend: str = "auto", memo: dict | None = None) -> dict[str, np.ndarray]:
     """Scores of ``poses: (N, P, 7)``: ``part_errors (N, P)``, ``assignment (N, P)``, ``pa``,
     ``sr``, ``sra``, ``scd`` ``(N,)`` and the raw batch result under ``"batch"``. ``backend``
-    applies to ``exact`` (``fast`` always runs on the CPU kernels)."""
+    applies to ``exact`` (``fast`` always runs on the CPU kernels). ``memo``: states already
+    scored in this mode (:func:`prescore`); rows found there are not scored again."""
     import aw_eval
+    from aw_eval.results import BatchScores
 
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
-    b = aw_eval.score_batch(geom, np.asarray(poses, dtype=np.float64), mode=mode,
-                            backend=backend if mode == "exact" else "numba")
+    poses = np.asarray(poses, dtype=np.float64)
+    if memo and len(poses) and all(geom.check_poses(p).tobytes() in memo for p in poses):
+        found = [memo[geom.check_poses(p).tobytes()] for p in poses]
+        b = BatchScores.stack(found, mode, len({p.tobytes() for p in poses}))
+    else:
+        b = aw_eval.score_batch(geom, poses, mode=mode, backend=backend if mode == "exact" else "numba")
     return {
         "part_errors": np.asarray(b.part_errors, dtype=np.float64),
         "assignment": np.asarray(b.assignment, dtype=np.int64),

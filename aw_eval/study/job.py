@@ -100,7 +100,7 @@ def surface_centroids(meshes) -> np.ndarray:
 
 
 def _score_run(req: RunRequest, task_id: str, geom, all_ids: list[str], centroids: np.ndarray,
-               settings: ScoreSettings) -> RunScore:
+               settings: ScoreSettings, memo: dict | None = None) -> RunScore:
     scored_ids = list(geom.part_ids)
     try:
         ep = read_episode(req.run_dir, task_id, all_ids, scored_ids, centroids, float(geom.divisor),
@@ -117,7 +117,8 @@ def _score_run(req: RunRequest, task_id: str, geom, all_ids: list[str], centroid
     ck = None
     t0 = time.perf_counter()
     if len(ep.ck_poses):
-        ck = evaluator.score_states(geom, ep.ck_poses, settings.checkpoint_mode, settings.backend)
+        ck = evaluator.score_states(geom, ep.ck_poses, settings.checkpoint_mode, settings.backend,
+                                    memo if settings.checkpoint_mode == "exact" else None)
         r.ck_pa, r.ck_sr, r.ck_sra, r.ck_scd = ck["pa"], ck["sr"], ck["sra"], ck["scd"]
         r.ck_part_errors, r.ck_assignment = ck["part_errors"], ck["assignment"]
         r.ck_reg_rotation, r.ck_reg_translation = ck["reg_rotation"], ck["reg_translation"]
@@ -131,7 +132,8 @@ def _score_run(req: RunRequest, task_id: str, geom, all_ids: list[str], centroid
         fin, row, poses = ck, len(ep.ck_poses) - 1, ep.ck_poses
     else:
         poses = ep.final_poses[None]
-        fin, row = evaluator.score_states(geom, poses, settings.final_mode, settings.backend), 0
+        fin, row = evaluator.score_states(geom, poses, settings.final_mode, settings.backend,
+                                          memo if settings.final_mode == "exact" else None), 0
     r.pa, r.sr, r.sra, r.scd = (float(fin[k][row]) for k in ("pa", "sr", "sra", "scd"))
     r.part_errors, r.assignment = fin["part_errors"][row], fin["assignment"][row]
     r.reg_rotation, r.reg_translation = fin["reg_rotation"][row], fin["reg_translation"][row]
@@ -165,6 +167,30 @@ def _load_official(job: TaskJob, inputs, t0: float):
     return geom, list(inputs.part_ids), inputs.centroids(), facts
 
 
+def _prescore_runs(job: TaskJob, geom, all_ids: list[str], centroids: np.ndarray) -> dict | None:
+    """On the jax backend, every ``exact`` state of every run of the task scored in one batch
+    (checkpoints of all systems fill each device call); ``None`` elsewhere, or where that batch
+    fails (each run is then scored, and fails, on its own)."""
+    st = job.settings
+    if not evaluator.batched_backend("exact", st.backend):
+        return None
+    poses = []
+    for req in job.runs:
+        try:
+            ep = read_episode(req.run_dir, job.task_id, all_ids, list(geom.part_ids), centroids, float(geom.divisor),
+                              final_only=st.final_only, trust_final=st.trust_final)
+        except Exception:  # noqa: BLE001 - unreadable here is reported by the run's own scoring
+            continue
+        if st.checkpoint_mode == "exact" and len(ep.ck_poses):
+            poses.append(ep.ck_poses)
+        if st.final_mode == "exact":
+            poses.append(ep.final_poses[None])
+    try:
+        return evaluator.prescore(geom, poses, "exact", st.backend)
+    except Exception:  # noqa: BLE001 - the per-run path reports the failure against its run
+        return None
+
+
 def score_task(job: TaskJob) -> TaskOutput:
     """Score every run of ``job``; never raises for a bad run or task (errors are in the output)."""
     evaluator.prepare_thread()
@@ -180,9 +206,10 @@ def score_task(job: TaskJob) -> TaskOutput:
                                               for r in job.runs], error=msg)
     geom, all_ids, centroids, facts = loaded
     out = TaskOutput(job.task_id, facts)
+    memo = _prescore_runs(job, geom, all_ids, centroids)
     for req in job.runs:
         try:
-            out.results.append(_score_run(req, job.task_id, geom, all_ids, centroids, job.settings))
+            out.results.append(_score_run(req, job.task_id, geom, all_ids, centroids, job.settings, memo))
         except Exception as exc:  # an evaluator failure on one run must not lose the others
             if isinstance(exc, OSError) and exc.errno in _WRITE_FAULTS:
                 raise

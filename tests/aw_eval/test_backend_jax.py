@@ -6,10 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import dataclasses
+
 import aw_eval
-from aw_eval.fixtures import random_checkpoints, swap_identical
+from aw_eval.fixtures import make_points_geometry, random_checkpoints, swap_identical
+from aw_eval.kernels import accelerator_present
 from aw_eval.registration import resolve_backend
-from eval_helpers import small_task
+from eval_helpers import small_settings, small_task
 
 
 def _agree(a, b):
@@ -37,9 +40,31 @@ def test_jax_batch_equals_numba_exact_with_swapped_identical_parts():
 def test_backend_choice_and_bad_input():
     assert resolve_backend("numba", "fast") == "numba"
     assert resolve_backend("jax", "exact") == "jax"
-    # the tests run JAX on the CPU: auto keeps the compiled CPU kernels
-    assert resolve_backend("auto", "exact") == "numba"
+    # auto: jax for exact where JAX sees a GPU or TPU, else the compiled CPU kernels
+    assert resolve_backend("auto", "exact") == ("jax" if accelerator_present() else "numba")
+    assert resolve_backend("auto", "fast") == "numba"
     with pytest.raises(ValueError, match="backend 'jax' runs mode 'exact' only"):
         resolve_backend("jax", "fast")
     with pytest.raises(ValueError, match="backend must be one of"):
         resolve_backend("gpu", "exact")
+
+
+def test_knife_edge_thresholds_decide_alike():
+    """Thresholds set 1e-7 relative above and below a part error and an SCD the numba backend
+    measured: the decisions there (PA, SR, SR^a) are the same on both backends."""
+    geom, obj = small_task(3, 16)
+    cks = random_checkpoints(obj, 4, seed=11)
+    base = aw_eval.score_batch(geom, cks, mode="exact", backend="numba")
+    errors = base.part_errors[base.part_errors > 1e-12]
+    scds = base.scd[base.scd > 1e-12]
+    assert len(errors) and len(scds)
+    for sign in (-1.0, 1.0):
+        st = dataclasses.replace(small_settings(16), threshold=float(np.sort(errors)[len(errors) // 2]) * (1 + sign * 1e-7),
+                                 sra_threshold=float(np.sort(scds)[len(scds) // 2]) * (1 + sign * 1e-7))
+        g, _ = make_points_geometry(3, 16, 0, st)
+        numba = aw_eval.score_batch(g, cks, mode="exact", backend="numba")
+        jax = aw_eval.score_batch(g, cks, mode="exact", backend="jax")
+        assert np.any(np.abs(numba.part_errors / st.threshold - 1) < 1e-6)  # a knife edge is scored
+        _agree(numba, jax)
+        stats = jax.stats["jax"]
+        assert stats["lanes_iterated"] >= stats["lane_iterations"] > 0

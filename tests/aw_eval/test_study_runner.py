@@ -86,3 +86,43 @@ def test_jax_backend_scores_a_study_as_numba_does(tmp_path):
     assert a.score.status == b.score.status == "scored"
     assert (a.score.pa, a.score.sr, a.score.sra) == (b.score.pa, b.score.sr, b.score.sra)
     assert abs(a.score.scd - b.score.scd) <= 1e-9 * abs(a.score.scd) + 1e-20
+
+
+def test_jax_backend_scores_every_exact_checkpoint_of_a_task_in_one_batch(tmp_path, monkeypatch):
+    """``aw-score --checkpoint-mode exact --backend jax``: the checkpoints and final states of
+    every run of a task (two systems here) are scored in one ``score_batch`` call, with the
+    numba backend's decisions on every checkpoint."""
+    import aw_eval
+
+    blocks = (("fantastic_breaks", ("none",)),)
+    suite = box_suite(tmp_path / "suite", objects_per_source=1, n_parts=2, blocks=blocks)
+    task = "fantastic_breaks-box000-none"
+    for system, correct in (("S", ["p01"]), ("T", None)):
+        write_scripted_run(tmp_path / "runs" / system / task, suite, task, system=system, correct=correct,
+                           inspect_moves=False)
+    geo = tmp_path / "geometry"
+    real = aw_eval.score_batch
+    calls = []
+
+    def counted(geom, poses, *a, **kw):
+        calls.append((len(poses), kw.get("backend")))
+        return real(geom, poses, *a, **kw)
+
+    monkeypatch.setattr(aw_eval, "score_batch", counted)
+    out = {}
+    for backend in ("numba", "jax"):
+        calls.clear()
+        settings = ScoreSettings(checkpoint_mode="exact", protocol=SMALL, backend=backend)
+        out[backend] = score_study(suite, tmp_path / "runs", tmp_path / backend, settings, n_jobs=1, progress=False,
+                                   geometry_cache=geo)[0]
+        out[backend + "_calls"] = list(calls)
+    assert len(out["jax_calls"]) == 1 and out["jax_calls"][0][1] == "jax"  # both runs' states, one batch
+    assert len(out["numba_calls"]) >= 2  # numba: per run
+    assert out["jax_calls"][0][0] >= 4
+    for key, a in out["numba"].runs.items():
+        b = out["jax"].runs[key].score
+        a = a.score
+        assert a.status == b.status == "scored"
+        assert np.array_equal(a.ck_pa, b.ck_pa) and np.array_equal(a.ck_sr, b.ck_sr) and np.array_equal(a.ck_sra, b.ck_sra)
+        assert np.all(np.abs(a.ck_scd - b.ck_scd) <= 1e-9 * np.abs(a.ck_scd) + 1e-20)
+        assert (a.pa, a.sr, a.sra) == (b.pa, b.sr, b.sra)
