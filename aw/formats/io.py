@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+import tempfile
 from pathlib import Path
 from typing import TypeVar, get_args
 
@@ -119,3 +121,28 @@ def write_json_atomic(path: str | Path, obj: object) -> None:
     except BaseException:
         tmp.unlink(missing_ok=True)  # a full disk leaves no half-written temporary behind
         raise
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether a process ``pid`` exists on this machine (one of another user's counts)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def staging_dir(parent: str | Path, name: str) -> Path:
+    """A new hidden folder ``parent/.NAME-<pid>-<random>`` to build in before the result is moved
+    into place (readers skip hidden folders). Folders of the same ``name`` that a killed process
+    left are removed first."""
+    parent = Path(parent)
+    parent.mkdir(parents=True, exist_ok=True)
+    prefix = f".{name}-"
+    for old in parent.glob(prefix + "*"):
+        pid = old.name[len(prefix):].split("-")[0]
+        if pid.isdigit() and not pid_alive(int(pid)):
+            shutil.rmtree(old, ignore_errors=True)
+    return Path(tempfile.mkdtemp(dir=parent, prefix=f"{prefix}{os.getpid()}-"))

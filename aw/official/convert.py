@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import tempfile
 from collections.abc import Iterable
 from datetime import datetime
 from pathlib import Path
@@ -32,6 +31,7 @@ import orjson
 
 from aw.formats import (FinalState, FormatError, PartTarget, RunInfo, SuiteEntry, SuiteManifest, Targets, write_final,
                         write_manifest, write_run_info, write_targets)
+from aw.formats.io import staging_dir
 from aw.formats.suite import suite_paths
 from aw.formats.trajectory import CameraState, TrajectoryCall, TrajectoryEnd, TrajectoryHeader
 from aw.official.archive import EpisodeArchive, iso_timestamp, parse_timestamp
@@ -54,30 +54,6 @@ def initial_archive_path(suite_dir: str | Path, task_id: str) -> Path:
 
 
 _SUITE_ITEMS = ("targets", "eval_points", "official", "tasks", "manifest.json")  # manifest.json last: it makes a suite
-_STAGING = ".aw-staging-"
-
-
-def _staging(parent: Path) -> Path:
-    """A hidden folder in ``parent`` to write into before anything is moved into place (readers
-    skip hidden folders); the ones a killed conversion left are removed first."""
-    parent.mkdir(parents=True, exist_ok=True)
-    for old in parent.glob(_STAGING + "*"):
-        pid = old.name[len(_STAGING):].split("-")[0]
-        if pid.isdigit() and not _alive(int(pid)):
-            shutil.rmtree(old, ignore_errors=True)
-    return Path(tempfile.mkdtemp(dir=parent, prefix=f"{_STAGING}{os.getpid()}-"))
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def _existing_suite(out: Path, force: bool) -> None:
     existing = [out / n for n in _SUITE_ITEMS if (out / n).exists()]
     if existing and not force:
@@ -141,7 +117,7 @@ def convert_package(package: str | Path | OfficialPackage, suite_out: str | Path
     chosen = _chosen_samples(pkg, samples)
     out = Path(suite_out)
     _existing_suite(out, force)
-    staged = _staging(out)
+    staged = staging_dir(out, "aw-staging")
     try:
         manifest = _write_suite(pkg, staged, chosen)
         _commit_suite(staged, out)
@@ -396,7 +372,7 @@ def convert(package: str | Path, episodes: str | Path | Iterable[str | Path], su
         _free_run_dir(run_dir, force)
     # Everything is read and written in hidden folders first, then moved into place: a bad archive
     # or a full disk leaves neither a suite nor runs that look complete.
-    staged_suite, staged_runs = _staging(suite), _staging(runs_root)
+    staged_suite, staged_runs = staging_dir(suite, "aw-staging"), staging_dir(runs_root, "aw-staging")
     try:
         manifest = _write_suite(pkg, staged_suite, chosen)
         for (name, block, sid, arc, extra), run_dir in zip(items, targets):

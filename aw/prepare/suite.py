@@ -13,7 +13,6 @@ import importlib
 import multiprocessing
 import os
 import shutil
-import tempfile
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -24,6 +23,7 @@ import numpy as np
 
 from aw.assembly import AssembledObject
 from aw.formats import SuiteEntry, SuiteManifest, write_manifest
+from aw.formats.io import staging_dir
 from aw.prepare.build import VariantPlan, prepare_object
 from aw.prepare.geometry import part_size_ratio
 from aw.prepare.references import IMAGE_SIZE, MANUAL_SIZE
@@ -169,7 +169,7 @@ def build_suite(
     out.mkdir(parents=True, exist_ok=True)
     # Built in a hidden folder inside ``out`` and moved into place whole: a failure or Ctrl-C
     # leaves no partial suite (nor half of a replaced one), and the same command can be rerun.
-    stage = Path(tempfile.mkdtemp(prefix=".partial-suite-", dir=out))
+    stage = staging_dir(out, "partial-suite")  # also removes those a killed build left
     try:
         manifest, done = _build_into(specs, prepare_output_dir(stage), name=name, generator=generator, seed=seed,
                                      variants=variants, jobs=jobs, progress=progress, image_size=image_size,

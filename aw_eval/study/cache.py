@@ -13,6 +13,7 @@ import hashlib
 import os
 from pathlib import Path
 
+from aw.formats.io import pid_alive
 from aw_eval.study.model import RunScore, TaskFacts, load_npz, save_npz
 
 __all__ = ["CACHE_VERSION", "file_digest", "geometry_key", "run_key", "Cache"]
@@ -56,16 +57,6 @@ def run_key(geom_key: str, run_dir: Path, settings_key: str, evaluator_version: 
     return h.hexdigest()[:_KEY_LEN]
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def _drop_others(keep: Path) -> None:
     """Remove stale entries next to ``keep`` (same run, older keys)."""
     for old in keep.parent.glob("*.npz"):
@@ -84,7 +75,7 @@ class Cache:
         for sub in ("runs", "tasks"):
             for tmp in (self.root / sub).rglob("*.npz.tmp*"):
                 pid = tmp.name.rpartition(".tmp")[2]
-                if pid.isdigit() and _alive(int(pid)) and int(pid) != os.getpid():
+                if pid.isdigit() and pid_alive(int(pid)) and int(pid) != os.getpid():
                     continue
                 tmp.unlink(missing_ok=True)
                 removed += 1
