@@ -18,6 +18,7 @@ says so with the estimate, and a progress display (:func:`aw.progress.progress`)
 
 from __future__ import annotations
 
+import multiprocessing
 import time
 import warnings
 from collections.abc import Callable
@@ -65,7 +66,9 @@ def components(n: int, candidates: np.ndarray, is_edge: Callable[[int, int], boo
 
     total = len(candidates)
     pairs = candidates.tolist()
-    bar = progress(total, what, unit="pair", enabled=show_progress and total >= _BAR_FROM, leave=False)
+    # in a worker process (aw-score's pool, Dask) the parent owns the display: no second bar over it
+    shown = show_progress and total >= _BAR_FROM and multiprocessing.parent_process() is None
+    bar = progress(total, what, unit="pair", enabled=shown, leave=False)
     started = time.monotonic()
     check_at, warned = _SAMPLE_S, False
     timed, timed_s = 0, 0.0  # registrations after the first (which may load compiled code) and their time

@@ -86,3 +86,19 @@ def _recording_progress(total, desc, unit="it", *, enabled=True, leave=True):
     from aw.progress import progress
 
     return progress(total, desc, unit, enabled=enabled, file=_OUT, interval=0.0, leave=leave)
+
+
+def _components_in_a_worker(n: int) -> list[list[int]]:
+    pair_search._BAR_FROM = 1
+    pair_search.progress = _recording_progress
+    _OUT.truncate(0)
+    groups = components(n, candidate_pairs(np.zeros((n, n)), 1.0), lambda i, j: True, what="groups")
+    assert _OUT.getvalue() == ""  # nothing drawn: the parent process owns the display
+    return groups
+
+
+def test_a_worker_process_draws_no_progress_of_its_own():
+    import multiprocessing
+
+    with multiprocessing.get_context("spawn").Pool(1) as pool:
+        assert pool.apply(_components_in_a_worker, (25,)) == [list(range(25))]
