@@ -4,12 +4,12 @@ directory."""
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any, Callable
 
 import orjson
 
+from aw.formats.io import write_bytes_atomic
 from aw_eval.report.csvs import write_checkpoint_csv, write_task_csv
 from aw_eval.report.markdown import render_markdown
 from aw_eval.report.plots import write_plots
@@ -22,16 +22,7 @@ __all__ = ["SCHEMA", "SCHEMA_VERSION", "AnalysisSettings", "build_results", "ren
 
 def write_json(path: Path, doc: Any) -> None:
     data = orjson.dumps(doc, option=orjson.OPT_INDENT_2 | orjson.OPT_SERIALIZE_NUMPY | orjson.OPT_NON_STR_KEYS)
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    try:
-        tmp.write_bytes(data + b"\n")
-        os.replace(tmp, path)
-    except OSError as exc:  # a full disk: no partial file is left behind, and the error names the file
-        tmp.unlink(missing_ok=True)
-        raise OSError(exc.errno, exc.strerror, str(path)) from None
-    except BaseException:  # an interrupt: the same
-        tmp.unlink(missing_ok=True)
-        raise
+    write_bytes_atomic(path, data + b"\n")  # a full disk leaves no partial file and names this one
 
 
 def _refinement(suite_dir: str, runs_dir: str) -> dict[str, Any] | None:

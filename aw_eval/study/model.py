@@ -8,13 +8,14 @@ as one JSON document inside the same ``.npz`` (no pickles: ``allow_pickle=False`
 from __future__ import annotations
 
 import io
-import os
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import orjson
+
+from aw.formats.io import write_bytes_atomic
 
 __all__ = ["RunScore", "TaskFacts", "save_npz", "load_npz", "STATUS_SCORED", "STATUS_MISSING", "STATUS_UNREADABLE"]
 
@@ -133,16 +134,7 @@ def save_npz(path: str | Path, obj: RunScore | TaskFacts) -> None:
     meta_bytes = orjson.dumps({"kind": type(obj).__name__, **meta}, option=orjson.OPT_SERIALIZE_NUMPY)
     buf = io.BytesIO()
     np.savez_compressed(buf, __meta__=np.frombuffer(meta_bytes, dtype=np.uint8), **arrays)
-    tmp = path.with_name(path.name + f".tmp{os.getpid()}")
-    try:
-        tmp.write_bytes(buf.getvalue())
-        os.replace(tmp, path)
-    except OSError as exc:  # a full disk: no partial file is left behind, and the error names the entry
-        tmp.unlink(missing_ok=True)
-        raise OSError(exc.errno, exc.strerror, str(path)) from None
-    except BaseException:  # an interrupt: the same
-        tmp.unlink(missing_ok=True)
-        raise
+    write_bytes_atomic(path, buf.getvalue())  # a full disk leaves no partial entry and names this one
 
 
 def load_npz(path: str | Path) -> RunScore | TaskFacts:
