@@ -40,14 +40,21 @@ def _pair_cd(x, y, st):
     return ref.register(qs[0], qs[1], [(s, np.zeros(3)) for s in cube_rotations()], st).scd
 
 
-def test_groups_are_transitive_closures():
-    # b moves one point of a by eps, c moves one more: a~b and b~c within 1e-4, a and c not
+def _chain():
+    """Clouds a, b, c where b moves one point of a by 0.034 and c one more: a~b and b~c within
+    1e-4, a and c not; and the generator, for more clouds."""
     rng = np.random.default_rng(4)
     a = rng.normal(size=(30, 3)) * [1.0, 0.5, 0.25]
     b = a.copy()
     b[0, 0] += 0.034
     c = b.copy()
     c[1, 0] += 0.034
+    return a, b, c, rng
+
+
+def test_groups_are_transitive_closures():
+    # b moves one point of a by eps, c moves one more: a~b and b~c within 1e-4, a and c not
+    a, b, c, rng = _chain()
     st = ProtocolSettings(n_surface=30, n_fps=30, max_iters=30, equiv_cd=1e-4)
     assert _pair_cd(a, b, st) <= 1e-4 and _pair_cd(b, c, st) <= 1e-4 and _pair_cd(a, c, st) > 1e-4
     groups = equivalence_groups(np.stack([a, b, c]), 1.0, st)
@@ -155,12 +162,7 @@ def test_candidate_search_equals_registering_every_pair(monkeypatch):
 
 def test_near_threshold_chain_is_joined_as_by_every_pair():
     # a ~ b and b ~ c within 1e-4, a and c not: the candidate order must not split the chain
-    rng = np.random.default_rng(4)
-    a = rng.normal(size=(30, 3)) * [1.0, 0.5, 0.25]
-    b = a.copy()
-    b[0, 0] += 0.034
-    c = b.copy()
-    c[1, 0] += 0.034
+    a, b, c, rng = _chain()
     far = rng.normal(size=(30, 3)) * [0.3, 0.3, 0.3]
     st = ProtocolSettings(n_surface=30, n_fps=30, max_iters=30)
     clouds = np.stack([c, far, a, b])
