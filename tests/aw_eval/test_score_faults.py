@@ -39,7 +39,8 @@ def _default_sigint() -> None:
 
 def _aw_score(study, out, *extra, preexec=_default_sigint, **kw) -> subprocess.Popen:
     suite, runs = study
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
+    # No bytecode written: under a file size limit CPython would install .pyc files cut short.
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path), "PYTHONDONTWRITEBYTECODE": "1"}
     return subprocess.Popen([sys.executable, "-m", "aw_eval.cli", str(suite), str(runs), "--out", str(out), *extra],
                             env=env, preexec_fn=preexec, stderr=subprocess.PIPE, text=True, **kw)
 

@@ -66,6 +66,8 @@ async def test_hostile_input_is_answered_in_one_line_and_recorded(box_task, tmp_
 
 # Starts aw-serve with its stderr in a file and, if given a byte limit, RLIMIT_FSIZE set: a file
 # written past the limit fails with EFBIG (Python ignores SIGXFSZ), as a full disk fails with ENOSPC.
+# Run it with -B: CPython installs a bytecode cache file cut short at the limit, which would break
+# every later import of that module in the checkout.
 _WRAPPER = """
 import os, resource, sys
 limit, errlog = int(sys.argv[1]), sys.argv[2]
@@ -135,7 +137,7 @@ async def test_full_disk_changes_nothing_and_never_contradicts_replies(box_task,
     run, errlog = disk / "run", tmp_path / "stderr.txt"
     params = StdioServerParameters(
         command=sys.executable,
-        args=["-c", _WRAPPER, str(limit), str(errlog), str(task_dir), "--record", str(run), "--surface", surface])
+        args=["-B", "-c", _WRAPPER, str(limit), str(errlog), str(task_dir), "--record", str(run), "--surface", surface])
     dx, filler, told_ok, failure = 0.01, None, 0, ""
     async with Client(params) as c:
         assert (await _edit(c, surface, dx))[0]
@@ -176,7 +178,7 @@ def test_a_run_directory_that_takes_no_header_is_refused_in_one_line(box_task, t
     import sys
 
     task_dir, _, _ = box_task
-    r = subprocess.run([sys.executable, "-c", _WRAPPER, "100", "-", str(task_dir), "--record", str(tmp_path / "run")],
+    r = subprocess.run([sys.executable, "-B", "-c", _WRAPPER, "100", "-", str(task_dir), "--record", str(tmp_path / "run")],
                        stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=120)
     lines = r.stderr.splitlines()  # a pipe: not limited like the files
     assert r.returncode == 2 and len(lines) == 1, lines

@@ -114,7 +114,8 @@ def test_a_full_disk_while_writing_the_evaluation_is_one_line_and_leaves_nothing
     out = tmp_path / "out"
     proc = subprocess.run([sys.executable, "-m", "aw_eval.cli", str(package.root), str(pristine.parent), "--out", str(out),
                            "--jobs", "1"], preexec_fn=limit, capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+                          env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path), "PYTHONDONTWRITEBYTECODE": "1"})
+    # (no bytecode written: under the limit CPython would install .pyc files cut short)
     assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
     assert _one_line_error(proc.stderr, "aw-score").endswith("metrics.jsonl: File too large")
     assert [p.name for p in out.iterdir()] == [".aw-lock"]
