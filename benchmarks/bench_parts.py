@@ -106,8 +106,7 @@ def step_geometry(suite: Path) -> dict:
     poses = np.asarray([targets.parts[pid].pose for pid in ids])
     geom = TaskGeometry(tuple(ids), clouds, poses, divisor, groups, st)
     index = geom.index() if callable(geom.index) else geom.index
-    index.graph_t  # noqa: B018 (built on first use: the joined target's Delaunay graph)
-    index._build_parts()  # each part's tree and graph, target and baked: what scoring builds once
+    index._build_parts()  # each part's baked tree and graph (target and prediction walk them): what scoring builds once
     out["index_s"] = time.perf_counter() - t
     geom.save(suite / "geometry.npz")  # for the score step
     out["total_s"] = sum(v for k, v in out.items() if k.endswith("_s"))
