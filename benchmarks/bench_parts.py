@@ -83,7 +83,9 @@ def step_geometry(suite: Path) -> dict:
     from aw.meshes import load_mesh
     from aw_eval.equivalence import equivalence_groups
     from aw_eval.geometry import TaskGeometry, part_divisor
-    from aw_eval.sampling import fps_jax, part_seed, surface_samples
+    from aw.pair_search import local_workers
+    from aw_eval.kernels.fps import fps_batch
+    from aw_eval.sampling import part_seed, surface_samples
     from aw_eval.settings import ProtocolSettings
 
     task_dir, targets_path = _task(suite)
@@ -96,7 +98,7 @@ def step_geometry(suite: Path) -> dict:
     out["load_s"], t = time.perf_counter() - t, time.perf_counter()
     cands = np.stack([surface_samples(m, st.n_surface, part_seed(st.seed, i)) for i, m in enumerate(meshes)])
     out["sampling_s"], t = time.perf_counter() - t, time.perf_counter()
-    idx = fps_jax(cands, st.n_fps)
+    idx = fps_batch(cands, st.n_fps, threads=local_workers())  # what aw_eval.sampling.part_clouds runs
     clouds = np.take_along_axis(cands, idx[..., None], axis=1)
     out["fps_s"], t = time.perf_counter() - t, time.perf_counter()
     divisor = targets.eval_divisor or max(part_divisor(np.asarray(m.vertices)) for m in meshes)

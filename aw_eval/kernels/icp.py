@@ -217,7 +217,7 @@ def kabsch_pairs(p, t, fc, bc):
     return r, cd - r @ cs
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # registrations run in threads (aw.pair_search.components)
 def _icp(p, t, tree_t, tree_p, gt, gp, parts, tparts, r0, t0, max_iters, tol, stop_at):
     n, m = p.shape[0], t.shape[0]
     fc = np.zeros(n, np.int64)
