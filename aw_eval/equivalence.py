@@ -71,7 +71,7 @@ def equivalence_groups(clouds: np.ndarray, divisor: float, settings: ProtocolSet
     def search(i: int) -> tuple:  # built once per part, only for parts that are registered
         if i not in structures:  # two threads may both build one: the same, and the last kept
             tree = build_tree(qs[i])
-            structures[i] = (tree, graph_for(tree))
+            structures[i] = (tree, graph_for(tree, clouds[i]))  # Qhull run shared with the task's index
         return structures[i]
 
     def is_edge(i: int, j: int) -> bool:

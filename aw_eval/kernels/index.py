@@ -59,7 +59,7 @@ class TaskIndex:
         tp = self.target_parts
         self.target_boxes = (tp.min(axis=1), tp.max(axis=1))  # ((P, 3), (P, 3))
         self.target_means = tp.mean(axis=1)  # (P, 3)
-        self.baked = [(tree, graph_for(tree)) for tree in (build_tree(c) for c in self._clouds)]
+        self.baked = [(tree, graph_for(tree, c)) for tree, c in ((build_tree(c), c) for c in self._clouds)]
         self.part_clouds = build_part_clouds(self.baked)  # None: a part has no graph
         self.target_walk = None  # the target through the parts' clouds (TargetWalk), where they and the poses are
         if self.part_clouds is not None and self._poses is not None:
