@@ -108,7 +108,8 @@ def step_geometry(suite: Path) -> dict:
     poses = np.asarray([targets.parts[pid].pose for pid in ids])
     geom = TaskGeometry(tuple(ids), clouds, poses, divisor, groups, st)
     index = geom.index() if callable(geom.index) else geom.index
-    index._build_parts()  # each part's baked tree and graph (target and prediction walk them): what scoring builds once
+    index._build_parts()  # each part's baked tree and graph: what part distances walk (the joined target's graph is
+    # built by the first checkpoint's ICP: in the score step)
     out["index_s"] = time.perf_counter() - t
     geom.save(suite / "geometry.npz")  # for the score step
     out["total_s"] = sum(v for k, v in out.items() if k.endswith("_s"))

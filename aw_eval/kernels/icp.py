@@ -29,7 +29,6 @@ Arrays: ``p (n, 3)`` prediction, ``t_pts (m, 3)`` target, rotations ``(3, 3)``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -38,7 +37,7 @@ from aw_eval.kernels.delaunay import DelaunayGraph, build_graph, cloud_neighbour
 from aw_eval.kernels.kdtree import STACK, KDTree, build_tree, nearest2
 from aw_eval.kernels.partwalk import PartClouds, build_part_clouds, no_part_clouds, part_maps, parts_pass
 
-__all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "TargetWalk", "build_tree", "graph_for", "kabsch_pairs", "nearest_positions"]
+__all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "build_tree", "graph_for", "kabsch_pairs", "nearest_positions"]
 
 # Safety margin of the certificate in normalized units (coordinates are O(1); rounding is ~1e-16).
 _MARGIN = 1e-10
@@ -126,14 +125,12 @@ class CertifiedNN:
 
 
 @njit(cache=True)
-def _evaluate(p, t, tree_t, tree_p, gt, gp, parts, tparts, r, tr, fc, fx, fd, bc, bx, bd, fresh, xs, ys, stack, bounds,
-              stats, tstats):
+def _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r, tr, fc, fx, fd, bc, bx, bd, fresh, xs, ys, stack, bounds, stats):
     """Objective at ``(r, tr)`` and neighbours of both directions (tree positions into ``fc``,
     ``bc``); returns ``(objective, searched)``. ``p (n, 3)``, ``t (m, 3)`` in tree order (``p`` in
     the part clouds' order when ``parts = (clouds, A, b, divisor, warm)`` has parts: the
     backward search then walks the parts' graphs, see :mod:`aw_eval.kernels.partwalk`, adding its
-    searches and walks to ``stats (2,)``; likewise ``t`` and the forward search with ``tparts``,
-    counted in ``tstats``)."""
+    searches and walks to ``stats (2,)``)."""
     n, m = p.shape[0], t.shape[0]
     for i in range(n):
         for k in range(3):
@@ -142,10 +139,7 @@ def _evaluate(p, t, tree_t, tree_p, gt, gp, parts, tparts, r, tr, fc, fx, fd, bc
         a, b, c = t[i, 0] - tr[0], t[i, 1] - tr[1], t[i, 2] - tr[2]
         for k in range(3):  # R^T (T - t)
             ys[i, k] = r[0, k] * a + r[1, k] * b + r[2, k] * c
-    if tparts[0][1].shape[0] > 0:
-        searched = parts_pass(tparts[0], tparts[1], tparts[2], tparts[3], xs, fc, fx, fd, fresh, tparts[4], tstats)
-    else:
-        searched = _certified_pass(tree_t, gt, xs, fc, fx, fd, fresh, stack, bounds)
+    searched = _certified_pass(tree_t, gt, xs, fc, fx, fd, fresh, stack, bounds)
     if parts[0][1].shape[0] > 0:
         searched += parts_pass(parts[0], parts[1], parts[2], parts[3], ys, bc, bx, bd, fresh, parts[4], stats)
     else:
@@ -218,7 +212,7 @@ def kabsch_pairs(p, t, fc, bc):
 
 
 @njit(cache=True, nogil=True)  # registrations run in threads (aw.pair_search.components)
-def _icp(p, t, tree_t, tree_p, gt, gp, parts, tparts, r0, t0, max_iters, tol, stop_at):
+def _icp(p, t, tree_t, tree_p, gt, gp, parts, r0, t0, max_iters, tol, stop_at):
     n, m = p.shape[0], t.shape[0]
     fc = np.zeros(n, np.int64)
     bc = np.zeros(m, np.int64)
@@ -231,9 +225,8 @@ def _icp(p, t, tree_t, tree_p, gt, gp, parts, tparts, r0, t0, max_iters, tol, st
     stack = np.empty(STACK, np.int64)
     bounds = np.empty(STACK)
     stats = np.zeros(2, np.int64)
-    tstats = np.zeros(2, np.int64)
-    obj, searched = _evaluate(p, t, tree_t, tree_p, gt, gp, parts, tparts, r0, t0, fc, fx, fd, bc, bx, bd, True, xs, ys, stack,
-                              bounds, stats, tstats)
+    obj, searched = _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r0, t0, fc, fx, fd, bc, bx, bd, True, xs, ys, stack, bounds,
+                              stats)
     best, best_r, best_t = obj, r0.copy(), t0.copy()
     prev = obj
     it = 0
@@ -242,8 +235,8 @@ def _icp(p, t, tree_t, tree_p, gt, gp, parts, tparts, r0, t0, max_iters, tol, st
     while it < max_iters:
         it += 1
         r, tr = kabsch_pairs(p, t, fc, bc)
-        new, s = _evaluate(p, t, tree_t, tree_p, gt, gp, parts, tparts, r, tr, fc, fx, fd, bc, bx, bd, False, xs, ys, stack,
-                           bounds, stats, tstats)
+        new, s = _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r, tr, fc, fx, fd, bc, bx, bd, False, xs, ys, stack, bounds,
+                           stats)
         searched += s
         if new < best:
             best, best_r, best_t = new, r, tr
@@ -283,74 +276,43 @@ class ICPResult:
     part_walks: int = 0  # the part walks those took (several per search where parts touch)
 
 
-class TargetWalk(NamedTuple):
-    """A target searched by walks in the parts' baked clouds (:mod:`aw_eval.kernels.partwalk`)
-    instead of a tree and graph of its own: the target is the union of the parts' clouds moved
-    by the target poses, so its nearest neighbours are those of the posed assembly, and the
-    structures already built for the backward search serve (nothing is built for the target)."""
-
-    clouds: PartClouds  # the parts' baked clouds
-    a: np.ndarray  # (P, 3, 3) ``part_maps`` of the target poses: normalized target -> baked frames
-    b: np.ndarray  # (P, 3)
-    divisor: float
-    points: np.ndarray  # (N, 3) the normalized target in the clouds' row order
-
-    @classmethod
-    def of(cls, clouds: PartClouds, target_parts: np.ndarray, poses: np.ndarray, divisor: float,
-           rotations: np.ndarray | None = None) -> "TargetWalk":
-        """``target_parts (P, n, 3)`` = the baked clouds posed by ``poses (P, 7)`` over ``divisor``."""
-        a, b = part_maps(poses, divisor, rotations)
-        return cls(clouds, a, b, float(divisor), np.ascontiguousarray(target_parts[clouds.part_of, clouds.rows]))
-
-    def kernel_args(self) -> tuple:
-        return (tuple(self.clouds), self.a, self.b, self.divisor, np.zeros(len(self.a), np.int64))
-
-
 class ICPProblem:
     """Registration of one prediction ``p (n, 3)`` onto one target ``t_pts (m, 3)``.
 
     ``tree_t`` (target) may be shared across checkpoints of a task; ``tree_p`` is built here
     unless given (both from :func:`aw_eval.kernels.kdtree.build_tree`). The search always certifies
     (it never changes a result). :meth:`for_assembly` searches the prediction through its parts'
-    clouds instead (no structure built per checkpoint); ``target``: the target searched through
-    the parts' clouds too (:class:`TargetWalk`; ``t_pts``, ``tree_t`` and ``graph_t`` are then
-    not used).
+    clouds instead (no structure built per checkpoint).
     """
 
-    def __init__(self, p: np.ndarray, t_pts: np.ndarray | None, tree_t: KDTree | None = None, tree_p: KDTree | None = None,
-                 graph_t: DelaunayGraph | None = None, graph_p: DelaunayGraph | None = None,
-                 target: TargetWalk | None = None):
+    def __init__(self, p: np.ndarray, t_pts: np.ndarray, tree_t: KDTree | None = None, tree_p: KDTree | None = None,
+                 graph_t: DelaunayGraph | None = None, graph_p: DelaunayGraph | None = None):
+        self.tree_t = build_tree(t_pts) if tree_t is None else tree_t
         self.tree_p = build_tree(p) if tree_p is None else tree_p
         # the kernels work in tree order; sums over all points do not depend on the order
         self._p = self.tree_p.points
-        self._gp = tuple(graph_p or no_graph())
-        self._parts = _NO_PARTS
-        self._set_target(t_pts, tree_t, graph_t, target)
-
-    def _set_target(self, t_pts, tree_t, graph_t, target: TargetWalk | None) -> None:
-        if target is not None:
-            self.tree_t, self._t, self._gt, self._tparts = _no_tree(), target.points, tuple(no_graph()), target.kernel_args()
-            return
-        self.tree_t = build_tree(t_pts) if tree_t is None else tree_t
         self._t = self.tree_t.points
         self._gt = tuple(graph_t or no_graph())
-        self._tparts = _NO_PARTS
+        self._gp = tuple(graph_p or no_graph())
+        self._parts = _NO_PARTS
 
     @classmethod
     def for_assembly(cls, pred_parts: np.ndarray, poses: np.ndarray, divisor: float, clouds: PartClouds,
-                     t_pts: np.ndarray | None, tree_t: KDTree | None = None, graph_t: DelaunayGraph | None = None,
-                     rotations: np.ndarray | None = None, target: TargetWalk | None = None) -> "ICPProblem":
+                     t_pts: np.ndarray, tree_t: KDTree | None = None, graph_t: DelaunayGraph | None = None,
+                     rotations: np.ndarray | None = None) -> "ICPProblem":
         """The prediction ``pred_parts (P, n, 3)`` of the poses ``(P, 7)`` (normalized by
         ``divisor``), searched by walks in its parts' baked clouds ``clouds`` (built once per
         task, :func:`aw_eval.kernels.partwalk.build_part_clouds`) instead of a tree of its own.
         ``rotations``: the poses' rotation matrices ``(P, 3, 3)`` where the caller has them."""
         prob = cls.__new__(cls)
+        prob.tree_t = build_tree(t_pts) if tree_t is None else tree_t
         prob.tree_p = _no_tree()
         prob._p = np.ascontiguousarray(pred_parts[clouds.part_of, clouds.rows])  # the clouds' row order
+        prob._t = prob.tree_t.points
+        prob._gt = tuple(graph_t or no_graph())
         prob._gp = tuple(no_graph())
         a, b = part_maps(poses, divisor, rotations)
         prob._parts = (tuple(clouds), a, b, float(divisor), np.zeros(len(a), np.int64))
-        prob._set_target(t_pts, tree_t, graph_t, target)
         return prob
 
     def run(self, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float, stop_at: float | None = None) -> ICPResult:
@@ -363,7 +325,7 @@ class ICPProblem:
         t0 = np.ascontiguousarray(t0, dtype=np.float64)
         stop = -np.inf if stop_at is None else float(stop_at)
         obj, r, t, it, searched, stats = _icp(self._p, self._t, tuple(self.tree_t), tuple(self.tree_p), self._gt, self._gp,
-                                       self._parts, self._tparts, r0, t0, int(max_iters), float(tol), stop)
+                                       self._parts, r0, t0, int(max_iters), float(tol), stop)
         return ICPResult(float(obj), r, t, int(it), int(searched), int(stats[0]), int(stats[1]))
 
 

@@ -4,12 +4,12 @@ which the protocol asks for nearest neighbours and ICP problems.
 ``TaskIndex`` holds the normalized target (``(P, n, 3)`` parts, ``(P n, 3)`` joined) with the
 joined target's KD-tree, and every part's cloud in its baked frame (which a checkpoint only moves
 rigidly) with its KD-tree and Delaunay graph, joined for walks through a posed assembly
-(:mod:`aw_eval.kernels.partwalk`). The target is itself such an assembly (the baked clouds moved
-by the target poses), so both directions of a checkpoint's ICP and of a part-to-part distance
-walk the same baked graphs: one Qhull run per part and task, none of the joined target (whose
-Delaunay graph, ``graph_t``, grew as ``N log N`` in all the points, 8 s at 100 parts of 1000
-points). Everything beyond the joined target's tree is built on first use; nothing here
-depends on a checkpoint.
+(:mod:`aw_eval.kernels.partwalk`). A part-to-part distance walks the baked graphs both ways (a
+target part is its baked cloud posed), so no target part has structures of its own, and a
+part's Qhull run is shared with the equivalence search. The joined target's Delaunay graph
+(``graph_t``, one Qhull run over all the points) is built on the first checkpoint's ICP: a
+walk through the target's parts would spare it, but visits every part's box per searched
+query and took twice the CPU per checkpoint at 100 parts. Nothing here depends on a checkpoint.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from aw_eval.kernels.cellgrid import JOINED_K, JOINED_MARGIN_CELLS, build_part_grids
-from aw_eval.kernels.icp import ICPProblem, TargetWalk, graph_for, nearest_positions
+from aw_eval.kernels.icp import ICPProblem, graph_for, nearest_positions
 from aw_eval.kernels.kdtree import build_tree
 from aw_eval.kernels.partwalk import build_part_clouds, part_maps
 
@@ -29,8 +29,8 @@ _UNBUILT = object()
 class TaskIndex:
     """Search structures of one task: ``target_parts (P, n, 3)`` normalized target points,
     ``clouds (P, n, 3)`` the parts' samples in their baked frames (unnormalized), and the target
-    ``poses (P, 7)`` and ``divisor`` with ``target_parts = (R clouds + t) / divisor``. Without the
-    poses, the target is searched through its own KD-tree and Delaunay graph (``graph_t``)."""
+    ``poses (P, 7)`` and ``divisor`` with ``target_parts = (R clouds + t) / divisor`` (needed by
+    :meth:`part_cd`)."""
 
     def __init__(self, target_parts: np.ndarray, clouds: np.ndarray, poses: np.ndarray | None = None,
                  divisor: float | None = None):
@@ -47,8 +47,7 @@ class TaskIndex:
 
     @property
     def graph_t(self):
-        """Delaunay graph of the joined target in tree order (``None`` where Qhull cannot); built
-        only where the target is not walked through the parts' clouds."""
+        """Delaunay graph of the joined target in tree order (``None`` where Qhull cannot)."""
         if self._graph_t is _UNBUILT:
             self._graph_t = graph_for(self.tree_t)
         return self._graph_t
@@ -61,21 +60,9 @@ class TaskIndex:
         self.target_means = tp.mean(axis=1)  # (P, 3)
         self.baked = [(tree, graph_for(tree, c)) for tree, c in ((build_tree(c), c) for c in self._clouds)]
         self.part_clouds = build_part_clouds(self.baked)  # None: a part has no graph
-        self.target_walk = None  # the target through the parts' clouds (TargetWalk), where they and the poses are
-        if self.part_clouds is not None and self._poses is not None:
-            self.target_walk = TargetWalk.of(self.part_clouds, tp, self._poses, self._divisor)
-            self.target_maps = (self.target_walk.a, self.target_walk.b)  # normalized target -> baked frames
-        elif self._poses is not None:
-            self.target_maps = part_maps(self._poses, self._divisor)
-        else:
-            self.target_maps = None
+        # normalized target -> baked frames (c = A y + b), for part_cd's forward searches
+        self.target_maps = None if self._poses is None else part_maps(self._poses, self._divisor)
         self._parts_built = True
-
-    def _target_search(self) -> dict:
-        """How a problem searches the target: through the parts' clouds, else its own tree and graph."""
-        if self.target_walk is not None:
-            return {"target": self.target_walk}
-        return {"tree_t": self.tree_t, "graph_t": self.graph_t}
 
     def assembly_problem(self, poses: np.ndarray, rotations: np.ndarray, pred_parts: np.ndarray,
                          divisor: float) -> ICPProblem:
@@ -85,17 +72,16 @@ class TaskIndex:
         the prediction gets its own tree and graph (same results, slower)."""
         self._build_parts()
         if self.part_clouds is not None:
-            return ICPProblem.for_assembly(pred_parts, poses, divisor, self.part_clouds, self.target, rotations=rotations,
-                                           **self._target_search())
+            return ICPProblem.for_assembly(pred_parts, poses, divisor, self.part_clouds, self.target, tree_t=self.tree_t,
+                                           graph_t=self.graph_t, rotations=rotations)
         return self.own_problem(pred_parts)[0]
 
     def own_problem(self, pred_parts: np.ndarray) -> tuple[ICPProblem, bool]:
         """ICP of ``pred_parts (P, n, 3)`` searched through its own KD-tree and Delaunay graph
         (built here, per checkpoint); the flag says whether Qhull gave a graph."""
-        self._build_parts()
         tree_p = build_tree(pred_parts.reshape(-1, 3))
         graph_p = graph_for(tree_p)
-        prob = ICPProblem(tree_p.points, self.target, tree_p=tree_p, graph_p=graph_p, **self._target_search())
+        prob = ICPProblem(tree_p.points, self.target, tree_t=self.tree_t, tree_p=tree_p, graph_t=self.graph_t, graph_p=graph_p)
         return prob, graph_p is not None
 
     def medium_problem(self, pred_parts: np.ndarray, m: int) -> ICPProblem:
