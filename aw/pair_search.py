@@ -9,11 +9,14 @@ the order edges are found in, so the search here registers, in order of increasi
   the threshold; every other pair cannot be an edge;
 - only a candidate whose parts are not connected yet: its edge could not change the components.
 
-So the components equal those of testing every pair. Registrations are timed as they go: when
-the ones left would take long on this machine (the lower of: their mean time, the first one
-left out as it may load compiled code, times the candidates left that are not yet connected;
-the time so far per candidate passed, times the candidates left), a :class:`LongWorkWarning`
-says so with the estimate, and a progress display (:func:`aw.progress.progress`) shows them.
+So the components equal those of testing every pair, also when several candidates are
+registered at once in threads (``workers``; a candidate is started only while its parts are
+not connected, and an edge found meanwhile only joins what it joins). Registrations are timed
+as they go: when the ones left would take long on this machine (the lower of: their mean time,
+the first one left out as it may load compiled code, times the candidates left that are not yet
+connected, over the threads; the time so far per candidate passed, times the candidates left),
+a :class:`LongWorkWarning` says so with the estimate, and a progress display
+(:func:`aw.progress.progress`) shows them.
 """
 
 from __future__ import annotations

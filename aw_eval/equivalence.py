@@ -6,8 +6,10 @@ connected components. The search (:func:`aw.pair_search.components`) registers o
 that the proven lower bounds of :mod:`aw.shape_bounds` do not rule out, likely edges first, and
 skips a pair already connected through other edges; the components are those of registering
 every pair (:func:`equivalence_groups_all_pairs`, kept for the tests). Each part's KD-tree and
-Delaunay graph are built once, for the parts that take part in a registration, and a
-registration stops as soon as any start reaches ``equiv_cd`` (the edge is then decided).
+Delaunay graph are built once, for the parts that take part in a registration (the Qhull run
+shared with the task's index, :func:`aw_eval.kernels.delaunay.cloud_neighbours`), candidates are
+registered in threads (:func:`aw.pair_search.local_workers`), and a registration stops as soon
+as any start reaches ``equiv_cd`` (the edge is then decided).
 """
 
 from __future__ import annotations
