@@ -85,7 +85,8 @@ def _part_clouds(points: np.ndarray, vertices: list[np.ndarray], divisor: float)
 
 
 def geometry_groups(part_ids: list[str], points: np.ndarray, vertices: list[np.ndarray], divisor: float,
-                    threshold: float = THRESHOLD, show_progress: bool = False, workers: int | None = None) -> list[list[str]]:
+                    threshold: float = THRESHOLD, show_progress: bool = False,
+                    workers: int | None = None) -> list[list[str]]:
     """Groups of interchangeable parts: ``part_ids`` sorted, ``points (P, n, 3)`` and ``vertices``
     (each part's mesh, ``(n_i, 3)``) in the same frame, ``divisor`` the scale divisor.
     ``show_progress``: a progress display when many pairs need registering. ``workers``: pairs

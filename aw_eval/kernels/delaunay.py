@@ -48,7 +48,8 @@ from numba import njit, types
 from numba.extending import intrinsic
 from scipy.spatial import Delaunay, QhullError
 
-__all__ = ["DelaunayGraph", "build_graph", "cloud_neighbours", "delaunay_neighbours", "graph_of", "walk", "no_graph", "uncertified", "to_search"]
+__all__ = ["DelaunayGraph", "build_graph", "cloud_neighbours", "delaunay_neighbours", "graph_of", "walk", "no_graph",
+           "uncertified", "to_search"]
 
 
 # Every row of a graph holds a multiple of LANES entries (padded with SENTINEL neighbours), so
