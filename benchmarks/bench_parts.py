@@ -5,6 +5,7 @@
     .venv/bin/python benchmarks/bench_parts.py --table benchmarks/results/parts_sweep.json
     .venv/bin/python benchmarks/bench_parts.py --candidates distinct 100,500
     PYTHONPATH=CHECKOUT .venv/bin/python benchmarks/bench_parts.py --time-groups OUT/suites/distinct050/geometry.npz
+    PYTHONPATH=CHECKOUT .venv/bin/python benchmarks/bench_parts.py --time-icp OUT/suites/identical100/geometry.npz
 
 Objects are generated as meshes, one folder per object (``aw-prepare folder`` layout), in a grid
 so that no two parts touch:
@@ -248,7 +249,30 @@ def time_groups(path: Path) -> dict:
             "groups": groups}
 
 
+def time_icp(path: Path) -> dict:
+    """CPU seconds of the search structures of one checkpoint (the initial layout) and of the ICP
+    of every ``len(starts) // 6``-th start, with whichever checkout ``PYTHONPATH`` names."""
+    import aw_eval
+    from aw_eval.geometry import TaskGeometry
+    from aw_eval.registration import checkpoint_starts
+
+    geom = TaskGeometry.load(path)
+    ck = geom.checkpoint(np.tile([0.0, 0, 0, 1, 0, 0, 0], (geom.n_parts, 1)))
+    cpu = time.process_time()
+    prob = geom.index().assembly_problem(ck.poses, ck.rotations, ck.parts, geom.divisor)
+    structures = time.process_time() - cpu
+    r0, t0 = checkpoint_starts(geom, ck)
+    prob.run(r0[0], t0[0], 2, 1e-9)  # compiled kernels loaded before the clock starts
+    cpu = time.process_time()
+    runs = [prob.run(r0[k], t0[k], 100, 1e-9) for k in range(0, len(r0), max(1, len(r0) // 6))]
+    return {"module": aw_eval.__file__, "structures_cpu_s": structures, "icp_cpu_s": time.process_time() - cpu,
+            "objectives": [r.objective for r in runs], "iterations": [r.iterations for r in runs]}
+
+
 def main() -> None:
+    if len(sys.argv) == 3 and sys.argv[1] == "--time-icp":
+        print(json.dumps(time_icp(Path(sys.argv[2]))))
+        return
     if len(sys.argv) == 3 and sys.argv[1] == "--time-groups":
         print(json.dumps(time_groups(Path(sys.argv[2]))))
         return
