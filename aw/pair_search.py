@@ -9,26 +9,31 @@ the order edges are found in, so the search here registers, in order of increasi
   the threshold; every other pair cannot be an edge;
 - only a candidate whose parts are not connected yet: its edge could not change the components.
 
-So the components equal those of testing every pair. Registrations are timed as they go: when
-the ones left would take long on this machine (the lower of: their mean time, the first one
-left out as it may load compiled code, times the candidates left that are not yet connected;
-the time so far per candidate passed, times the candidates left), a :class:`LongWorkWarning`
-says so with the estimate, and a progress display (:func:`aw.progress.progress`) shows them.
+So the components equal those of testing every pair, also when several candidates are
+registered at once in threads (``workers``; a candidate is started only while its parts are
+not connected, and an edge found meanwhile only joins what it joins). Registrations are timed
+as they go: when the ones left would take long on this machine (the lower of: their mean time,
+the first one left out as it may load compiled code, times the candidates left that are not yet
+connected, over the threads; the time so far per candidate passed, times the candidates left),
+a :class:`LongWorkWarning` says so with the estimate, and a progress display
+(:func:`aw.progress.progress`) shows them.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
 import time
 import warnings
 from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
 import numpy as np
 
 from aw.progress import progress
 from aw.shape_bounds import SAFETY
 
-__all__ = ["LongWorkWarning", "candidate_pairs", "components", "WARN_AFTER_S"]
+__all__ = ["LongWorkWarning", "candidate_pairs", "components", "local_workers", "WARN_AFTER_S"]
 
 WARN_AFTER_S = 300.0  # an estimate above this (seconds) is worth a warning
 _SAMPLE_S = 10.0  # first estimate after this long (then after twice as long, and so on)
@@ -51,11 +56,26 @@ def candidate_pairs(lower: np.ndarray, threshold: float) -> np.ndarray:
     return np.stack([i[order], j[order]], axis=1).astype(np.int64)
 
 
+def local_workers() -> int:
+    """Threads this process may use for per-task work: the cores it may run on in the main
+    process; 1 in a worker process (aw-score's ``--jobs`` pool, Dask), whose parent already
+    runs one such process per core, so that nothing is oversubscribed."""
+    if multiprocessing.parent_process() is not None:
+        return 1
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
 def components(n: int, candidates: np.ndarray, is_edge: Callable[[int, int], bool], *, what: str,
-               show_progress: bool = True) -> list[list[int]]:
+               show_progress: bool = True, workers: int = 1) -> list[list[int]]:
     """Components of ``range(n)`` under the edges ``is_edge(i, j)`` (``i < j``) among ``candidates
     (K, 2)``; each sorted, ordered by their lowest member. ``what`` names the work in the progress
-    display and the warning (e.g. ``"equivalence groups of 500 parts"``)."""
+    display and the warning (e.g. ``"equivalence groups of 500 parts"``). ``workers``: threads
+    registering candidates at once (``is_edge`` must then be thread-safe and release the GIL in
+    its heavy part, as the compiled ICP does); a candidate is started only while its parts are
+    not connected, so the components are the same for any number."""
     parent = list(range(n))
 
     def root(i: int) -> int:
@@ -64,36 +84,66 @@ def components(n: int, candidates: np.ndarray, is_edge: Callable[[int, int], boo
             i = parent[i]
         return i
 
+    def timed_edge(i: int, j: int) -> tuple[bool, float]:
+        t = time.monotonic()
+        return is_edge(i, j), time.monotonic() - t
+
     total = len(candidates)
     pairs = candidates.tolist()
+    workers = max(1, min(int(workers), total))
     # in a worker process (aw-score's pool, Dask) the parent owns the display: no second bar over it
     shown = show_progress and total >= _BAR_FROM and multiprocessing.parent_process() is None
     bar = progress(total, what, unit="pair", enabled=shown, leave=False)
     started = time.monotonic()
     check_at, warned = _SAMPLE_S, False
     timed, timed_s = 0, 0.0  # registrations after the first (which may load compiled code) and their time
-    with bar:
-        for k, (i, j) in enumerate(pairs):
+    k, done_count = 0, 0  # next candidate to consider; registrations finished
+    running: dict = {}  # future -> (i, j) registering now
+    pool = ThreadPoolExecutor(workers, thread_name_prefix="aw-pairs") if workers > 1 else None
+
+    def finish(i: int, j: int, edge: bool, secs: float) -> None:
+        nonlocal done_count, timed, timed_s
+        if edge:
             a, b = root(i), root(j)
-            if a != b:
-                t = time.monotonic()
-                if is_edge(i, j):
-                    parent[max(a, b)] = min(a, b)
-                if k:
-                    timed, timed_s = timed + 1, timed_s + time.monotonic() - t
-            bar.update(1)
-            if not warned and timed and time.monotonic() - started >= check_at:
-                check_at *= 2  # estimates at 10, 20, 40 ... s: the count below walks the candidates left
-                left = sum(1 for i2, j2 in pairs[k + 1 :] if root(i2) != root(j2))
-                # the lower of: each pair left not yet connected registered; the pace so far
-                # (pairs joined meanwhile are skipped: a group of many identical parts forms fast)
-                pace = (time.monotonic() - started) / (k + 1) * (total - k - 1)
-                estimate = min(timed_s / timed * left, pace)
-                if estimate > WARN_AFTER_S:
-                    warned = True
-                    warnings.warn(f"{what}: up to {left} of {total} candidate pairs left to register, about "
-                                  f"{estimate / 60:.0f} min on this machine ({timed_s / timed:.2f} s a pair)",
-                                  LongWorkWarning, stacklevel=2)
+            parent[max(a, b)] = min(a, b)
+        if done_count:
+            timed, timed_s = timed + 1, timed_s + secs
+        done_count += 1
+        bar.update(1)
+
+    try:
+        with bar:
+            while k < total or running:
+                while k < total and len(running) < workers:
+                    i, j = pairs[k]
+                    k += 1
+                    if root(i) == root(j):
+                        bar.update(1)  # connected already: its edge could not change the components
+                    elif pool is None:
+                        finish(i, j, *timed_edge(i, j))
+                        break  # one at a time: the estimate below is checked after each
+                    else:
+                        running[pool.submit(timed_edge, i, j)] = (i, j)
+                if running:
+                    for fut in wait(running, return_when=FIRST_COMPLETED).done:
+                        finish(*running.pop(fut), *fut.result())
+                if not warned and timed and time.monotonic() - started >= check_at:
+                    check_at *= 2  # estimates at 10, 20, 40 ... s: the count below walks the candidates left
+                    left = sum(1 for i2, j2 in pairs[k:] if root(i2) != root(j2))
+                    # the lower of: each pair left not yet connected registered; the pace so far
+                    # (pairs joined meanwhile are skipped: a group of many identical parts forms fast)
+                    pace = (time.monotonic() - started) / k * (total - k)
+                    estimate = min(timed_s / timed * left / workers, pace)
+                    if estimate > WARN_AFTER_S:
+                        warned = True
+                        warnings.warn(f"{what}: up to {left} of {total} candidate pairs left to register, about "
+                                      f"{estimate / 60:.0f} min on this machine ({timed_s / timed:.2f} s a pair, "
+                                      f"{workers} at a time)", LongWorkWarning, stacklevel=2)
+    finally:
+        if pool is not None:
+            for fut in running:
+                fut.cancel()
+            pool.shutdown(wait=True)
     groups: dict[int, list[int]] = {}
     for i in range(n):
         groups.setdefault(root(i), []).append(i)

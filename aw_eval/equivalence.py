@@ -6,15 +6,17 @@ connected components. The search (:func:`aw.pair_search.components`) registers o
 that the proven lower bounds of :mod:`aw.shape_bounds` do not rule out, likely edges first, and
 skips a pair already connected through other edges; the components are those of registering
 every pair (:func:`equivalence_groups_all_pairs`, kept for the tests). Each part's KD-tree and
-Delaunay graph are built once, for the parts that take part in a registration, and a
-registration stops as soon as any start reaches ``equiv_cd`` (the edge is then decided).
+Delaunay graph are built once, for the parts that take part in a registration (the Qhull run
+shared with the task's index, :func:`aw_eval.kernels.delaunay.cloud_neighbours`), candidates are
+registered in threads (:func:`aw.pair_search.local_workers`), and a registration stops as soon
+as any start reaches ``equiv_cd`` (the edge is then decided).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from aw.pair_search import candidate_pairs, components
+from aw.pair_search import candidate_pairs, components, local_workers
 from aw.pose import cube_rotations, pca_frame
 from aw.shape_bounds import cloud_bounds, lower_bounds
 from aw_eval.kernels import ICPProblem, build_tree, graph_for
@@ -54,11 +56,13 @@ def pair_cd(q_i: np.ndarray, q_j: np.ndarray, settings: ProtocolSettings, tree_i
 
 
 def equivalence_groups(clouds: np.ndarray, divisor: float, settings: ProtocolSettings | None = None, *,
-                       show_progress: bool = True) -> list[list[int]]:
+                       show_progress: bool = True, workers: int | None = None) -> list[list[int]]:
     """Groups (sorted index lists, ordered by first member) of ``clouds (P, n, 3)`` (baked frame).
 
     ``show_progress``: a progress display when many pairs need registering (and, either way, a
-    :class:`aw.pair_search.LongWorkWarning` when they would take long)."""
+    :class:`aw.pair_search.LongWorkWarning` when they would take long). ``workers``: pairs
+    registered at once, in threads (the compiled ICP releases the GIL); default
+    :func:`aw.pair_search.local_workers`. The groups do not depend on it."""
     settings = settings or ProtocolSettings()
     qs = part_frames(clouds, float(divisor))
     if not qs:
@@ -67,9 +71,9 @@ def equivalence_groups(clouds: np.ndarray, divisor: float, settings: ProtocolSet
     structures: dict[int, tuple] = {}
 
     def search(i: int) -> tuple:  # built once per part, only for parts that are registered
-        if i not in structures:
+        if i not in structures:  # two threads may both build one: the same, and the last kept
             tree = build_tree(qs[i])
-            structures[i] = (tree, graph_for(tree))
+            structures[i] = (tree, graph_for(tree, clouds[i]))  # Qhull run shared with the task's index
         return structures[i]
 
     def is_edge(i: int, j: int) -> bool:
@@ -78,7 +82,7 @@ def equivalence_groups(clouds: np.ndarray, divisor: float, settings: ProtocolSet
                        graph_j=graph_j) <= settings.equiv_cd
 
     return components(len(qs), candidates, is_edge, what=f"equivalence groups of {len(qs)} parts",
-                      show_progress=show_progress)
+                      show_progress=show_progress, workers=local_workers() if workers is None else workers)
 
 
 def equivalence_groups_all_pairs(clouds: np.ndarray, divisor: float, settings: ProtocolSettings | None = None) -> list[list[int]]:

@@ -5,6 +5,7 @@
     .venv/bin/python benchmarks/bench_parts.py --table benchmarks/results/parts_sweep.json
     .venv/bin/python benchmarks/bench_parts.py --candidates distinct 100,500
     PYTHONPATH=CHECKOUT .venv/bin/python benchmarks/bench_parts.py --time-groups OUT/suites/distinct050/geometry.npz
+    PYTHONPATH=CHECKOUT .venv/bin/python benchmarks/bench_parts.py --time-icp OUT/suites/identical100/geometry.npz
 
 Objects are generated as meshes, one folder per object (``aw-prepare folder`` layout), in a grid
 so that no two parts touch:
@@ -83,7 +84,9 @@ def step_geometry(suite: Path) -> dict:
     from aw.meshes import load_mesh
     from aw_eval.equivalence import equivalence_groups
     from aw_eval.geometry import TaskGeometry, part_divisor
-    from aw_eval.sampling import fps_jax, part_seed, surface_samples
+    from aw.pair_search import local_workers
+    from aw_eval.kernels.fps import fps_batch
+    from aw_eval.sampling import part_seed, surface_samples
     from aw_eval.settings import ProtocolSettings
 
     task_dir, targets_path = _task(suite)
@@ -96,7 +99,7 @@ def step_geometry(suite: Path) -> dict:
     out["load_s"], t = time.perf_counter() - t, time.perf_counter()
     cands = np.stack([surface_samples(m, st.n_surface, part_seed(st.seed, i)) for i, m in enumerate(meshes)])
     out["sampling_s"], t = time.perf_counter() - t, time.perf_counter()
-    idx = fps_jax(cands, st.n_fps)
+    idx = fps_batch(cands, st.n_fps, threads=local_workers())  # what aw_eval.sampling.part_clouds runs
     clouds = np.take_along_axis(cands, idx[..., None], axis=1)
     out["fps_s"], t = time.perf_counter() - t, time.perf_counter()
     divisor = targets.eval_divisor or max(part_divisor(np.asarray(m.vertices)) for m in meshes)
@@ -106,8 +109,8 @@ def step_geometry(suite: Path) -> dict:
     poses = np.asarray([targets.parts[pid].pose for pid in ids])
     geom = TaskGeometry(tuple(ids), clouds, poses, divisor, groups, st)
     index = geom.index() if callable(geom.index) else geom.index
-    index.graph_t  # noqa: B018 (built on first use: the joined target's Delaunay graph)
-    index._build_parts()  # each part's tree and graph, target and baked: what scoring builds once
+    index._build_parts()  # each part's baked tree and graph: what part distances walk (the joined target's graph is
+    # built by the first checkpoint's ICP: in the score step)
     out["index_s"] = time.perf_counter() - t
     geom.save(suite / "geometry.npz")  # for the score step
     out["total_s"] = sum(v for k, v in out.items() if k.endswith("_s"))
@@ -246,7 +249,30 @@ def time_groups(path: Path) -> dict:
             "groups": groups}
 
 
+def time_icp(path: Path) -> dict:
+    """CPU seconds of the search structures of one checkpoint (the initial layout) and of the ICP
+    of every ``len(starts) // 6``-th start, with whichever checkout ``PYTHONPATH`` names."""
+    import aw_eval
+    from aw_eval.geometry import TaskGeometry
+    from aw_eval.registration import checkpoint_starts
+
+    geom = TaskGeometry.load(path)
+    ck = geom.checkpoint(np.tile([0.0, 0, 0, 1, 0, 0, 0], (geom.n_parts, 1)))
+    cpu = time.process_time()
+    prob = geom.index().assembly_problem(ck.poses, ck.rotations, ck.parts, geom.divisor)
+    structures = time.process_time() - cpu
+    r0, t0 = checkpoint_starts(geom, ck)
+    prob.run(r0[0], t0[0], 2, 1e-9)  # compiled kernels loaded before the clock starts
+    cpu = time.process_time()
+    runs = [prob.run(r0[k], t0[k], 100, 1e-9) for k in range(0, len(r0), max(1, len(r0) // 6))]
+    return {"module": aw_eval.__file__, "structures_cpu_s": structures, "icp_cpu_s": time.process_time() - cpu,
+            "objectives": [r.objective for r in runs], "iterations": [r.iterations for r in runs]}
+
+
 def main() -> None:
+    if len(sys.argv) == 3 and sys.argv[1] == "--time-icp":
+        print(json.dumps(time_icp(Path(sys.argv[2]))))
+        return
     if len(sys.argv) == 3 and sys.argv[1] == "--time-groups":
         print(json.dumps(time_groups(Path(sys.argv[2]))))
         return

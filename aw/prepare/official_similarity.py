@@ -20,7 +20,7 @@ from itertools import permutations, product
 import numpy as np
 from scipy.spatial import cKDTree
 
-from aw.pair_search import candidate_pairs, components
+from aw.pair_search import candidate_pairs, components, local_workers
 from aw.prepare.official_frame import pca_frame
 from aw.shape_bounds import cloud_bounds, lower_bounds
 
@@ -85,10 +85,13 @@ def _part_clouds(points: np.ndarray, vertices: list[np.ndarray], divisor: float)
 
 
 def geometry_groups(part_ids: list[str], points: np.ndarray, vertices: list[np.ndarray], divisor: float,
-                    threshold: float = THRESHOLD, show_progress: bool = False) -> list[list[str]]:
+                    threshold: float = THRESHOLD, show_progress: bool = False,
+                    workers: int | None = None) -> list[list[str]]:
     """Groups of interchangeable parts: ``part_ids`` sorted, ``points (P, n, 3)`` and ``vertices``
     (each part's mesh, ``(n_i, 3)``) in the same frame, ``divisor`` the scale divisor.
-    ``show_progress``: a progress display when many pairs need registering."""
+    ``show_progress``: a progress display when many pairs need registering. ``workers``: pairs
+    registered at once, in threads (default :func:`aw.pair_search.local_workers`; the groups do
+    not depend on it)."""
     clouds = _part_clouds(points, vertices, divisor)
     if not clouds:
         return []
@@ -98,7 +101,7 @@ def geometry_groups(part_ids: list[str], points: np.ndarray, vertices: list[np.n
         return register(clouds[i], clouds[j], enough=threshold) <= threshold
 
     found = components(len(part_ids), candidates, is_edge, what=f"geometry groups of {len(part_ids)} parts",
-                       show_progress=show_progress)
+                       show_progress=show_progress, workers=local_workers() if workers is None else workers)
     return [[part_ids[k] for k in g] for g in found]
 
 

@@ -39,6 +39,7 @@ with per-edge ``coords (3, nnz)`` and ``half_inv (nnz,)`` (see :class:`DelaunayG
 
 from __future__ import annotations
 
+import hashlib
 from typing import NamedTuple
 
 import numpy as np
@@ -47,7 +48,8 @@ from numba import njit, types
 from numba.extending import intrinsic
 from scipy.spatial import Delaunay, QhullError
 
-__all__ = ["DelaunayGraph", "build_graph", "walk", "no_graph", "uncertified", "to_search"]
+__all__ = ["DelaunayGraph", "build_graph", "cloud_neighbours", "delaunay_neighbours", "graph_of", "walk", "no_graph",
+           "uncertified", "to_search"]
 
 
 # Every row of a graph holds a multiple of LANES entries (padded with SENTINEL neighbours), so
@@ -79,6 +81,17 @@ def no_graph() -> DelaunayGraph:
 def build_graph(points: np.ndarray) -> DelaunayGraph | None:
     """Delaunay graph of ``points (n, 3)``, or ``None`` where Qhull leaves a point out or fails."""
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    found = delaunay_neighbours(pts)
+    return None if found is None else graph_of(found, pts)
+
+
+def delaunay_neighbours(points: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The Delaunay neighbours of ``points (n, 3)`` in CSR form ``(indptr (n + 1,), indices
+    (nnz,))`` over their rows (one Qhull run), or ``None`` where Qhull leaves a point out or
+    fails. They do not change under a rotation, reflection, translation or uniform scaling of
+    the points (the empty-sphere property is kept), so one run serves a cloud in every frame:
+    :func:`graph_of` makes the graph of any such image of it, in any row order."""
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     if len(pts) < 5:
         return None
     try:
@@ -88,6 +101,44 @@ def build_graph(points: np.ndarray) -> DelaunayGraph | None:
     if len(tri.coplanar) or len(np.unique(tri.simplices)) != len(pts):
         return None  # a point outside the triangulation could never be reached by a walk
     indptr, indices = tri.vertex_neighbor_vertices
+    return indptr.astype(np.int64), indices.astype(np.int64)
+
+
+# Neighbours of the clouds seen in this process, by content (FIFO, at most this many clouds): a
+# task's equivalence groups and its search structures search one part's cloud in two frames
+# (its PCA frame, its baked frame), and one Qhull run serves both.
+_NEIGHBOURS: dict = {}
+_NEIGHBOURS_MAX = 1024
+
+
+def cloud_neighbours(cloud: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`delaunay_neighbours` of ``cloud (n, 3)``, computed once per process and cloud."""
+    pts = np.ascontiguousarray(cloud, dtype=np.float64).reshape(-1, 3)
+    key = hashlib.blake2b(pts.tobytes(), digest_size=20).digest()
+    if key in _NEIGHBOURS:
+        return _NEIGHBOURS[key]
+    found = delaunay_neighbours(pts)
+    while len(_NEIGHBOURS) >= _NEIGHBOURS_MAX:
+        _NEIGHBOURS.pop(next(iter(_NEIGHBOURS)), None)
+    _NEIGHBOURS[key] = found
+    return found
+
+
+def graph_of(neighbours: tuple[np.ndarray, np.ndarray], points: np.ndarray, order: np.ndarray | None = None
+             ) -> DelaunayGraph | None:
+    """The :class:`DelaunayGraph` of ``points (n, 3)`` from :func:`delaunay_neighbours` of (an
+    image of) them under a similarity; ``order (n,)``: the neighbours' row of each point
+    (``points[k]`` is row ``order[k]``, e.g. a KD-tree's ``index``), else the same rows. ``None``
+    where two points coincide."""
+    indptr, indices = neighbours
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    if order is not None:  # renumber: new row k is old row order[k]
+        position = np.empty(len(order), np.int64)
+        position[order] = np.arange(len(order))
+        degree = np.diff(indptr)[order]
+        new_ptr = np.concatenate([[0], np.cumsum(degree)]).astype(np.int64)
+        take = np.repeat(indptr[order] - new_ptr[:-1], degree) + np.arange(new_ptr[-1])
+        indptr, indices = new_ptr, position[indices[take]]
     rows = np.repeat(np.arange(len(pts)), np.diff(indptr))
     length = np.linalg.norm(pts[indices] - pts[rows], axis=1)
     if not np.all(length > 0):

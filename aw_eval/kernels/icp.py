@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from aw_eval.kernels.delaunay import DelaunayGraph, build_graph, no_graph, to_search, walk
+from aw_eval.kernels.delaunay import DelaunayGraph, build_graph, cloud_neighbours, graph_of, no_graph, to_search, walk
 from aw_eval.kernels.kdtree import STACK, KDTree, build_tree, nearest2
 from aw_eval.kernels.partwalk import PartClouds, build_part_clouds, no_part_clouds, part_maps, parts_pass
 
@@ -211,7 +211,7 @@ def kabsch_pairs(p, t, fc, bc):
     return r, cd - r @ cs
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # registrations run in threads (aw.pair_search.components)
 def _icp(p, t, tree_t, tree_p, gt, gp, parts, r0, t0, max_iters, tol, stop_at):
     n, m = p.shape[0], t.shape[0]
     fc = np.zeros(n, np.int64)
@@ -340,6 +340,12 @@ def _no_tree() -> KDTree:
     return _NO_TREE[0]
 
 
-def graph_for(tree: KDTree) -> DelaunayGraph | None:
-    """Delaunay graph of a tree's points in tree order (``None`` where Qhull cannot build one)."""
-    return build_graph(tree.points)
+def graph_for(tree: KDTree, cloud: np.ndarray | None = None) -> DelaunayGraph | None:
+    """Delaunay graph of a tree's points in tree order (``None`` where Qhull cannot build one).
+    ``cloud (n, 3)``: a similar image of the tree's points, row for row (``tree.points[k]`` is the
+    image of ``cloud[tree.index[k]]``), whose Qhull run is shared by every frame it is searched in
+    (:func:`aw_eval.kernels.delaunay.cloud_neighbours`)."""
+    if cloud is None:
+        return build_graph(tree.points)
+    found = cloud_neighbours(cloud)
+    return None if found is None else graph_of(found, tree.points, tree.index)

@@ -1,11 +1,15 @@
 """A task's search structures, built once per task and process: the narrow interface through
 which the protocol asks for nearest neighbours and ICP problems.
 
-``TaskIndex`` holds the normalized target (``(P, n, 3)`` parts, ``(P n, 3)`` joined), its KD-tree
-and Delaunay graph, each target part's tree and graph, and every part's cloud in its baked
-frame (which a checkpoint only moves rigidly), joined for walks through a posed assembly
-(:mod:`aw_eval.kernels.partwalk`). Everything beyond the joined target's tree is built on first
-use; nothing here depends on a checkpoint.
+``TaskIndex`` holds the normalized target (``(P, n, 3)`` parts, ``(P n, 3)`` joined) with the
+joined target's KD-tree, and every part's cloud in its baked frame (which a checkpoint only moves
+rigidly) with its KD-tree and Delaunay graph, joined for walks through a posed assembly
+(:mod:`aw_eval.kernels.partwalk`). A part-to-part distance walks the baked graphs both ways (a
+target part is its baked cloud posed), so no target part has structures of its own, and a
+part's Qhull run is shared with the equivalence search. The joined target's Delaunay graph
+(``graph_t``, one Qhull run over all the points) is built on the first checkpoint's ICP: a
+walk through the target's parts would spare it, but visits every part's box per searched
+query and took twice the CPU per checkpoint at 100 parts. Nothing here depends on a checkpoint.
 """
 
 from __future__ import annotations
@@ -15,7 +19,7 @@ import numpy as np
 from aw_eval.kernels.cellgrid import JOINED_K, JOINED_MARGIN_CELLS, build_part_grids
 from aw_eval.kernels.icp import ICPProblem, graph_for, nearest_positions
 from aw_eval.kernels.kdtree import build_tree
-from aw_eval.kernels.partwalk import build_part_clouds
+from aw_eval.kernels.partwalk import build_part_clouds, part_maps
 
 __all__ = ["TaskIndex", "mean_squared_norm"]
 
@@ -23,14 +27,19 @@ _UNBUILT = object()
 
 
 class TaskIndex:
-    """Search structures of one task: ``target_parts (P, n, 3)`` normalized target points and
-    ``clouds (P, n, 3)`` the parts' samples in their baked frames (unnormalized)."""
+    """Search structures of one task: ``target_parts (P, n, 3)`` normalized target points,
+    ``clouds (P, n, 3)`` the parts' samples in their baked frames (unnormalized), and the target
+    ``poses (P, 7)`` and ``divisor`` with ``target_parts = (R clouds + t) / divisor`` (needed by
+    :meth:`part_cd`)."""
 
-    def __init__(self, target_parts: np.ndarray, clouds: np.ndarray):
+    def __init__(self, target_parts: np.ndarray, clouds: np.ndarray, poses: np.ndarray | None = None,
+                 divisor: float | None = None):
         self.target_parts = target_parts
         self.target = np.ascontiguousarray(target_parts.reshape(-1, 3))  # (P n, 3)
         self.tree_t = build_tree(self.target)
         self._clouds = clouds
+        self._poses = None if poses is None else np.asarray(poses, dtype=np.float64)
+        self._divisor = divisor
         self._graph_t = _UNBUILT
         self._parts_built = False
         self._medium: dict[int, tuple] = {}
@@ -47,12 +56,12 @@ class TaskIndex:
         if self._parts_built:
             return
         tp = self.target_parts
-        self.part_trees = [build_tree(t) for t in tp]
-        self.part_graphs = [graph_for(t) for t in self.part_trees]
         self.target_boxes = (tp.min(axis=1), tp.max(axis=1))  # ((P, 3), (P, 3))
         self.target_means = tp.mean(axis=1)  # (P, 3)
-        self.baked = [(tree, graph_for(tree)) for tree in (build_tree(c) for c in self._clouds)]
+        self.baked = [(tree, graph_for(tree, c)) for tree, c in ((build_tree(c), c) for c in self._clouds)]
         self.part_clouds = build_part_clouds(self.baked)  # None: a part has no graph
+        # normalized target -> baked frames (c = A y + b), for part_cd's forward searches
+        self.target_maps = None if self._poses is None else part_maps(self._poses, self._divisor)
         self._parts_built = True
 
     def assembly_problem(self, poses: np.ndarray, rotations: np.ndarray, pred_parts: np.ndarray,
@@ -87,18 +96,23 @@ class TaskIndex:
 
     def part_cd(self, moved_parts: np.ndarray, to_baked: tuple, i: int, j: int) -> float:
         """CD(registered pred part ``i``, target part ``j``) with squared distances from normalized
-        coordinates, as the reference computes them. Forward: the target part's tree and graph;
-        backward: the target points mapped into part ``i``'s baked frame by ``to_baked = (A (P, 3,
-        3), b (P, 3))`` (``c = A y + b``), searched in the baked cloud's tree and graph."""
+        coordinates, as the reference computes them. Forward: the moved points mapped into part
+        ``j``'s baked frame by the target pose's map, searched in that baked cloud's tree and graph
+        (target part ``j`` is that cloud posed); backward: the target points mapped into part
+        ``i``'s baked frame by ``to_baked = (A (P, 3, 3), b (P, 3))`` (``c = A y + b``), searched in
+        its baked cloud's tree and graph. Needs the target poses."""
         self._build_parts()
-        tree_t, tree_b, graph_b = self.part_trees[j], *self.baked[i]
+        if self.target_maps is None:
+            raise ValueError("TaskIndex.part_cd needs the target poses and divisor")
+        (tree_j, graph_j), (tree_i, graph_i) = self.baked[j], self.baked[i]
         # queries in their own trees' order: consecutive queries are neighbours in space, so each
         # walk starts next to its answer (FPS order would jump across the part)
-        x, y = moved_parts[i][tree_b.index], tree_t.points
-        fwd = nearest_positions(tree_t, self.part_graphs[j], x)
+        x, y = moved_parts[i][tree_i.index], self.target_parts[j][tree_j.index]
+        ta, tb = self.target_maps
+        fwd = nearest_positions(tree_j, graph_j, x @ ta[j].T + tb[j])  # tree positions of cloud j = rows of y
         a, b = to_baked
-        bwd = nearest_positions(tree_b, graph_b, y @ a[i].T + b[i])  # tree positions of part i = rows of x
-        return mean_squared_norm(x - tree_t.points[fwd]) + mean_squared_norm(y - x[bwd])
+        bwd = nearest_positions(tree_i, graph_i, y @ a[i].T + b[i])  # tree positions of part i = rows of x
+        return mean_squared_norm(x - y[fwd]) + mean_squared_norm(y - x[bwd])
 
     def part_grids(self, divisor: float):
         """``(target, baked)``: :class:`aw_eval.kernels.cellgrid.PartGrids` of the joined target

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import itertools
+import threading
 import warnings
 
 import numpy as np
@@ -49,6 +50,42 @@ def test_components_equal_every_pair_and_skip_connected_pairs():
         assert got == _all_pairs(n, lambda i, j: (i, j) in edges), trial
         assert len(asked) == len(set(asked)) and all(i < j and lower[i, j] <= 1e-4 for i, j in asked)
         assert len(asked) <= len(candidate_pairs(lower, 1e-4))
+
+
+def test_threads_register_pairs_at_once_with_the_same_components():
+    """With ``workers=2`` two registrations run at the same time (each waits for the other at a
+    barrier, which a serial search would never pass), and the components are every pair's."""
+    rng = np.random.default_rng(1)
+    for trial in range(20):
+        n = int(rng.integers(2, 25))
+        edges = {(i, j) for i, j in itertools.combinations(range(n), 2) if rng.random() < 0.15}
+        lower = np.zeros((n, n))
+        met = threading.Barrier(2, timeout=10)
+        asked, threads = [], set()
+
+        def edge(i, j):
+            if not asked or len(asked) == 1:  # the first two registrations meet
+                asked.append((i, j))
+                met.wait()
+            else:
+                asked.append((i, j))
+            threads.add(threading.current_thread().name)
+            return (i, j) in edges
+
+        if n == 2:  # one candidate: nothing to run beside it
+            met = threading.Barrier(1)
+        got = components(n, candidate_pairs(lower, 1e-4), edge, what="test", show_progress=False, workers=2)
+        assert got == _all_pairs(n, lambda i, j: (i, j) in edges), trial
+        assert len(asked) == len(set(asked)) and all(t.startswith("aw-pairs") for t in threads)
+
+
+def test_local_workers_are_the_cores_here_and_one_in_a_worker_process():
+    import multiprocessing
+    import os
+
+    assert pair_search.local_workers() == len(os.sched_getaffinity(0))
+    with multiprocessing.get_context("spawn").Pool(1) as pool:
+        assert pool.apply(pair_search.local_workers) == 1
 
 
 def test_candidates_come_by_increasing_bound_and_keep_the_threshold_inclusive():

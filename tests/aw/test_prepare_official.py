@@ -371,7 +371,7 @@ def test_geometry_groups_equal_registering_every_pair(monkeypatch):
         ids = [f"p{k:02d}" for k in range(len(extents))]
         divisor = max(float(np.linalg.norm(e)) for e in extents)
         calls.clear()
-        fast = sim.geometry_groups(ids, points, verts, divisor)
+        fast = sim.geometry_groups(ids, points, verts, divisor, workers=2)  # threads: the same groups
         n_fast = len(calls)
         assert fast == sim.geometry_groups_all_pairs(ids, points, verts, divisor), name
         assert n_fast < len(calls) - n_fast, name

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from aw.pose import quat_to_matrix
 from aw_eval import reference as ref
@@ -150,7 +151,7 @@ def test_candidate_search_equals_registering_every_pair(monkeypatch):
         clouds = _boxes_object(extents, 96, seed=len(name))
         divisor = max(float(np.linalg.norm(e)) for e in extents)
         calls.clear()
-        fast = eq.equivalence_groups(clouds, divisor, st, show_progress=False)
+        fast = eq.equivalence_groups(clouds, divisor, st, show_progress=False, workers=2)  # threads: the same groups
         n_fast = len(calls)
         assert fast == eq.equivalence_groups_all_pairs(clouds, divisor, st), name
         assert n_fast < len(calls) - n_fast, name  # fewer registrations than the all-pairs path's
@@ -160,7 +161,8 @@ def test_candidate_search_equals_registering_every_pair(monkeypatch):
     assert max(seen_sizes) >= 10 and 1 in seen_sizes  # a big group of identical parts, and loners
 
 
-def test_near_threshold_chain_is_joined_as_by_every_pair():
+@pytest.mark.parametrize("workers", [1, 2])
+def test_near_threshold_chain_is_joined_as_by_every_pair(workers):
     # a ~ b and b ~ c within 1e-4, a and c not: the candidate order must not split the chain
     a, b, c, rng = _chain()
     far = rng.normal(size=(30, 3)) * [0.3, 0.3, 0.3]
@@ -168,5 +170,5 @@ def test_near_threshold_chain_is_joined_as_by_every_pair():
     clouds = np.stack([c, far, a, b])
     from aw_eval.equivalence import equivalence_groups_all_pairs
 
-    assert equivalence_groups(clouds, 1.0, st, show_progress=False) == [[0, 2, 3], [1]] == \
+    assert equivalence_groups(clouds, 1.0, st, show_progress=False, workers=workers) == [[0, 2, 3], [1]] == \
         equivalence_groups_all_pairs(clouds, 1.0, st)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from aw_eval.kernels.fps import fps_batch
 from aw_eval.sampling import fps_jax, fps_numpy, part_clouds, part_seed, surface_samples
 from aw_eval.settings import ProtocolSettings
 
@@ -17,6 +18,20 @@ def test_fps_numpy_and_jax_pick_identical_indices():
     want = np.stack([fps_numpy(c, 300) for c in cands])
     assert np.array_equal(fps_jax(cands, 300), want)
     assert all(len(set(w.tolist())) == 300 for w in want)
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_compiled_fps_picks_the_numpy_indices(threads):
+    """The compiled batch kernel picks :func:`fps_numpy`'s indices, on curved and flat meshes and
+    on a lattice full of exact ties, on one thread or several."""
+    meshes = [trimesh.creation.box(extents=[1, 0.5, 0.2]), trimesh.creation.cylinder(radius=0.1, height=1.0),
+              trimesh.creation.icosphere(subdivisions=2), trimesh.creation.annulus(0.2, 0.4, 0.1)]
+    cands = np.stack([surface_samples(m, 1024, part_seed(7, i)) for i, m in enumerate(meshes)])
+    assert np.array_equal(fps_batch(cands, 300, threads=threads), np.stack([fps_numpy(c, 300) for c in cands]))
+    g = np.stack(np.meshgrid(*[np.arange(4.0)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    assert np.array_equal(fps_batch(np.stack([g, g[::-1]]), 20, threads=threads), np.stack([fps_numpy(g, 20), fps_numpy(g[::-1], 20)]))
+    with pytest.raises(ValueError):
+        fps_batch(cands, 2000)
 
 
 def test_fps_ties_go_to_the_lowest_index():

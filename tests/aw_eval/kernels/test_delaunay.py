@@ -84,6 +84,33 @@ def test_graph_rows_hold_the_delaunay_neighbours_in_order_then_sentinels():
         assert np.allclose(graph.half_inv[lo:lo + len(real)], 0.5 / np.linalg.norm(pts[real] - pts[i], axis=1))
 
 
+@pytest.mark.parametrize("cloud", ["gaussian", "surfaces"])
+def test_one_qhull_run_serves_the_cloud_in_every_frame_and_order(cloud):
+    """The graph of a rotated, reflected, moved and scaled copy in KD-tree order, made from the
+    neighbours of the original cloud (:func:`graph_for` with ``cloud``), walks from any start to
+    the exact nearest point, and a move shorter than its margin keeps that point. (Where points
+    are cospherical, as on the flat faces of sampled parts, a Delaunay triangulation is not
+    unique and Qhull's choice depends on the frame; every choice holds these properties.)"""
+    rng = np.random.default_rng(11)
+    pts = rng.normal(size=(400, 3)) if cloud == "gaussian" else _surface_cloud(rng, 400)
+    rot = np.linalg.qr(rng.normal(size=(3, 3)))[0] * [1.0, 1.0, -1.0]  # a reflection too
+    copy = (pts - pts.mean(axis=0)) @ rot * 0.37 + [2.0, -1.0, 0.5]
+    tree = build_tree(copy)
+    shared = tuple(graph_for(tree, pts))
+    if cloud == "gaussian":  # in general position the triangulation is unique: the same rows
+        own = graph_for(tree)
+        rows = lambda g: [set(g[1][g[0][i]:g[0][i + 1]].tolist()) - {i} for i in range(len(copy))]  # noqa: E731
+        assert rows(shared) == rows(own)
+    x = np.concatenate([tree.points[rng.integers(0, len(copy), 300)] + rng.normal(size=(300, 3)) * 0.02,
+                        rng.normal(size=(100, 3)) * 2.0])
+    j, margin = _walk_all(tree.points, shared, x, rng.integers(0, len(copy), len(x)))
+    assert np.array_equal(j, _brute(x, tree.points))
+    for scale in (0.999, 0.5):
+        d = rng.normal(size=x.shape)
+        d *= (scale * margin / np.linalg.norm(d, axis=1))[:, None]
+        assert np.array_equal(_brute(x + d, tree.points), j)
+
+
 @njit
 def _scan_rows(graph, x, dj):
     out = np.empty((x.shape[0], 2))
