@@ -12,10 +12,10 @@ the order edges are found in, so the search here registers, in order of increasi
 So the components equal those of testing every pair, also when several candidates are
 registered at once in threads (``workers``; a candidate is started only while its parts are
 not connected, and an edge found meanwhile only joins what it joins). Registrations are timed
-as they go: when the ones left would take long on this machine (the lower of: their mean time,
-the first one left out as it may load compiled code, times the candidates left that are not yet
-connected, over the threads; the time so far per candidate passed, times the candidates left),
-a :class:`LongWorkWarning` says so with the estimate, and a progress display
+as they go: when the ones left would take long on this machine (their mean time, the first one
+left out as it may load compiled code, times the registrations expected among the candidates
+left that are not yet connected, over the threads; see :func:`_registrations_left`), a
+:class:`LongWorkWarning` says so with the estimate, and a progress display
 (:func:`aw.progress.progress`) shows them.
 """
 
@@ -97,14 +97,17 @@ def components(n: int, candidates: np.ndarray, is_edge: Callable[[int, int], boo
     started = time.monotonic()
     check_at, warned = _SAMPLE_S, False
     timed, timed_s = 0, 0.0  # registrations after the first (which may load compiled code) and their time
+    edges, non_edges, joined = 0, 0, 0  # registrations that found an edge / none; merges of two components
     k, done_count = 0, 0  # next candidate to consider; registrations finished
     running: dict = {}  # future -> (i, j) registering now
     pool = ThreadPoolExecutor(workers, thread_name_prefix="aw-pairs") if workers > 1 else None
 
     def finish(i: int, j: int, edge: bool, secs: float) -> None:
-        nonlocal done_count, timed, timed_s
+        nonlocal done_count, timed, timed_s, edges, non_edges, joined
+        edges, non_edges = edges + edge, non_edges + (not edge)
         if edge:
             a, b = root(i), root(j)
+            joined += a != b  # (two threads may join the same components)
             parent[max(a, b)] = min(a, b)
         if done_count:
             timed, timed_s = timed + 1, timed_s + secs
@@ -130,10 +133,7 @@ def components(n: int, candidates: np.ndarray, is_edge: Callable[[int, int], boo
                 if not warned and timed and time.monotonic() - started >= check_at:
                     check_at *= 2  # estimates at 10, 20, 40 ... s: the count below walks the candidates left
                     left = sum(1 for i2, j2 in pairs[k:] if root(i2) != root(j2))
-                    # the lower of: each pair left not yet connected registered; the pace so far
-                    # (pairs joined meanwhile are skipped: a group of many identical parts forms fast)
-                    pace = (time.monotonic() - started) / k * (total - k)
-                    estimate = min(timed_s / timed * left / workers, pace)
+                    estimate = timed_s / timed * _registrations_left(left, edges, non_edges, n - joined) / workers
                     if estimate > WARN_AFTER_S:
                         warned = True
                         warnings.warn(f"{what}: up to {left} of {total} candidate pairs left to register, about "
@@ -148,3 +148,12 @@ def components(n: int, candidates: np.ndarray, is_edge: Callable[[int, int], boo
     for i in range(n):
         groups.setdefault(root(i), []).append(i)
     return sorted(groups.values(), key=lambda g: g[0])
+
+
+def _registrations_left(left: int, edges: int, non_edges: int, n_components: int) -> float:
+    """How many of the ``left`` candidates not yet connected will still be registered, expected
+    from those registered so far: the share of them that found no edge is registered in full,
+    while the ones that find an edge are at most one fewer than the components (each joins two,
+    and skips every candidate between them: a group of many identical parts forms fast)."""
+    done = edges + non_edges
+    return min(left, left * non_edges / done + min(n_components - 1, left * edges / done))

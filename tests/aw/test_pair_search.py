@@ -8,6 +8,7 @@ import threading
 import warnings
 
 import numpy as np
+import pytest
 
 from aw import pair_search
 from aw.pair_search import LongWorkWarning, candidate_pairs, components
@@ -139,3 +140,36 @@ def test_a_worker_process_draws_no_progress_of_its_own():
 
     with multiprocessing.get_context("spawn").Pool(1) as pool:
         assert pool.apply(_components_in_a_worker, (25,)) == [list(range(25))]
+
+
+class _Clock:
+    """A clock that only the registrations move: each takes one second."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def monotonic(self) -> float:
+        return self.now
+
+    def register(self, edge: bool) -> bool:
+        self.now += 1.0
+        return edge
+
+
+@pytest.mark.parametrize(("identical", "warns"), [(True, False), (False, True)])
+def test_the_estimate_expects_a_group_of_identical_parts_to_form_fast(monkeypatch, identical, warns):
+    """100 identical parts: 4,950 candidates, but at most 99 registrations find an edge and every
+    other candidate is skipped, so one second a registration is no long work (99 s); 100 parts of
+    which no two match: every candidate is registered, about 80 min."""
+    clock = _Clock()
+    monkeypatch.setattr(pair_search, "time", clock)
+    n = 100
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        got = components(n, candidate_pairs(np.zeros((n, n)), 1e-4), lambda i, j: clock.register(identical),
+                         what=f"groups of {n} parts")
+    assert got == ([list(range(n))] if identical else [[k] for k in range(n)])
+    slow = [str(w.message) for w in caught if issubclass(w.category, LongWorkWarning)]
+    assert len(slow) == int(warns), slow
+    if warns:
+        assert "min on this machine (1.00 s a pair, 1 at a time)" in slow[0] and "about 82 min" in slow[0]
