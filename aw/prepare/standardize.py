@@ -125,13 +125,22 @@ def assembled_at_start(prep: PreparedObject, tol: float = ASSEMBLED_TOLERANCE) -
     parts = prep.scored_parts
     if len(parts) == 1:
         return [parts[0].part_id]
+    # A necessary condition for every pair at once (hundreds of parts): both target poses take
+    # one vertex of part a's mesh to within tol of each other (slack far above the rounding of
+    # the two ways of computing it); only the pairs that pass are checked on every vertex.
+    targets = np.array([q.target for q in parts], dtype=np.float64)  # (P, 7)
+    firsts = np.array([np.asarray(q.mesh.vertices[0], dtype=np.float64) for q in parts])  # (P, 3)
+    moved = apply_pose(targets[None], firsts[:, None, None, :])[:, :, 0]  # (a, b, 3): pose b on a vertex of a
+    near = np.abs(moved - moved[np.arange(len(parts)), np.arange(len(parts))][:, None]).max(axis=-1) <= tol * (1 + 1e-6) + 1e-12
     best: list[str] = []
-    for a in parts:
-        group = [b.part_id for b in parts
-                 if all(float(np.abs(apply_pose(a.target, m.vertices) - apply_pose(b.target, m.vertices)).max()) <= tol
-                        for m in (a.mesh, b.mesh))]
+    for ia, a in enumerate(parts):
+        group = [parts[ib].part_id for ib in np.flatnonzero(near[ia])
+                 if all(float(np.abs(apply_pose(a.target, m.vertices) - apply_pose(parts[ib].target, m.vertices)).max()) <= tol
+                        for m in (a.mesh, parts[ib].mesh))]
         if len(group) > len(best):
             best = group
+        if len(best) == len(parts):
+            break
     return best if len(best) >= 2 else []
 
 

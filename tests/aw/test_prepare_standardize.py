@@ -187,3 +187,35 @@ def test_parts_already_assembled_in_the_layout_are_found_and_refused(tmp_path):
     with pytest.raises(ValueError, match=r"object plate cannot be assessed: its one part p01 is on its target"):
         prepare_object(single, tmp_path, ["none"])
     assert not (tmp_path / "tasks").exists()
+
+
+def test_assembled_parts_are_those_of_checking_every_pair_on_every_vertex():
+    """The pairs are screened on one vertex first: a part whose target turns about that very
+    vertex (the same image there, not elsewhere) is still told apart, and the group is the one
+    that checking every pair on every vertex gives."""
+    from dataclasses import replace
+
+    from aw.pose import apply_pose, compose_poses, invert_pose, matrix_to_quat
+    from aw.prepare.standardize import ASSEMBLED_TOLERANCE, assembled_at_start
+
+    def every_pair(prep) -> list[str]:  # the plain statement
+        best: list[str] = []
+        for a in prep.scored_parts:
+            group = [b.part_id for b in prep.scored_parts
+                     if all(np.abs(apply_pose(a.target, m.vertices) - apply_pose(b.target, m.vertices)).max() <= ASSEMBLED_TOLERANCE
+                            for m in (a.mesh, b.mesh))]
+            best = group if len(group) > len(best) else best
+        return best if len(best) >= 2 else []
+
+    prep = standardize(stool())
+    a, b, c, *rest = prep.parts
+    v = apply_pose(invert_pose(a.target), apply_pose(b.target, np.asarray(b.mesh.vertices)))
+    glued = replace(b, mesh=trimesh.Trimesh(v, b.mesh.faces, process=False), target=a.target.copy())
+    pivot = np.asarray(a.mesh.vertices[0], dtype=np.float64)
+    turn = rotation_about_axis(2, 0.05)
+    about_pivot = np.concatenate([pivot - turn @ pivot, matrix_to_quat(turn)])
+    turned = replace(c, target=compose_poses(a.target, about_pivot))
+    assert np.abs(apply_pose(turned.target, pivot[None]) - apply_pose(a.target, pivot[None])).max() < 1e-12
+    mixed = prep.with_parts([a, glued, turned, *rest])
+    assert assembled_at_start(mixed) == every_pair(mixed) == [a.part_id, b.part_id]
+    assert assembled_at_start(prep) == every_pair(prep) == []
