@@ -30,18 +30,13 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
 import numpy as np
 
-from aw.progress import progress
+from aw.progress import WARN_AFTER_S, LongWorkWarning, progress
 from aw.shape_bounds import SAFETY
 
 __all__ = ["LongWorkWarning", "candidate_pairs", "components", "local_workers", "WARN_AFTER_S"]
 
-WARN_AFTER_S = 300.0  # an estimate above this (seconds) is worth a warning
 _SAMPLE_S = 10.0  # first estimate after this long (then after twice as long, and so on)
 _BAR_FROM = 20  # fewer candidates than this need no progress display
-
-
-class LongWorkWarning(UserWarning):
-    """Per-task work that will take long on this machine (the message gives the estimate)."""
 
 
 def candidate_pairs(lower: np.ndarray, threshold: float) -> np.ndarray:

@@ -11,9 +11,24 @@ import sys
 import time
 from typing import IO, Any
 
-__all__ = ["progress", "LineProgress", "DEFAULT_INTERVAL_S"]
+__all__ = ["progress", "LineProgress", "DEFAULT_INTERVAL_S", "LongWorkWarning", "WARN_AFTER_S", "warnings_in_one_line"]
 
 DEFAULT_INTERVAL_S = 15.0
+WARN_AFTER_S = 300.0  # an estimate of the work left above this (seconds) is worth a warning
+
+
+class LongWorkWarning(UserWarning):
+    """Per-task work that will take long on this machine (the message gives the estimate)."""
+
+
+def warnings_in_one_line(prog: str):
+    """A ``warnings.showwarning`` that prints ``PROG: warning: MESSAGE`` on stderr: what a
+    command-line user reads, without the source line and file name."""
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        print(f"{prog}: warning: {message}", file=sys.stderr, flush=True)
+
+    return show
 
 
 class LineProgress:

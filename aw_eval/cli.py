@@ -18,12 +18,14 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Sequence
 
 from aw.cli.common import (
     CliError, UsageError, add_hidden_alias, add_jobs, add_no_progress, check_out_dir, new_parser, plural, positive_int,
     run_main,
 )
+from aw.progress import warnings_in_one_line
 
 __all__ = ["build_parser", "main", "protocol_note"]
 
@@ -90,7 +92,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_main("aw-score", lambda: _locked(args))
     before = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops as Ctrl-C does: workers ended, exit 130
     try:
-        return run_main("aw-score", lambda: _locked(args))
+        with warnings.catch_warnings():
+            warnings.showwarning = warnings_in_one_line("aw-score")
+            return run_main("aw-score", lambda: _locked(args))
     finally:
         signal.signal(signal.SIGTERM, before)
 

@@ -18,10 +18,12 @@ function of its rows in order: any worker layout gives identical numbers.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
+from aw import progress as _progress
 from aw_eval.chamfer import chamfer_pairs
 from aw_eval.geometry import Checkpoint, TaskGeometry
 from aw_eval.kernels import fast_settings, part_cd_batch
@@ -125,21 +127,43 @@ def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None, b
     warm = None
     order = sorted(first)
     stats = {"seconds": 0.0}
+    long_work = _LongWork(len(first), f"scoring {len(first)} states of a {geom.n_parts}-part task ({mode}, {backend})", t0)
     if backend == "jax":
         stats["jax"] = {}
         for lo in range(0, len(order), JAX_CHUNK):
             keys = order[lo: lo + JAX_CHUNK]
             results.update(zip(keys, _score_many_jax(geom, [geom.checkpoint(poses[k]) for k in keys], mode, stats["jax"])))
+            long_work.done(lo + len(keys))
             if progress is not None:
                 progress(lo + len(keys), len(first))
     for done, k in enumerate(order if backend == "numba" else []):
         results[k], warm = _score_one(geom, geom.checkpoint(poses[k]), mode, warm)
+        long_work.done(done + 1)
         if progress is not None:
             progress(done + 1, len(first))
     by_unique = [results[k] for k in first]
     rows = [by_unique[u] for u in np.asarray(inverse).reshape(-1)]
     stats["seconds"] = time.perf_counter() - t0
     return BatchScores.stack(rows, mode, len(first), stats)
+
+
+class _LongWork:
+    """Warns once (:class:`aw.progress.LongWorkWarning`) when the states left of a batch would
+    take long at the pace of those scored so far: an object of many parts can take minutes a
+    state under ``exact``, and a study of it hours, with nothing else to show for it."""
+
+    def __init__(self, total: int, what: str, started: float) -> None:
+        self.total, self.what, self.started, self.warned = total, what, started, False
+
+    def done(self, count: int) -> None:
+        if self.warned or count >= self.total:
+            return
+        pace = (time.perf_counter() - self.started) / count
+        left = pace * (self.total - count)
+        if left > _progress.WARN_AFTER_S:
+            self.warned = True
+            warnings.warn(f"{self.what}: {self.total - count} left, about {left / 60:.0f} min on this machine "
+                          f"({pace:.1f} s a state)", _progress.LongWorkWarning, stacklevel=3)
 
 
 @dataclass

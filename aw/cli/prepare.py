@@ -22,6 +22,7 @@ from aw.cli.common import CliError, UsageError, add_commands, new_parser, run_ma
 from aw.cli.suite import add_suite_options, check_unique_task_ids, run_suite
 from aw.formats import FormatError
 from aw.prepare import ObjectError, ObjectSpec, SuiteExistsError
+from aw.progress import warnings_in_one_line
 from aw.sources.folder import UP_AXES
 
 __all__ = ["REGISTRARS", "add_suite_options", "run_suite", "build_parser", "main"]
@@ -129,10 +130,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _warn_in_one_line(message, category, filename, lineno, file=None, line=None) -> None:
-    print(f"aw-prepare: warning: {message}", file=sys.stderr)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     import warnings
 
@@ -141,7 +138,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     def body() -> int:
         try:
             with warnings.catch_warnings():
-                warnings.showwarning = _warn_in_one_line
+                warnings.showwarning = warnings_in_one_line("aw-prepare")
                 return args.func(args)
         except SuiteExistsError as exc:
             raise UsageError(str(exc)) from None

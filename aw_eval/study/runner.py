@@ -12,6 +12,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import re
+import warnings
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
@@ -22,6 +23,7 @@ from typing import Any
 from aw.cli.common import plural
 from aw.formats import FormatError, read_manifest, read_run_info
 from aw.formats.suite import suite_paths
+from aw.progress import warnings_in_one_line
 from aw_eval.study import evaluator
 from aw_eval.study.cache import Cache, file_digest, geometry_key, run_key
 from aw_eval.study.job import STATUS_ERROR, RunRequest, ScoreSettings, TaskJob, TaskOutput, score_task
@@ -181,6 +183,7 @@ def _worker_init(parent: int) -> None:
     # One XLA thread per worker process: the pool already spreads work over the cores.
     os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
     watch_parent(parent)  # a killed aw-score takes its workers with it
+    warnings.showwarning = warnings_in_one_line("aw-score")  # e.g. a task that will take long
 
 
 def _failed(job: TaskJob, exc: BaseException, where: str) -> ScoringFailed:

@@ -48,3 +48,15 @@ def test_a_terminal_gets_tqdm_and_disabled_prints_nothing():
     off.update(2)
     off.close()
     assert quiet.getvalue() == ""
+
+
+def test_warnings_read_as_one_line_of_the_command(capsys):
+    import warnings
+
+    from aw.progress import LongWorkWarning, warnings_in_one_line
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.showwarning = warnings_in_one_line("aw-score")
+        warnings.warn("scoring 9 states of a 300-part task (exact, numba): 8 left, about 40 min", LongWorkWarning)
+    assert capsys.readouterr().err == "aw-score: warning: scoring 9 states of a 300-part task (exact, numba): 8 left, about 40 min\n"

@@ -37,6 +37,27 @@ def test_score_batch_dedupes_and_matches_score(task):
     assert len(empty) == 0 and empty.part_errors.shape == (0, 4)
 
 
+@pytest.mark.parametrize(("seconds_a_state", "warns"), [(100.0, False), (200.0, True)])
+def test_a_batch_that_will_take_long_warns_once_with_its_estimate(task, monkeypatch, seconds_a_state, warns):
+    """On a clock that moves only as states are scored: three states at 200 s each leave 400 s
+    after the first, worth a warning (above 300 s); at 100 s each, 200 s are not."""
+    import types
+    import warnings
+
+    import aw_eval.scoring
+    from aw.progress import LongWorkWarning
+
+    ticks = iter(np.arange(100) * seconds_a_state)
+    monkeypatch.setattr(aw_eval.scoring, "time", types.SimpleNamespace(perf_counter=lambda: float(next(ticks))))
+    geom, obj = task
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        aw_eval.score_batch(geom, random_checkpoints(obj, 3, seed=2), backend="numba")
+    slow = [str(w.message) for w in caught if issubclass(w.category, LongWorkWarning)]
+    assert slow == (["scoring 3 states of a 4-part task (exact, numba): 2 left, about 7 min on this machine "
+                     "(200.0 s a state)"] if warns else [])
+
+
 def test_registration_is_returned_and_reusable(task):
     geom, obj = task
     poses = random_checkpoints(obj, 1, seed=4, kinds=("near",))[0]
