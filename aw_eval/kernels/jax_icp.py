@@ -94,6 +94,8 @@ MIN_LANES = 8
 # Box distances held at once by the leaf lookups (lanes x queries x leaves, float64): lanes
 # are looked up in groups that fit it (lax.map over the groups).
 LEAF_ELEMENTS = 1 << 25
+# Leaves a query reads where the caller does not say (tests lower it to exercise the fallback).
+CANDIDATES = DEFAULT_CANDIDATES
 
 
 def _leaf_candidates(jnp, lax, leaves, y, x, ref, c: int):
@@ -102,22 +104,23 @@ def _leaf_candidates(jnp, lax, leaves, y, x, ref, c: int):
     ``ref (M, 3)`` the joined clouds there (distances are computed there, as the protocol
     computes them). Returns ``(index (q,), answered (q,))``: the first minimum over the points of
     the ``c`` nearest leaf boxes (all parts' leaves as one list), and whether the next box is
-    farther than it (then it is the brute-force first minimum; :mod:`aw_eval.kernels.leafbox`)."""
+    farther than it (then it is the brute-force first minimum; :mod:`aw_eval.kernels.leafbox`);
+    ``answered`` is ``None`` where every leaf is read (all certain)."""
     lo, hi, index = leaves
     p, b, s = index.shape
     q = x.shape[0]
+    if c >= p * b:  # every leaf read: plain brute force over ``ref`` (all certain; None known when tracing)
+        d = ((x[:, None, 0] - ref[None, :, 0]) ** 2 + (x[:, None, 1] - ref[None, :, 1]) ** 2) + (x[:, None, 2] - ref[None, :, 2]) ** 2
+        return jnp.argmin(d, axis=1).astype(jnp.int32), None
     g = jnp.maximum(jnp.maximum(lo[:, None] - y[:, :, None], y[:, :, None] - hi[:, None]), 0.0)  # (P, q, B, 3)
     lb = (g[..., 0] * g[..., 0] + g[..., 1] * g[..., 1]) + g[..., 2] * g[..., 2]
     lb = jnp.moveaxis(lb, 0, 1).reshape(q, p * b)
-    c = min(c, p * b)
-    neg, order = lax.top_k(-lb, min(c + 1, p * b))  # nearest boxes first
+    neg, order = lax.top_k(-lb, c + 1)  # nearest boxes first
     cand = index.reshape(p * b, s)[order[:, :c]].reshape(q, c * s)
     yc = ref[cand]  # (q, c s, 3)
     d = ((x[:, None, 0] - yc[..., 0]) ** 2 + (x[:, None, 1] - yc[..., 1]) ** 2) + (x[:, None, 2] - yc[..., 2]) ** 2
     dmin = jnp.min(d, axis=1)
     idx = jnp.min(jnp.where(d == dmin[:, None], cand, jnp.iinfo(jnp.int32).max), axis=1)  # lowest index of the ties
-    if c == p * b:
-        return idx, jnp.ones(q, bool)
     return idx, -neg[:, c] * (1 - LEAF_REL) - LEAF_ABS > dmin
 
 
@@ -129,20 +132,26 @@ def _lanes(jax, f, group: int, *args):
         return jax.vmap(f)(*args)
     grouped = [a.reshape((lanes // g, g) + a.shape[1:]) for a in args]
     out = jax.lax.map(lambda xs: jax.vmap(f)(*xs), grouped)
-    return tuple(o.reshape((lanes,) + o.shape[2:]) for o in out)
+    return tuple(None if o is None else o.reshape((lanes,) + o.shape[2:]) for o in out)
 
 
-def _group(queries: int, boxes: int) -> int:
-    """Lanes per leaf-lookup group: the largest power of two whose box distances fit LEAF_ELEMENTS."""
+def _group(queries: int, leaves: LeafBoxes, candidates: int) -> int:
+    """Lanes per leaf-lookup group: the largest power of two whose box and candidate distances
+    fit LEAF_ELEMENTS."""
+    p, b, s = leaves[2].shape
+    per_query = max(p * b, min(candidates, p * b) * s)
     g = 1
-    while 2 * g * queries * boxes <= LEAF_ELEMENTS:
+    while 2 * g * queries * per_query <= LEAF_ELEMENTS:
         g *= 2
     return g
 
 
 def _brute_fix(jnp, lax, idx, answered, x, refs, lane_ref):
     """Replace the unanswered entries of ``idx (L, q)`` by brute-force first minima: query
-    ``x[l, i]`` against ``refs[lane_ref[l]] (M, 3)``, FALLBACK_ROWS flagged queries at a time."""
+    ``x[l, i]`` against ``refs[lane_ref[l]] (M, 3)``, FALLBACK_ROWS flagged queries at a time
+    (``answered`` ``None``: all answered). Returns ``(index (L, q), brute-forced count)``."""
+    if answered is None:
+        return idx, jnp.asarray(0, jnp.int64)
     lanes, q = idx.shape
     flat = ~answered.reshape(-1)
     count = jnp.sum(flat)
@@ -180,12 +189,12 @@ def _compiled_nearest(candidates: int):
 
 
 def nearest_in_leaves(x: np.ndarray, ref: np.ndarray, leaves: LeafBoxes,
-                      candidates: int = DEFAULT_CANDIDATES) -> tuple[np.ndarray, int]:
+                      candidates: int | None = None) -> tuple[np.ndarray, int]:
     """``(index (L, q), brute-forced)``: the nearest row of ``ref (M, 3)`` (first minimum) for
     every query ``x (L, q, 3)``, by the leaf boxes of ``ref``'s parts (:class:`LeafBoxes`, their
     frame ``ref``'s) and the brute-force path where they do not certify: the lookup ICP does."""
     _, jnp = jax_modules()
-    idx, count = _compiled_nearest(int(candidates))(jnp.asarray(x, dtype=jnp.float64), jnp.asarray(ref, dtype=jnp.float64),
+    idx, count = _compiled_nearest(int(CANDIDATES if candidates is None else candidates))(jnp.asarray(x, dtype=jnp.float64), jnp.asarray(ref, dtype=jnp.float64),
                                                     tuple(jnp.asarray(a) for a in leaves))
     return np.asarray(idx), int(count)
 
@@ -201,18 +210,16 @@ def _compiled_round(max_iters: int, tol: float, candidates: int, has_pred_leaves
         """Both directions' neighbours and the objective of every lane at ``(r (L, 3, 3), t (L, 3))``."""
         p = preds[ck]  # (L, n, 3)
         x = jnp.einsum("lnk,ljk->lnj", p, r) + t[:, None, :]  # moved predictions
-        n_tb = tl[2].shape[0] * tl[2].shape[1]
         fwd, f_ok = _lanes(jax, lambda xl: _leaf_candidates(jnp, lax, tl, xl[None], xl, target, candidates),
-                           _group(x.shape[1], n_tb), x)
+                           _group(x.shape[1], tl, candidates), x)
         fwd, nf = _brute_fix(jnp, lax, fwd, f_ok, x, target[None], jnp.zeros(x.shape[0], jnp.int32))
         if has_pred_leaves:
             # target points into each part's leaf frame: part maps after the inverse registration
             a, b = maps[ck, :, :, :3], maps[ck, :, :, 3]  # (L, P, 3, 3), (L, P, 3)
             z = jnp.einsum("mk,lkj->lmj", target, r) - jnp.einsum("lk,lkj->lj", t, r)[:, None, :]  # R^T (T - t)
             y = jnp.einsum("lmk,lpjk->lpmj", z, a) + b[:, :, None, :]
-            n_pb = pl[2].shape[0] * pl[2].shape[1]
             bwd, b_ok = _lanes(jax, lambda yl, xl: _leaf_candidates(jnp, lax, pl, yl, target, xl, candidates),
-                               _group(target.shape[0], n_pb), y, x)
+                               _group(target.shape[0], pl, candidates), y, x)
         else:
             bwd = jnp.zeros((x.shape[0], target.shape[0]), jnp.int32)
             b_ok = jnp.zeros(bwd.shape, bool)
@@ -266,7 +273,7 @@ def _bucket(n: int) -> int:
 def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float,
               target_leaves: LeafBoxes | None = None, pred_leaves: LeafBoxes | None = None,
               pred_maps: np.ndarray | None = None, stats: dict | None = None,
-              candidates: int = DEFAULT_CANDIDATES) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              candidates: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The protocol's ICP of every checkpoint from every start.
 
     ``preds (C, n, 3)`` normalized predictions of one task, ``target (m, 3)``, starts
@@ -275,12 +282,13 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
     ``pred_leaves`` of the ``P`` clouds every prediction moves rigidly (``preds[c]`` = cloud
     ``q`` mapped into the prediction frame, part after part) with ``pred_maps (C, P, 3, 4)``:
     ``[A | b]`` taking a point of prediction ``c``'s frame into cloud ``q``'s frame (default:
-    brute force). ``candidates``: leaves a query reads. Either way the neighbours are the
+    brute force). ``candidates``: leaves a query reads (default CANDIDATES). Either way the neighbours are the
     brute-force first minima. Returns each lane's best state: ``objective (C, S)``, ``rotation
     (C, S, 3, 3)``, ``translation (C, S, 3)`` (NumPy float64). ``stats``: filled with
     ``lanes_iterated`` (sum over rounds of the lanes computed, padding included),
-    ``lane_iterations`` (fits the protocol needed), ``rounds`` and ``brute_queries`` (queries
-    the leaves did not certify).
+    ``lane_iterations`` (fits the protocol needed), ``rounds``, ``queries`` (neighbour queries
+    computed, padding included) and ``brute_queries`` (of those, the ones the leaves did not
+    certify).
     """
     jax, jnp = jax_modules()
     target = np.ascontiguousarray(target, dtype=np.float64)
@@ -288,7 +296,7 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
         target_leaves = build_leaf_boxes(target)
     c, s = r0.shape[:2]
     has_pl = pred_leaves is not None
-    init, round_ = _compiled_round(int(max_iters), float(tol), int(candidates), has_pl)
+    init, round_ = _compiled_round(int(max_iters), float(tol), int(CANDIDATES if candidates is None else candidates), has_pl)
     dev = lambda a: jnp.asarray(a)  # noqa: E731
     tl = tuple(dev(a) for a in target_leaves)
     pl = tuple(dev(a) for a in pred_leaves) if has_pl else ()
@@ -298,7 +306,8 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
     ck_all = np.repeat(np.arange(c), s)
     r_all, t_all = np.asarray(r0, np.float64).reshape(-1, 3, 3), np.asarray(t0, np.float64).reshape(-1, 3)
     best_obj, best_r, best_t = np.empty(lanes), r_all.copy(), t_all.copy()
-    counters = {"lanes_iterated": 0, "lane_iterations": 0, "brute_queries": 0, "rounds": 0}
+    counters = {"lanes_iterated": 0, "lane_iterations": 0, "queries": 0, "brute_queries": 0, "rounds": 0}
+    per_lane = preds.shape[1] + len(target)  # neighbour queries of one evaluation, both directions
     # the starts' objectives, in buckets; then rounds over the lanes still running
     live: list[tuple] = []
     for lo in range(0, lanes, 1 << 12):
@@ -306,6 +315,7 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
         pad = _pad(ids)
         obj, fwd, bwd, nflag = init(pr, tgt, tl, pl, maps, dev(ck_all[pad]), dev(r_all[pad]), dev(t_all[pad]))
         counters["brute_queries"] += int(nflag)
+        counters["queries"] += len(pad) * per_lane
         obj = np.asarray(obj)[: len(ids)]
         best_obj[ids] = obj
         live.append((ids, np.ones(len(ids), bool), np.zeros(len(ids), np.int64), obj, np.asarray(fwd)[: len(ids)],
@@ -321,7 +331,9 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
         out, nflag = round_(pr, tgt, tl, pl, maps, dev(ck_all[ids][pad]), state)
         n = len(ids)
         new_its = np.asarray(out[1])[:n]
-        counters["lanes_iterated"] += len(pad) * int((new_its - its).max())
+        iters = int((new_its - its).max())  # every lane of the bucket computed that many
+        counters["lanes_iterated"] += len(pad) * iters
+        counters["queries"] += len(pad) * iters * per_lane
         counters["rounds"] += 1
         counters["lane_iterations"] += int((new_its - its).sum())
         counters["brute_queries"] += int(nflag)
