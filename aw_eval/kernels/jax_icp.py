@@ -94,6 +94,12 @@ MIN_LANES = 8
 # Box distances held at once by the leaf lookups (lanes x queries x leaves, float64): lanes
 # are looked up in groups that fit it (lax.map over the groups).
 LEAF_ELEMENTS = 1 << 25
+# Relative slack of the boxes picked in float32: a box not picked has a float32 distance at least
+# the (c+1)-th one's, so a float64 one at least (1 - 2^-24)^2 times that box's (float32 rounds
+# by at most 2^-24 relative; below its normal range by more, but there the absolute slack fails
+# the certificate anyway; above its range every box is inf alike, and the fresh float64 value
+# still bounds nothing it should not: such a query is not certified unless d* is smaller).
+_F32_SLACK = 1e-6
 # Leaves a query reads where the caller does not say (tests lower it to exercise the fallback).
 CANDIDATES = DEFAULT_CANDIDATES
 
@@ -115,13 +121,26 @@ def _leaf_candidates(jnp, lax, leaves, y, x, ref, c: int):
     g = jnp.maximum(jnp.maximum(lo[:, None] - y[:, :, None], y[:, :, None] - hi[:, None]), 0.0)  # (P, q, B, 3)
     lb = (g[..., 0] * g[..., 0] + g[..., 1] * g[..., 1]) + g[..., 2] * g[..., 2]
     lb = jnp.moveaxis(lb, 0, 1).reshape(q, p * b)
-    neg, order = lax.top_k(-lb, c + 1)  # nearest boxes first
-    cand = index.reshape(p * b, s)[order[:, :c]].reshape(q, c * s)
-    yc = ref[cand]  # (q, c s, 3)
-    d = ((x[:, None, 0] - yc[..., 0]) ** 2 + (x[:, None, 1] - yc[..., 1]) ** 2) + (x[:, None, 2] - yc[..., 2]) ** 2
+    # the c nearest boxes picked in float32 (XLA's float64 top_k is far slower on a CPU); the
+    # certificate is the (c+1)-th float32 value, lowered by far more than float32's rounding:
+    # every box not picked has a float32 distance at least that, so a float64 one at least
+    # that x (1 - 2^-24)
+    # (materialized: where XLA fuses the top-k into its several consumers, it recomputes it in
+    # each, 8x slower on a CPU)
+    order = lax.optimization_barrier(lax.top_k(-lb.astype(jnp.float32), c + 1)[1])
+    nxt = order[:, c]  # the (c+1)-th box, its distance taken afresh in float64
+    part = nxt // b
+    gap = jnp.maximum(jnp.maximum(lo.reshape(-1, 3)[nxt] - y[part, jnp.arange(q)], y[part, jnp.arange(q)] - hi.reshape(-1, 3)[nxt]), 0.0)
+    bound = ((gap[:, 0] * gap[:, 0] + gap[:, 1] * gap[:, 1]) + gap[:, 2] * gap[:, 2]) * (1 - _F32_SLACK)
+    flat = index.reshape(p * b, s)
+    # whole leaves gathered (contiguous blocks), coordinates leaf-major: (P B, 3, S)
+    sel = order[:, :c]
+    yc, cand = jnp.swapaxes(ref[flat], 1, 2)[sel], flat[sel].reshape(q, c * s)  # (q, c, 3, S), (q, c S)
+    d = ((x[:, None, 0, None] - yc[:, :, 0]) ** 2 + (x[:, None, 1, None] - yc[:, :, 1]) ** 2) + (x[:, None, 2, None] - yc[:, :, 2]) ** 2
+    d = d.reshape(q, c * s)
     dmin = jnp.min(d, axis=1)
     idx = jnp.min(jnp.where(d == dmin[:, None], cand, jnp.iinfo(jnp.int32).max), axis=1)  # lowest index of the ties
-    return idx, -neg[:, c] * (1 - LEAF_REL) - LEAF_ABS > dmin
+    return idx, bound * (1 - LEAF_REL) - LEAF_ABS > dmin
 
 
 def _lanes(jax, f, group: int, *args):
