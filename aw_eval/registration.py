@@ -34,7 +34,7 @@ __all__ = ["MODES", "BACKENDS", "resolve_backend", "register_exact_many", "jax_p
            "register", "register_checkpoint", "CONTACT_WALKS"]
 
 MODES = ("exact", "fast")
-# numba: compiled walks on the CPU, one start at a time; jax: batched candidate-list lookups on
+# numba: compiled walks on the CPU, one start at a time; jax: batched leaf-box certified lookups on
 # any XLA device; auto: jax for exact when JAX sees an accelerator, numba otherwise (on a CPU the
 # compiled walks are far faster: docs/performance.md)
 BACKENDS = ("auto", "numba", "jax")

@@ -10,7 +10,8 @@ Nearest neighbours, in fixed shapes: exact per-query leaf-box certificates
 takes the squared distances to every leaf box of its clouds, reads the points of the
 ``candidates`` nearest boxes, computes their squared distances from coordinates as the protocol
 does (in the reference frame) and takes the first minimum; the next box's distance certifies
-that no other point is nearer or tied. Forward, the joined target's leaves; backward, the
+that no other point is nearer or tied (the boxes are picked by a float32 top-k, XLA's fast
+one on a CPU; the certificate allows for float32's rounding). Forward, the joined target's leaves; backward, the
 leaves of every part's baked cloud as one list (a checkpoint moves each rigidly: the target
 points are mapped into each part's frame for the box distances). Every query without a
 certificate takes the brute-force path, all lanes' such queries compacted into tiles of
