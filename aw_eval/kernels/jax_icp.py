@@ -95,11 +95,9 @@ MIN_LANES = 8
 # Box distances held at once by the leaf lookups (lanes x queries x leaves, float64): lanes
 # are looked up in groups that fit it (lax.map over the groups).
 LEAF_ELEMENTS = 1 << 25
-# Relative slack of the boxes picked in float32: a box not picked has a float32 distance at least
-# the (c+1)-th one's, so a float64 one at least (1 - 2^-24)^2 times that box's (float32 rounds
-# by at most 2^-24 relative; below its normal range by more, but there the absolute slack fails
-# the certificate anyway; above its range every box is inf alike, and the fresh float64 value
-# still bounds nothing it should not: such a query is not certified unless d* is smaller).
+# Relative slack for the boxes picked in float32 (rounding to float32 moves a value by at most
+# 2^-24 relative; below float32's normal range by more, where the absolute slack fails the
+# certificate anyway).
 _F32_SLACK = 1e-6
 # Leaves a query reads where the caller does not say (tests lower it to exercise the fallback).
 CANDIDATES = DEFAULT_CANDIDATES
@@ -122,17 +120,18 @@ def _leaf_candidates(jnp, lax, leaves, y, x, ref, c: int):
     g = jnp.maximum(jnp.maximum(lo[:, None] - y[:, :, None], y[:, :, None] - hi[:, None]), 0.0)  # (P, q, B, 3)
     lb = (g[..., 0] * g[..., 0] + g[..., 1] * g[..., 1]) + g[..., 2] * g[..., 2]
     lb = jnp.moveaxis(lb, 0, 1).reshape(q, p * b)
-    # the c nearest boxes picked in float32 (XLA's float64 top_k is far slower on a CPU); the
-    # certificate is the (c+1)-th float32 value, lowered by far more than float32's rounding:
-    # every box not picked has a float32 distance at least that, so a float64 one at least
-    # that x (1 - 2^-24)
-    # (materialized: where XLA fuses the top-k into its several consumers, it recomputes it in
-    # each, 8x slower on a CPU)
+    # the c nearest boxes picked in float32 (XLA's float64 top-k is far slower on a CPU), and
+    # materialized (fused into its several consumers, XLA recomputes it in each: 8x slower). The
+    # certificate: every box not picked has a float32 distance at least the (c+1)-th box's, so a
+    # float64 one at least (1 - 2^-24)^2 times that box's float64 distance, capped at float32's
+    # largest value (past it every float32 distance is inf alike)
     order = lax.optimization_barrier(lax.top_k(-lb.astype(jnp.float32), c + 1)[1])
-    nxt = order[:, c]  # the (c+1)-th box, its distance taken afresh in float64
+    nxt = order[:, c]
     part = nxt // b
-    gap = jnp.maximum(jnp.maximum(lo.reshape(-1, 3)[nxt] - y[part, jnp.arange(q)], y[part, jnp.arange(q)] - hi.reshape(-1, 3)[nxt]), 0.0)
-    bound = ((gap[:, 0] * gap[:, 0] + gap[:, 1] * gap[:, 1]) + gap[:, 2] * gap[:, 2]) * (1 - _F32_SLACK)
+    yn = y[part, jnp.arange(q)]  # (q, 3) each query in that box's frame
+    gap = jnp.maximum(jnp.maximum(lo.reshape(-1, 3)[nxt] - yn, yn - hi.reshape(-1, 3)[nxt]), 0.0)
+    nxt_d2 = (gap[:, 0] * gap[:, 0] + gap[:, 1] * gap[:, 1]) + gap[:, 2] * gap[:, 2]
+    bound = jnp.minimum(nxt_d2, float(np.finfo(np.float32).max)) * (1 - _F32_SLACK)
     flat = index.reshape(p * b, s)
     # whole leaves gathered (contiguous blocks), coordinates leaf-major: (P B, 3, S)
     sel = order[:, :c]

@@ -106,7 +106,8 @@ def box_d2(lo: np.ndarray, hi: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 def leaf_lookup(leaves: LeafBoxes, y: np.ndarray, x: np.ndarray, ref: np.ndarray,
                 candidates: int = DEFAULT_CANDIDATES) -> tuple[np.ndarray, np.ndarray]:
-    """Host version of the XLA lookup: ``(index (k,), answered (k,))`` for queries ``y (P, k, 3)``
+    """Host version of the XLA lookup (the same rule; boxes picked in float64 here, in float32
+    there): ``(index (k,), answered (k,))`` for queries ``y (P, k, 3)``
     in every cloud's frame and ``x (k, 3)`` the same queries in ``ref``'s frame (``ref (P n, 3)``
     the joined clouds there); ``index`` is the first minimum over the ``candidates`` nearest
     leaves, certified where ``answered`` (elsewhere the caller's brute-force path)."""

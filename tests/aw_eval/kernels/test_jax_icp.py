@@ -64,7 +64,8 @@ def test_leaf_lookup_with_its_fallback_is_the_brute_force_first_minimum(candidat
     """Two parts (a sheet and a dense blob with duplicated points) and a third identical to the
     first, leaves of 4 points, queries near, across and far outside the clouds: every answer is
     the brute-force first minimum over the joined clouds (lowest index on exact ties), the
-    uncertified queries by the fallback."""
+    uncertified queries by the fallback; queries far above the sheet, where the boxes' distances
+    agree to float32's rounding, stay exact."""
     rng = np.random.default_rng(4)
     sheet = np.c_[rng.uniform(-1, 1, (60, 2)), np.zeros(60)]
     blob = rng.normal(size=(60, 3)) * 0.02 + 0.3
@@ -76,7 +77,9 @@ def test_leaf_lookup_with_its_fallback_is_the_brute_force_first_minimum(candidat
     parts = ref.reshape(3, 60, 3)
     leaves = build_part_leaves(parts, leaf=4)
     x = np.concatenate([ref[rng.integers(180, size=150)] + rng.normal(size=(150, 3)) * 0.01,
-                        rng.uniform(-1.2, 1.2, (100, 3)), rng.normal(size=(6, 3)) * 30.0, ref[:10]]).reshape(2, -1, 3)
+                        rng.uniform(-1.2, 1.2, (100, 3)), rng.normal(size=(6, 3)) * 30.0, ref[:10],
+                        # far above the sheet: many boxes within float32's rounding of each other
+                        np.c_[rng.uniform(-1, 1, (8, 2)), np.full(8, 1e3)]]).reshape(2, -1, 3)
     idx, brute = nearest_in_leaves(x, ref, leaves, candidates=candidates)
     want = brute_first_min(x.reshape(-1, 3), ref).reshape(idx.shape)
     assert np.array_equal(idx, want)
