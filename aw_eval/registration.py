@@ -34,7 +34,7 @@ __all__ = ["MODES", "BACKENDS", "resolve_backend", "register_exact_many", "jax_p
            "register", "register_checkpoint", "CONTACT_WALKS"]
 
 MODES = ("exact", "fast")
-# numba: compiled walks on the CPU, one start at a time; jax: batched candidate-list lookups on
+# numba: compiled walks on the CPU, one start at a time; jax: batched leaf-box certified lookups on
 # any XLA device; auto: jax for exact when JAX sees an accelerator, numba otherwise (on a CPU the
 # compiled walks are far faster: docs/performance.md)
 BACKENDS = ("auto", "numba", "jax")
@@ -103,17 +103,17 @@ def jax_part_maps(geom: TaskGeometry, cks: list[Checkpoint]) -> np.ndarray:
 
 def register_exact_many(geom: TaskGeometry, cks: list[Checkpoint], stats: dict | None = None) -> list[Registration]:
     """The protocol's registration of every checkpoint of ``cks`` at once (``jax`` backend): all
-    starts of all checkpoints batched, neighbours from the task's cell grids
-    (:meth:`aw_eval.kernels.TaskIndex.part_grids`: target parts forward, the parts' baked clouds
-    backward, exact); per checkpoint the lowest objective wins, ties to the earlier start
+    starts of all checkpoints batched, neighbours certified by the task's leaf boxes
+    (:meth:`aw_eval.kernels.TaskIndex.part_leaves`: the joined target forward, the parts' baked
+    clouds backward, exact); per checkpoint the lowest objective wins, ties to the earlier start
     (``argmin`` takes the first). ``stats``: see :func:`aw_eval.kernels.icp_batch`."""
     st = geom.settings
     starts = [checkpoint_starts(geom, ck) for ck in cks]
     preds = np.stack([ck.points for ck in cks])
-    target_grids, baked_grids = geom.index().part_grids(geom.divisor)
+    target_leaves, baked_leaves = geom.index().part_leaves(geom.divisor)
     obj, rot, trans = icp_batch(preds, geom.index().target, np.stack([s[0] for s in starts]),
-                                np.stack([s[1] for s in starts]), st.max_iters, st.tol, target_grids=target_grids,
-                                pred_grids=baked_grids, pred_maps=jax_part_maps(geom, cks), stats=stats)
+                                np.stack([s[1] for s in starts]), st.max_iters, st.tol, target_leaves=target_leaves,
+                                pred_leaves=baked_leaves, pred_maps=jax_part_maps(geom, cks), stats=stats)
     best = np.argmin(obj, axis=1)
     return [Registration(float(obj[c, k]), rot[c, k], trans[c, k], int(k), obj[c]) for c, k in enumerate(best)]
 

@@ -60,7 +60,7 @@ def _score_many_jax(geom: TaskGeometry, cks: list[Checkpoint], mode: str, stats:
     t0 = time.perf_counter()
     size = 1 << (len(cks) - 1).bit_length()  # padded with copies of the last checkpoint
     padded = cks + [cks[-1]] * (size - len(cks))
-    geom.index().part_grids(geom.divisor)  # built once per task
+    geom.index().part_leaves(geom.divisor)  # built once per task
     t1 = time.perf_counter()
     icp_stats: dict = {}
     regs = register_exact_many(geom, padded, icp_stats)

@@ -91,6 +91,13 @@ def main() -> None:
             r = {k: v for k, v in r.items() if k not in ("numba", "jax")}
             out["rows"].append({"parts": parts, "points_per_part": args.n_fps, "thresholds": label, **r})
             print(json.dumps(out["rows"][-1]), flush=True)
+        _total(out, t0)
+        path.write_text(json.dumps(out, indent=2) + "\n")  # after each part count: a time limit keeps the rest
+    print(json.dumps(out["total"], indent=2))
+    print(f"wrote {path}")
+
+
+def _total(out: dict, t0: float) -> None:
     rows = out["rows"]
     out["total"] = {
         "scored_checkpoints": sum(r["checkpoints"] for r in rows),
@@ -100,10 +107,8 @@ def main() -> None:
         "max_rel_part_error": max(r["max_rel_part_error"] for r in rows),
         "knife_edge_part_errors": sum(r["part_errors_within_1e-6_of_threshold"] for r in rows),
         "seconds": round(time.perf_counter() - t0, 1),
+        "load_average_after": os.getloadavg(),
     }
-    path.write_text(json.dumps(out, indent=2) + "\n")
-    print(json.dumps(out["total"], indent=2))
-    print(f"wrote {path}")
 
 
 if __name__ == "__main__":

@@ -6,13 +6,14 @@
     JAX_PLATFORMS=cpu .venv/bin/python benchmarks/bench_jax.py --parts 2 --n-fps 100 --checkpoints 16 --chunk 16 --numba 16 --out OUT
 
 Synthetic geometry and agent-like trajectory checkpoints (:mod:`aw_eval.fixtures`), per part
-count. Times the task's cell grids (built once per task, numba on the host), then
+count. Times the task's leaf boxes (built once per task on the host: the joined target's and
+the parts' baked clouds', :mod:`aw_eval.kernels.leafbox`), then
 ``score_batch(mode="exact", backend="jax")`` cold (its first chunk, compilation included) and
-warm (every checkpoint again, compiled), split into stages (grids, ICP, part CDs, host work),
+warm (every checkpoint again, compiled), split into stages (leaf boxes, ICP, part CDs, host work),
 with the ICP's lane counters: lanes computed (padding included) against the iterations the
-protocol needed, and queries that took the brute-force path. Then ``backend="numba"`` on the
-first ``--numba`` checkpoints: identical PA/SR and SCD within 1e-9 relative are checked on
-those, and the ratio is taken on the same checkpoints. The projection to 60,000 checkpoints
+protocol needed, and the share of neighbour queries the leaves did not certify (brute force).
+Then ``backend="numba"`` on the first ``--numba`` checkpoints: identical PA/SR and SCD within
+1e-9 relative are checked on those, and the ratio is taken on the same checkpoints. The projection to 60,000 checkpoints
 is the warm rate times 60,000, labelled as a projection. ``JAX_PLATFORMS`` picks the device
 as usual (default: an accelerator when JAX sees one).
 """
@@ -38,6 +39,7 @@ STUDY_CHECKPOINTS = 60_000
 def one_part_count(parts: int, args) -> dict:
     import aw_eval
     from aw_eval.fixtures import make_points_geometry, trajectory_checkpoints
+    from aw_eval.kernels.leafbox import DEFAULT_CANDIDATES
 
     settings = aw_eval.ProtocolSettings(n_fps=args.n_fps, n_surface=max(4096, 4 * args.n_fps))
     geom, obj = make_points_geometry(parts, args.n_fps, seed=parts, settings=settings)
@@ -45,8 +47,9 @@ def one_part_count(parts: int, args) -> dict:
     cks = np.unique(trajectory_checkpoints(obj, 4 * args.checkpoints, seed=1000 + parts), axis=0)[: args.checkpoints]
     geom.index()
     t0 = time.perf_counter()
-    grids = geom.index().part_grids(geom.divisor)
-    grid_s = time.perf_counter() - t0
+    geom.index()._leaves = None  # time a fresh build
+    leaves = geom.index().part_leaves(geom.divisor)
+    leaf_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     aw_eval.score_batch(geom, cks[: args.chunk], mode="exact", backend="jax")
     cold = time.perf_counter() - t0
@@ -63,18 +66,18 @@ def one_part_count(parts: int, args) -> dict:
     jax_per_ck, numba_per_ck = warm / len(cks), numba_s / max(k, 1)
     rel = np.abs(j.scd[:k] - n.scd) / np.maximum(np.maximum(j.scd[:k], n.scd), 1e-300)
     tiny = np.maximum(j.scd[:k], n.scd) < 1e-20  # exact registrations: both are rounding noise
-    queries = st["lane_iterations"] * parts * args.n_fps * 2
     return {
         "parts": parts, "points_per_part": args.n_fps, "checkpoints": int(len(cks)), "chunk": args.chunk,
-        "grids_once_per_task_s": round(grid_s, 3),
-        "grid_nodes": [int(g.child.shape[1]) for g in grids], "grid_k": int(grids[0].cand.shape[2]),
+        "leaf_boxes_once_per_task_s": round(leaf_s, 4),
+        "leaves_target_parts": [int(a.index.shape[1]) for a in leaves], "leaf_size": int(leaves[0].index.shape[2]),
+        "leaves_read_per_query": DEFAULT_CANDIDATES,
         "jax_first_chunk_s_incl_compile": round(cold, 2),
         "jax_first_chunk_s_per_ck_incl_compile": cold / min(args.chunk, len(cks)),
         "jax_warm_s_per_ck": jax_per_ck,
         "warm_stage_s_per_ck": {s: st[s] / len(cks) for s in ("structures", "icp", "part_cd", "host")},
         "lanes_computed": int(st["lanes_iterated"]), "lane_iterations_needed": int(st["lane_iterations"]),
         "rounds": int(st["rounds"]), "brute_force_queries": int(st["brute_queries"]),
-        "brute_force_share_of_queries": st["brute_queries"] / max(queries, 1),
+        "brute_force_share_of_queries": st["brute_queries"] / max(st["queries"], 1),
         "numba_checkpoints": k, "numba_s_per_ck": numba_per_ck, "jax_over_numba_speed": numba_per_ck / jax_per_ck,
         "identical_pa_sr": int(np.sum((j.pa[:k] == n.pa) & (j.sr[:k] == n.sr))),
         "max_rel_scd": float(np.max(np.where(tiny, 0.0, rel))) if k else None,

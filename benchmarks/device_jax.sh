@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# One-shot GPU measurement of the jax backend (`exact` on candidate-list neighbours), sized to
+# One-shot GPU measurement of the jax backend (`exact` on leaf-box certified neighbours), sized to
 # finish in about 8 minutes on one H100 (an estimate: not yet run there): 2, 8 and 20 parts at
 # 1,000 points a part, 64 checkpoints each, cold and
-# warm seconds per checkpoint, the per-stage split, agreement with numba on the first 4
+# warm seconds per checkpoint, the per-stage split (leaf boxes, ICP, part CDs, host), the share
+# of queries the leaves did not certify, agreement with numba on the first 4
 # checkpoints of each, and the projection to 60,000 checkpoints. Writes
 # benchmarks/results/bench_jax_gpu.json (or $1/bench_jax_gpu.json) and prints it.
 #

@@ -15,7 +15,7 @@ Inside: compiled KD-trees (``kdtree``), Delaunay walks with Voronoi certificates
 (``delaunay``), walks through a posed assembly's parts (``partwalk``), the fused ICP kernel
 (``icp``) and the coarse stage (``fast``); and their XLA counterpart for accelerators
 (``jax_icp``: the same ICP batched over checkpoints x starts, its neighbours from fixed-shape
-candidate lists of cell grids built by ``cellgrid``, exact). Nothing here decides what is scored: every result is
+per-query leaf-box certificates of ``leafbox``, exact). Nothing here decides what is scored: every result is
 the protocol's (``fast`` excepted, whose agreement is measured).
 """
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from aw_eval.kernels.cellgrid import build_cell_grid
 from aw_eval.kernels.fast import coarse_icp
 from aw_eval.kernels.fps import fps_batch
 from aw_eval.kernels.icp import CertifiedNN, ICPProblem, build_tree, graph_for, nearest_positions
@@ -37,6 +36,5 @@ def compile_kernels() -> None:
     poses = np.array([[0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], [0.0, 0.2, 0.0, 0.0, 1.0, 0.0, 0.0]])
     ICPProblem.for_assembly(parts, poses, 1.0, clouds, b, tree_t=tb, graph_t=graph_for(tb)).run(np.eye(3), np.zeros(3), 3, 1e-9)
     coarse_icp(a.reshape(2, 20, 3), b[:20].reshape(2, 10, 3), np.eye(3)[None], np.zeros((1, 3)), 8, 3, 1e-9)
-    build_cell_grid(a, k=4, depth=1)  # the jax backend's candidate lists
     fps_batch(rng.normal(size=(2, 50, 3)), 10)
     _COMPILED = True

@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from aw_eval.kernels.cellgrid import JOINED_K, JOINED_MARGIN_CELLS, build_part_grids
 from aw_eval.kernels.icp import ICPProblem, graph_for, nearest_positions
 from aw_eval.kernels.kdtree import build_tree
+from aw_eval.kernels.leafbox import build_leaf_boxes, build_part_leaves
 from aw_eval.kernels.partwalk import build_part_clouds, part_maps
 
 __all__ = ["TaskIndex", "mean_squared_norm"]
@@ -43,7 +43,7 @@ class TaskIndex:
         self._graph_t = _UNBUILT
         self._parts_built = False
         self._medium: dict[int, tuple] = {}
-        self._grids = None
+        self._leaves = None
 
     @property
     def graph_t(self):
@@ -114,15 +114,14 @@ class TaskIndex:
         bwd = nearest_positions(tree_i, graph_i, y @ a[i].T + b[i])  # tree positions of part i = rows of x
         return mean_squared_norm(x - y[fwd]) + mean_squared_norm(y - x[bwd])
 
-    def part_grids(self, divisor: float):
-        """``(target, baked)``: :class:`aw_eval.kernels.cellgrid.PartGrids` of the joined target
-        (one grid, ``JOINED_K`` candidates a cell) and of the parts' baked clouds over ``divisor`` (what a checkpoint moves rigidly into the
-        normalized prediction), for the jax backend; built once per task (numba, on the host)."""
+    def part_leaves(self, divisor: float):
+        """``(target, baked)``: :class:`aw_eval.kernels.leafbox.LeafBoxes` of the joined target (one
+        cloud) and of the parts' baked clouds over ``divisor`` (what a checkpoint moves rigidly into
+        the normalized prediction), for the jax backend; built once per task (milliseconds)."""
         key = float(divisor)
-        if self._grids is None or self._grids[0] != key:
-            target = build_part_grids(self.target[None], k=JOINED_K, margin_cells=JOINED_MARGIN_CELLS)
-            self._grids = (key, target, build_part_grids(self._clouds / key))
-        return self._grids[1], self._grids[2]
+        if self._leaves is None or self._leaves[0] != key:
+            self._leaves = (key, build_leaf_boxes(self.target), build_part_leaves(self._clouds / key))
+        return self._leaves[1], self._leaves[2]
 
     def part_bounds(self) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
         """``(means (P, 3), (box lows (P, 3), box highs (P, 3)))`` of the target parts."""

@@ -5,16 +5,18 @@ directions' nearest neighbours, one proper Kabsch fit of all pairs, at most ``ma
 stop when the objective improves by less than ``tol``, keep the best state visited), for many
 checkpoints of one task at once.
 
-Nearest neighbours, in fixed shapes: every query reads the candidate list of its grid cell
-(:mod:`aw_eval.kernels.cellgrid`; built once per task on the host), computes its squared
-distances from coordinates as the protocol does and takes the first minimum. Forward, one grid
-of the joined target; backward, one grid per part of the parts' baked clouds (a checkpoint
-moves each rigidly: the target points are mapped into each part's frame, the parts' answers
-combined by first minimum, and a part whose grid does not answer is skipped only when its box
-is farther than the best found). Every query the grids cannot answer exactly (outside a grid, an
-overflowing cell, an unskippable part) takes the brute-force path, all lanes' such queries
-compacted into tiles of FALLBACK_ROWS. So every neighbour is the brute-force first minimum, and
-every decision the numba backend's up to the rounding of near (not exact) ties.
+Nearest neighbours, in fixed shapes: exact per-query leaf-box certificates
+(:mod:`aw_eval.kernels.leafbox`; built once per task on the host, in milliseconds). A query
+takes the squared distances to every leaf box of its clouds, reads the points of the
+``candidates`` nearest boxes, computes their squared distances from coordinates as the protocol
+does (in the reference frame) and takes the first minimum; the next box's distance certifies
+that no other point is nearer or tied (the boxes are picked by a float32 top-k, XLA's fast
+one on a CPU; the certificate allows for float32's rounding). Forward, the joined target's leaves; backward, the
+leaves of every part's baked cloud as one list (a checkpoint moves each rigidly: the target
+points are mapped into each part's frame for the box distances). Every query without a
+certificate takes the brute-force path, all lanes' such queries compacted into tiles of
+FALLBACK_ROWS. So every neighbour is the brute-force first minimum, and every decision the
+numba backend's up to the rounding of near (not exact) ties.
 
 Lanes (one checkpoint's one start) stop at different iterations: the loop runs ROUND_ITERS
 iterations per round, then drops the lanes that stopped and packs the rest into the smallest
@@ -28,10 +30,12 @@ from functools import lru_cache
 
 import numpy as np
 
-from aw_eval.kernels.cellgrid import JOINED_K, JOINED_MARGIN_CELLS, PartGrids, build_part_grids
+from aw_eval.kernels.leafbox import ABS as LEAF_ABS
+from aw_eval.kernels.leafbox import DEFAULT_CANDIDATES, LeafBoxes, build_leaf_boxes
+from aw_eval.kernels.leafbox import REL as LEAF_REL
 from aw_eval.kernels.jaxcfg import jax_modules
 
-__all__ = ["accelerator_present", "icp_batch", "nearest_in_grids", "part_cd_batch", "fit_tile", "DEFAULT_TILE"]
+__all__ = ["accelerator_present", "icp_batch", "nearest_in_leaves", "part_cd_batch", "fit_tile", "DEFAULT_TILE"]
 
 # Query rows per brute-force tile (at most): a tile holds tile x m squared distances per lane,
 # and the tile shrinks so that all lanes' tiles together stay near TILE_ELEMENTS.
@@ -82,77 +86,91 @@ def _kabsch(jnp, src, dst):
     return r, cd - r @ cs
 
 
-# Slack of the lower-bound test that skips a part whose grid does not answer a query: the part
-# is searched (brute force) unless its box is farther than the best candidate by more than this
-# relative margin (and an absolute one far above the rounding of O(1) squared distances).
-_LB_REL, _LB_ABS = 1e-9, 1e-15
 # Flagged queries brute-forced per step of the fallback loop (all lanes together).
 FALLBACK_ROWS = 256
 # ICP iterations per round; between rounds the lanes that have stopped are dropped and the
 # remaining ones packed into the smallest bucket (a power of two, at least MIN_LANES).
 ROUND_ITERS = 8
 MIN_LANES = 8
-# Share of a grid round's queries answered by brute force above which the next rounds skip
-# the grids, and how many rounds until they are tried again.
-BRUTE_SHARE = 0.5
-PROBE_ROUNDS = 3
+# Box distances held at once by the leaf lookups (lanes x queries x leaves, float64): lanes
+# are looked up in groups that fit it (lax.map over the groups).
+LEAF_ELEMENTS = 1 << 25
+# Relative slack for the boxes picked in float32 (rounding to float32 moves a value by at most
+# 2^-24 relative; below float32's normal range by more, where the absolute slack fails the
+# certificate anyway).
+_F32_SLACK = 1e-6
+# Leaves a query reads where the caller does not say (tests lower it to exercise the fallback).
+CANDIDATES = DEFAULT_CANDIDATES
 
 
-def _grid_candidates(jnp, g, y, x, ref):
-    """Grid lookup of one lane's queries in every part: ``y (P, q, 3)`` the queries in each
-    part's grid frame, ``x (q, 3)`` the same queries in the reference frame, ``ref (M, 3)`` the
-    joined clouds in that frame (distances are computed there, as the protocol computes them).
-    Returns ``(index (q,), answered (q,))``: the first minimum over the parts' candidate lists, and
-    whether it is certainly the brute-force first minimum (every part's grid answered, or its
-    box is farther than the best found)."""
-    lo, inv_h, dims, child, cand, over, box_lo, box_hi, depth = g
-    scale = inv_h * float(1 << depth)
-    f = jnp.floor((y - lo[:, None, :]) * scale[:, None, None])
-    fine_dims = (dims * (1 << depth))[:, None, :]
-    inside = jnp.all((f >= 0) & (f < fine_dims), axis=-1)  # (P, q)
-    fine = jnp.clip(f, 0, fine_dims - 1).astype(jnp.int32)
-    root = fine >> depth
-    node = (root[..., 0] * dims[:, None, 1] + root[..., 1]) * dims[:, None, 2] + root[..., 2]
-    parts = jnp.arange(lo.shape[0])[:, None]
-    for lev in range(1, depth + 1):
-        bits = (fine >> (depth - lev)) & 1
-        c = child[parts, node]
-        node = jnp.where(c >= 0, c + 4 * bits[..., 0] + 2 * bits[..., 1] + bits[..., 2], node)
-    ok = inside & ~over[parts, node]  # (P, q)
-    cands = cand[parts, node]  # (P, q, K)
-    yc = ref[cands]  # (P, q, K, 3)
-    d = ((x[None, :, None, 0] - yc[..., 0]) ** 2 + (x[None, :, None, 1] - yc[..., 1]) ** 2) + (x[None, :, None, 2] - yc[..., 2]) ** 2
-    k = jnp.argmin(d, axis=-1)  # (P, q): first minimum within a part (ascending indices)
-    best_d = jnp.where(ok, jnp.take_along_axis(d, k[..., None], -1)[..., 0], jnp.inf)
-    best_i = jnp.take_along_axis(cands, k[..., None], -1)[..., 0]
-    q = jnp.argmin(best_d, axis=0)  # first part: parts hold ascending index ranges
-    dmin = jnp.min(best_d, axis=0)
-    idx = jnp.take_along_axis(best_i, q[None], 0)[0]
-    g2 = jnp.maximum(jnp.maximum(box_lo[:, None, :] - y, y - box_hi[:, None, :]), 0.0)
-    lb = jnp.sum(g2 * g2, axis=-1)  # (P, q) squared distance to each part's box
-    unsure = ~ok & (lb * (1 - _LB_REL) - _LB_ABS <= dmin[None])
-    return idx, ~jnp.any(unsure, axis=0)
+def _leaf_candidates(jnp, lax, leaves, y, x, ref, c: int):
+    """Leaf lookup of one lane's queries in ``P`` clouds: ``y (P, q, 3)`` the queries in each
+    cloud's frame (its leaf boxes'), ``x (q, 3)`` the same queries in the reference frame,
+    ``ref (M, 3)`` the joined clouds there (distances are computed there, as the protocol
+    computes them). Returns ``(index (q,), answered (q,))``: the first minimum over the points of
+    the ``c`` nearest leaf boxes (all parts' leaves as one list), and whether the next box is
+    farther than it (then it is the brute-force first minimum; :mod:`aw_eval.kernels.leafbox`);
+    ``answered`` is ``None`` where every leaf is read (all certain)."""
+    lo, hi, index = leaves
+    p, b, s = index.shape
+    q = x.shape[0]
+    if c >= p * b:  # every leaf read: plain brute force over ``ref`` (all certain; None known when tracing)
+        d = ((x[:, None, 0] - ref[None, :, 0]) ** 2 + (x[:, None, 1] - ref[None, :, 1]) ** 2) + (x[:, None, 2] - ref[None, :, 2]) ** 2
+        return jnp.argmin(d, axis=1).astype(jnp.int32), None
+    g = jnp.maximum(jnp.maximum(lo[:, None] - y[:, :, None], y[:, :, None] - hi[:, None]), 0.0)  # (P, q, B, 3)
+    lb = (g[..., 0] * g[..., 0] + g[..., 1] * g[..., 1]) + g[..., 2] * g[..., 2]
+    lb = jnp.moveaxis(lb, 0, 1).reshape(q, p * b)
+    # the c nearest boxes picked in float32 (XLA's float64 top-k is far slower on a CPU), and
+    # materialized (fused into its several consumers, XLA recomputes it in each: 8x slower). The
+    # certificate: every box not picked has a float32 distance at least the (c+1)-th box's, so a
+    # float64 one at least (1 - 2^-24)^2 times that box's float64 distance, capped at float32's
+    # largest value (past it every float32 distance is inf alike)
+    order = lax.optimization_barrier(lax.top_k(-lb.astype(jnp.float32), c + 1)[1])
+    nxt = order[:, c]
+    part = nxt // b
+    yn = y[part, jnp.arange(q)]  # (q, 3) each query in that box's frame
+    gap = jnp.maximum(jnp.maximum(lo.reshape(-1, 3)[nxt] - yn, yn - hi.reshape(-1, 3)[nxt]), 0.0)
+    nxt_d2 = (gap[:, 0] * gap[:, 0] + gap[:, 1] * gap[:, 1]) + gap[:, 2] * gap[:, 2]
+    bound = jnp.minimum(nxt_d2, float(np.finfo(np.float32).max)) * (1 - _F32_SLACK)
+    flat = index.reshape(p * b, s)
+    # whole leaves gathered (contiguous blocks), coordinates leaf-major: (P B, 3, S)
+    sel = order[:, :c]
+    yc, cand = jnp.swapaxes(ref[flat], 1, 2)[sel], flat[sel].reshape(q, c * s)  # (q, c, 3, S), (q, c S)
+    d = ((x[:, None, 0, None] - yc[:, :, 0]) ** 2 + (x[:, None, 1, None] - yc[:, :, 1]) ** 2) + (x[:, None, 2, None] - yc[:, :, 2]) ** 2
+    d = d.reshape(q, c * s)
+    dmin = jnp.min(d, axis=1)
+    idx = jnp.min(jnp.where(d == dmin[:, None], cand, jnp.iinfo(jnp.int32).max), axis=1)  # lowest index of the ties
+    return idx, bound * (1 - LEAF_REL) - LEAF_ABS > dmin
 
 
-# Lanes whose grid lookups run together (lax.map over groups of them bounds the gathered
-# candidates held at once: lanes x queries x K x 4 float64 per group).
-LANE_GROUP = 32
-
-
-def _lanes(jax, f, *args):
-    """``vmap(f)(*args)`` over the leading (lanes) axis, LANE_GROUP lanes at a time."""
+def _lanes(jax, f, group: int, *args):
+    """``vmap(f)(*args)`` over the leading (lanes) axis, ``group`` lanes at a time."""
     lanes = args[0].shape[0]
-    g = min(LANE_GROUP, lanes)
+    g = max(1, min(group, lanes))
     if lanes % g:
         return jax.vmap(f)(*args)
     grouped = [a.reshape((lanes // g, g) + a.shape[1:]) for a in args]
     out = jax.lax.map(lambda xs: jax.vmap(f)(*xs), grouped)
-    return tuple(o.reshape((lanes,) + o.shape[2:]) for o in out)
+    return tuple(None if o is None else o.reshape((lanes,) + o.shape[2:]) for o in out)
+
+
+def _group(queries: int, leaves: LeafBoxes, candidates: int) -> int:
+    """Lanes per leaf-lookup group: the largest power of two whose box and candidate distances
+    fit LEAF_ELEMENTS."""
+    p, b, s = leaves[2].shape
+    per_query = max(p * b, min(candidates, p * b) * s)
+    g = 1
+    while 2 * g * queries * per_query <= LEAF_ELEMENTS:
+        g *= 2
+    return g
 
 
 def _brute_fix(jnp, lax, idx, answered, x, refs, lane_ref):
     """Replace the unanswered entries of ``idx (L, q)`` by brute-force first minima: query
-    ``x[l, i]`` against ``refs[lane_ref[l]] (M, 3)``, FALLBACK_ROWS flagged queries at a time."""
+    ``x[l, i]`` against ``refs[lane_ref[l]] (M, 3)``, FALLBACK_ROWS flagged queries at a time
+    (``answered`` ``None``: all answered). Returns ``(index (L, q), brute-forced count)``."""
+    if answered is None:
+        return idx, jnp.asarray(0, jnp.int64)
     lanes, q = idx.shape
     flat = ~answered.reshape(-1)
     count = jnp.sum(flat)
@@ -177,57 +195,50 @@ def _brute_fix(jnp, lax, idx, answered, x, refs, lane_ref):
 
 
 @lru_cache(maxsize=None)
-def _compiled_nearest(depth: int):
+def _compiled_nearest(candidates: int):
     jax, jnp = jax_modules()
 
-    def run(x, ref, g):
-        n_parts = g[0].shape[0]
-        idx, ok = jax.vmap(lambda xl: _grid_candidates(jnp, tuple(g) + (depth,), jnp.broadcast_to(xl[None], (n_parts,) + xl.shape),
-                                                       xl, ref))(x)
+    def run(x, ref, leaves):
+        n_parts = leaves[0].shape[0]
+        idx, ok = jax.vmap(lambda xl: _leaf_candidates(jnp, jax.lax, leaves, jnp.broadcast_to(xl[None], (n_parts,) + xl.shape),
+                                                       xl, ref, candidates))(x)
         return _brute_fix(jnp, jax.lax, idx, ok, x, ref[None], jnp.zeros(x.shape[0], jnp.int32))
 
     return jax.jit(run)
 
 
-def nearest_in_grids(x: np.ndarray, ref: np.ndarray, grids: PartGrids) -> tuple[np.ndarray, int]:
+def nearest_in_leaves(x: np.ndarray, ref: np.ndarray, leaves: LeafBoxes,
+                      candidates: int | None = None) -> tuple[np.ndarray, int]:
     """``(index (L, q), brute-forced)``: the nearest row of ``ref (M, 3)`` (first minimum) for
-    every query ``x (L, q, 3)``, by the grids of ``ref``'s parts (:class:`PartGrids`, their frame
-    ``ref``'s) and the brute-force path where they do not answer: the lookup ICP does."""
+    every query ``x (L, q, 3)``, by the leaf boxes of ``ref``'s parts (:class:`LeafBoxes`, their
+    frame ``ref``'s) and the brute-force path where they do not certify: the lookup ICP does."""
     _, jnp = jax_modules()
-    idx, count = _compiled_nearest(grids.depth)(jnp.asarray(x, dtype=jnp.float64), jnp.asarray(ref, dtype=jnp.float64),
-                                                tuple(jnp.asarray(a) for a in grids[:8]))
+    idx, count = _compiled_nearest(int(CANDIDATES if candidates is None else candidates))(jnp.asarray(x, dtype=jnp.float64), jnp.asarray(ref, dtype=jnp.float64),
+                                                    tuple(jnp.asarray(a) for a in leaves))
     return np.asarray(idx), int(count)
 
 
 @lru_cache(maxsize=None)
-def _compiled_round(max_iters: int, tol: float, depth_t: int, depth_p: int, has_pred_grids: bool, brute: bool):
+def _compiled_round(max_iters: int, tol: float, candidates: int, has_pred_leaves: bool):
     """``(init, round)``: every lane evaluated at its start; one round of the ICP of ``L``
-    lanes (at most ROUND_ITERS iterations of every active lane). ``brute``: the round takes the
-    brute-force path for every query (where most queries would fall back to it anyway)."""
+    lanes (at most ROUND_ITERS iterations of every active lane)."""
     jax, jnp = jax_modules()
     lax = jax.lax
 
-    def nearest(preds, target, tg, pg, maps, ck, r, t):
+    def nearest(preds, target, tl, pl, maps, ck, r, t):
         """Both directions' neighbours and the objective of every lane at ``(r (L, 3, 3), t (L, 3))``."""
         p = preds[ck]  # (L, n, 3)
         x = jnp.einsum("lnk,ljk->lnj", p, r) + t[:, None, :]  # moved predictions
-        if brute:
-            tile = fit_tile(x.shape[0], max(x.shape[1], target.shape[0]))
-            fwd = jax.vmap(lambda xl: _nearest(jnp, lax, xl, target, tile)[0])(x).astype(jnp.int32)
-            bwd = jax.vmap(lambda xl: _nearest(jnp, lax, target, xl, tile)[0])(x).astype(jnp.int32)
-            return _objective(jnp, x, target, fwd, bwd), fwd, bwd, jnp.asarray(fwd.size + bwd.size, jnp.int64)
-        tg_ = tuple(tg) + (depth_t,)
-        n_tp = tg[0].shape[0]
-        fwd, f_ok = _lanes(jax, lambda xl: _grid_candidates(jnp, tg_, jnp.broadcast_to(xl[None], (n_tp,) + xl.shape), xl,
-                                                            target), x)
+        fwd, f_ok = _lanes(jax, lambda xl: _leaf_candidates(jnp, lax, tl, xl[None], xl, target, candidates),
+                           _group(x.shape[1], tl, candidates), x)
         fwd, nf = _brute_fix(jnp, lax, fwd, f_ok, x, target[None], jnp.zeros(x.shape[0], jnp.int32))
-        if has_pred_grids:
-            pg_ = tuple(pg) + (depth_p,)
-            # target points into each part's grid frame: part maps after the inverse registration
+        if has_pred_leaves:
+            # target points into each part's leaf frame: part maps after the inverse registration
             a, b = maps[ck, :, :, :3], maps[ck, :, :, 3]  # (L, P, 3, 3), (L, P, 3)
             z = jnp.einsum("mk,lkj->lmj", target, r) - jnp.einsum("lk,lkj->lj", t, r)[:, None, :]  # R^T (T - t)
             y = jnp.einsum("lmk,lpjk->lpmj", z, a) + b[:, :, None, :]
-            bwd, b_ok = _lanes(jax, lambda yl, xl: _grid_candidates(jnp, pg_, yl, target, xl), y, x)
+            bwd, b_ok = _lanes(jax, lambda yl, xl: _leaf_candidates(jnp, lax, pl, yl, target, xl, candidates),
+                               _group(target.shape[0], pl, candidates), y, x)
         else:
             bwd = jnp.zeros((x.shape[0], target.shape[0]), jnp.int32)
             b_ok = jnp.zeros(bwd.shape, bool)
@@ -235,11 +246,10 @@ def _compiled_round(max_iters: int, tol: float, depth_t: int, depth_p: int, has_
         bwd, nb = _brute_fix(jnp, lax, bwd, b_ok, tq, x, jnp.arange(x.shape[0]))
         return _objective(jnp, x, target, fwd, bwd), fwd, bwd, (nf + nb).astype(jnp.int64)
 
-    def init(preds, target, tg, pg, maps, ck, r0, t0):
-        obj, fwd, bwd, nflag = nearest(preds, target, tg, pg, maps, ck, r0, t0)
-        return obj, fwd, bwd, nflag
+    def init(preds, target, tl, pl, maps, ck, r0, t0):
+        return nearest(preds, target, tl, pl, maps, ck, r0, t0)
 
-    def round_(preds, target, tg, pg, maps, ck, state):
+    def round_(preds, target, tl, pl, maps, ck, state):
         def cond(c):
             return (c[0] < ROUND_ITERS) & c[1][0].any()
 
@@ -249,7 +259,7 @@ def _compiled_round(max_iters: int, tol: float, depth_t: int, depth_p: int, has_
             src = jnp.concatenate([p, jnp.take_along_axis(p, bwd[..., None], 1)], axis=1)
             dst = jnp.concatenate([target[fwd], jnp.broadcast_to(target[None], bwd.shape + (3,))], axis=1)
             r, t = jax.vmap(lambda a_, b_: _kabsch(jnp, a_, b_))(src, dst)
-            new, nfwd, nbwd, nf = nearest(preds, target, tg, pg, maps, ck, r, t)
+            new, nfwd, nbwd, nf = nearest(preds, target, tl, pl, maps, ck, r, t)
             better = active & (new < best)
             best = jnp.where(better, new, best)
             br = jnp.where(better[:, None, None], r, br)
@@ -280,48 +290,51 @@ def _bucket(n: int) -> int:
 
 
 def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float,
-              target_grids: PartGrids | None = None, pred_grids: PartGrids | None = None,
-              pred_maps: np.ndarray | None = None, stats: dict | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              target_leaves: LeafBoxes | None = None, pred_leaves: LeafBoxes | None = None,
+              pred_maps: np.ndarray | None = None, stats: dict | None = None,
+              candidates: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The protocol's ICP of every checkpoint from every start.
 
     ``preds (C, n, 3)`` normalized predictions of one task, ``target (m, 3)``, starts
-    ``r0 (C, S, 3, 3)``, ``t0 (C, S, 3)``. Neighbours: ``target_grids`` (:class:`PartGrids` of
-    the target's parts, their points in ``target``'s order; default: one grid of the whole
-    target) for the forward direction; for the backward one ``pred_grids`` of the clouds every
-    prediction moves rigidly (``P`` clouds, ``preds[c]`` = cloud ``q`` mapped into the
-    prediction frame, part after part) with ``pred_maps (C, P, 3, 4)``: ``[A | b]`` taking a
-    point of prediction ``c``'s frame into cloud ``q``'s frame (default: brute force). Either
-    way the neighbours are the brute-force first minima. Returns each lane's best state:
-    ``objective (C, S)``, ``rotation (C, S, 3, 3)``, ``translation (C, S, 3)`` (NumPy float64).
-    ``stats``: filled with ``lanes_iterated`` (sum over rounds of the lanes computed, padding
-    included), ``lane_iterations`` (fits the protocol needed) and ``brute_queries``.
+    ``r0 (C, S, 3, 3)``, ``t0 (C, S, 3)``. Neighbours: ``target_leaves`` (:class:`LeafBoxes` of
+    ``target``, one cloud; default: built here) for the forward direction; for the backward one
+    ``pred_leaves`` of the ``P`` clouds every prediction moves rigidly (``preds[c]`` = cloud
+    ``q`` mapped into the prediction frame, part after part) with ``pred_maps (C, P, 3, 4)``:
+    ``[A | b]`` taking a point of prediction ``c``'s frame into cloud ``q``'s frame (default:
+    brute force). ``candidates``: leaves a query reads (default CANDIDATES). Either way the neighbours are the
+    brute-force first minima. Returns each lane's best state: ``objective (C, S)``, ``rotation
+    (C, S, 3, 3)``, ``translation (C, S, 3)`` (NumPy float64). ``stats``: filled with
+    ``lanes_iterated`` (sum over rounds of the lanes computed, padding included),
+    ``lane_iterations`` (fits the protocol needed), ``rounds``, ``queries`` (neighbour queries
+    computed, padding included) and ``brute_queries`` (of those, the ones the leaves did not
+    certify).
     """
     jax, jnp = jax_modules()
     target = np.ascontiguousarray(target, dtype=np.float64)
-    if target_grids is None:
-        target_grids = build_part_grids(target[None], k=JOINED_K, margin_cells=JOINED_MARGIN_CELLS)
+    if target_leaves is None:
+        target_leaves = build_leaf_boxes(target)
     c, s = r0.shape[:2]
-    has_pg = pred_grids is not None
-    shape = (int(max_iters), float(tol), target_grids.depth, pred_grids.depth if has_pg else 0, has_pg)
-    init, round_grid = _compiled_round(*shape, False)
-    brute, since_grid = False, 0
+    has_pl = pred_leaves is not None
+    init, round_ = _compiled_round(int(max_iters), float(tol), int(CANDIDATES if candidates is None else candidates), has_pl)
     dev = lambda a: jnp.asarray(a)  # noqa: E731
-    tg = tuple(dev(a) for a in target_grids[:8])
-    pg = tuple(dev(a) for a in pred_grids[:8]) if has_pg else ()
-    maps = dev(pred_maps if has_pg else np.zeros((c, 1, 3, 4)))
+    tl = tuple(dev(a) for a in target_leaves)
+    pl = tuple(dev(a) for a in pred_leaves) if has_pl else ()
+    maps = dev(pred_maps if has_pl else np.zeros((c, 1, 3, 4)))
     pr, tgt = dev(np.asarray(preds, np.float64)), dev(target)
     lanes = c * s
     ck_all = np.repeat(np.arange(c), s)
     r_all, t_all = np.asarray(r0, np.float64).reshape(-1, 3, 3), np.asarray(t0, np.float64).reshape(-1, 3)
     best_obj, best_r, best_t = np.empty(lanes), r_all.copy(), t_all.copy()
-    counters = {"lanes_iterated": 0, "lane_iterations": 0, "brute_queries": 0, "rounds": 0, "brute_rounds": 0}
+    counters = {"lanes_iterated": 0, "lane_iterations": 0, "queries": 0, "brute_queries": 0, "rounds": 0}
+    per_lane = preds.shape[1] + len(target)  # neighbour queries of one evaluation, both directions
     # the starts' objectives, in buckets; then rounds over the lanes still running
     live: list[tuple] = []
     for lo in range(0, lanes, 1 << 12):
         ids = np.arange(lo, min(lanes, lo + (1 << 12)))
         pad = _pad(ids)
-        obj, fwd, bwd, nflag = init(pr, tgt, tg, pg, maps, dev(ck_all[pad]), dev(r_all[pad]), dev(t_all[pad]))
+        obj, fwd, bwd, nflag = init(pr, tgt, tl, pl, maps, dev(ck_all[pad]), dev(r_all[pad]), dev(t_all[pad]))
         counters["brute_queries"] += int(nflag)
+        counters["queries"] += len(pad) * per_lane
         obj = np.asarray(obj)[: len(ids)]
         best_obj[ids] = obj
         live.append((ids, np.ones(len(ids), bool), np.zeros(len(ids), np.int64), obj, np.asarray(fwd)[: len(ids)],
@@ -334,19 +347,13 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
         pad = _pad(np.arange(len(ids)))
         state = (active[pad] & (pad < len(ids)), its[pad], prev[pad], fwd[pad], bwd[pad], best[pad], br[pad], bt[pad])
         state = tuple(dev(a) for a in state)
-        round_ = _compiled_round(*shape, True)[1] if brute else round_grid
-        out, nflag = round_(pr, tgt, tg, pg, maps, dev(ck_all[ids][pad]), state)
+        out, nflag = round_(pr, tgt, tl, pl, maps, dev(ck_all[ids][pad]), state)
         n = len(ids)
         new_its = np.asarray(out[1])[:n]
-        iters = int((new_its - its).max())
+        iters = int((new_its - its).max())  # every lane of the bucket computed that many
         counters["lanes_iterated"] += len(pad) * iters
-        # where most queries of a grid round fell back to brute force, the next rounds take the
-        # plain brute-force path (cheaper than the lookups plus the fallback), trying the grids
-        # again every PROBE_ROUNDS rounds (lanes near convergence query near the surfaces)
-        share = int(nflag) / max(len(pad) * iters * (preds.shape[1] + len(target)), 1)
-        brute, since_grid = (share > BRUTE_SHARE, 0) if not brute else (since_grid + 1 < PROBE_ROUNDS, since_grid + 1)
+        counters["queries"] += len(pad) * iters * per_lane
         counters["rounds"] += 1
-        counters["brute_rounds"] += int(round_ is not round_grid)
         counters["lane_iterations"] += int((new_its - its).sum())
         counters["brute_queries"] += int(nflag)
         active, its, prev, fwd, bwd, best, br, bt = (np.asarray(a)[:n] for a in out)

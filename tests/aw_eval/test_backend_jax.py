@@ -10,7 +10,7 @@ import dataclasses
 
 import aw_eval
 from aw_eval.fixtures import make_points_geometry, random_checkpoints, swap_identical
-from aw_eval.kernels import accelerator_present
+from aw_eval.kernels import accelerator_present, jax_icp
 from aw_eval.registration import resolve_backend
 from eval_helpers import small_settings, small_task
 
@@ -22,9 +22,13 @@ def _agree(a, b):
     assert np.allclose(a.part_errors, b.part_errors, rtol=1e-9, atol=1e-20)
 
 
-def test_jax_batch_equals_numba_exact_with_swapped_identical_parts():
+@pytest.mark.parametrize("candidates", [1, 8])
+def test_jax_batch_equals_numba_exact_with_swapped_identical_parts(monkeypatch, candidates):
     """Far, near and exact checkpoints of a 3-part table with identical legs (two of them with
-    the legs' poses exchanged), one jax call of 8 checkpoints padded from 7."""
+    the legs' poses exchanged), one jax call of 8 checkpoints padded from 7; neighbours by
+    leaf certificates with their brute-force fallback (1 leaf read of 2-3) or by brute force
+    (8: every leaf read)."""
+    monkeypatch.setattr(jax_icp, "CANDIDATES", candidates)
     geom, obj = small_task(3, 16)
     cks = random_checkpoints(obj, 5, seed=3)
     legs = next(g for g in geom.groups if len(g) > 1)
@@ -49,9 +53,11 @@ def test_backend_choice_and_bad_input():
         resolve_backend("gpu", "exact")
 
 
-def test_knife_edge_thresholds_decide_alike():
+def test_knife_edge_thresholds_decide_alike(monkeypatch):
     """Thresholds set 1e-7 relative above and below a part error and an SCD the numba backend
-    measured: the decisions there (PA, SR, SR^a) are the same on both backends."""
+    measured: the decisions there (PA, SR, SR^a) are the same on both backends (neighbours by
+    leaf certificates, one leaf read of 2-3, with the brute-force fallback)."""
+    monkeypatch.setattr(jax_icp, "CANDIDATES", 1)
     geom, obj = small_task(3, 16)
     cks = random_checkpoints(obj, 4, seed=11)
     base = aw_eval.score_batch(geom, cks, mode="exact", backend="numba")
@@ -68,3 +74,4 @@ def test_knife_edge_thresholds_decide_alike():
         _agree(numba, jax)
         stats = jax.stats["jax"]
         assert stats["lanes_iterated"] >= stats["lane_iterations"] > 0
+        assert 0 < stats["brute_queries"] < stats["queries"]  # the leaves certified some, the fallback did the rest

@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aw_eval.kernels.cellgrid import brute_first_min, build_part_grids
-from aw_eval.kernels import jax_icp
-from aw_eval.kernels.jax_icp import fit_tile, icp_batch, nearest_in_grids, part_cd_batch
+from aw_eval.kernels.jax_icp import fit_tile, icp_batch, nearest_in_leaves, part_cd_batch
+from aw_eval.kernels.leafbox import brute_first_min, build_part_leaves
 from aw_eval.reference import chamfer as ref_chamfer
 from aw_eval.reference import icp as ref_icp
 from aw_eval.reference import pca_starts
@@ -23,12 +22,11 @@ def _clouds(seed: int, n: int = 40):
     return pred, target
 
 
-@pytest.mark.parametrize("brute_share", [1.0, 0.0])
-def test_icp_batch_equals_the_reference_from_every_start_of_every_cloud(monkeypatch, brute_share):
+@pytest.mark.parametrize("candidates", [1, 8])
+def test_icp_batch_equals_the_reference_from_every_start_of_every_cloud(candidates):
     """Two clouds x 24 starts in one call: every lane's best objective and transform equal the
-    reference ICP's from that start, whether the rounds after the first look neighbours up in
-    the grids (``BRUTE_SHARE = 1``) or brute-force them all (``BRUTE_SHARE = 0``)."""
-    monkeypatch.setattr(jax_icp, "BRUTE_SHARE", brute_share)
+    reference ICP's from that start, whether the leaves certify most queries (8 of them read)
+    or send many to the brute-force path (1 read)."""
     clouds = [_clouds(0), _clouds(1)]
     starts = [pca_starts(p, t) for p, t in clouds]
     target = clouds[0][1]
@@ -36,10 +34,10 @@ def test_icp_batch_equals_the_reference_from_every_start_of_every_cloud(monkeypa
     r0 = np.array([[r for r, _ in s] for s in starts])
     t0 = np.array([[t for _, t in s] for s in starts])
     stats = {}
-    obj, rot, trans = icp_batch(preds, target, r0, t0, max_iters=30, tol=1e-9, stats=stats)
+    obj, rot, trans = icp_batch(preds, target, r0, t0, max_iters=30, tol=1e-9, stats=stats, candidates=candidates)
     # rounds drop the lanes that stopped: far fewer lanes computed than 48 lanes x 30 iterations
     assert stats["lane_iterations"] <= stats["lanes_iterated"] < 48 * 30 and stats["rounds"] >= 2
-    assert (stats["brute_rounds"] == 0) == (brute_share == 1.0)
+    assert stats["brute_queries"] > 0 or candidates > 1
     assert obj.shape == (2, 24) and rot.shape == (2, 24, 3, 3) and trans.shape == (2, 24, 3)
     for c in range(2):
         for k in range(24):
@@ -61,25 +59,32 @@ def test_part_cd_batch_equals_the_reference_chamfer_of_every_pair():
     assert np.allclose(some[:, listed], want[:, listed], rtol=1e-12, atol=0) and np.all(np.isinf(some[:, ~listed]))
 
 
-def test_grid_lookup_with_its_fallback_is_the_brute_force_first_minimum():
-    """Two parts (a sheet and a dense blob with duplicated points), K = 4 so that many cells
-    overflow, queries near, across and far outside the grids: every answer is the brute-force
-    first minimum over the joined clouds, the overflowing and outside queries by the fallback."""
+@pytest.mark.parametrize("candidates", [2, 8])
+def test_leaf_lookup_with_its_fallback_is_the_brute_force_first_minimum(candidates):
+    """Two parts (a sheet and a dense blob with duplicated points) and a third identical to the
+    first, leaves of 4 points, queries near, across and far outside the clouds: every answer is
+    the brute-force first minimum over the joined clouds (lowest index on exact ties), the
+    uncertified queries by the fallback; queries far above the sheet, where the boxes' distances
+    agree to float32's rounding, stay exact."""
     rng = np.random.default_rng(4)
     sheet = np.c_[rng.uniform(-1, 1, (60, 2)), np.zeros(60)]
     blob = rng.normal(size=(60, 3)) * 0.02 + 0.3
     blob[:10] = blob[10:20]  # exact duplicates within a part
     sheet[:5] = sheet[5:10]
-    parts = np.stack([sheet, blob])
-    ref = parts.reshape(-1, 3)
+    parts = np.stack([sheet, blob, sheet])  # part 2 identical to part 0
+    ref = parts.reshape(-1, 3).copy()
     ref[65:70] = ref[:5]  # duplicates across parts: the lower index (part 0) must win
-    parts = ref.reshape(2, 60, 3)
-    grids = build_part_grids(parts, k=4, depth=2)
-    x = np.concatenate([ref[rng.integers(120, size=150)] + rng.normal(size=(150, 3)) * 0.01,
-                        rng.uniform(-1.2, 1.2, (100, 3)), rng.normal(size=(6, 3)) * 30.0, ref[:10]]).reshape(2, -1, 3)
-    idx, brute = nearest_in_grids(x, ref, grids)
-    assert np.array_equal(idx, brute_first_min(x.reshape(-1, 3), ref).reshape(idx.shape))
-    assert 6 <= brute < idx.size  # the far queries and some overflowing cells took the fallback
+    parts = ref.reshape(3, 60, 3)
+    leaves = build_part_leaves(parts, leaf=4)
+    x = np.concatenate([ref[rng.integers(180, size=150)] + rng.normal(size=(150, 3)) * 0.01,
+                        rng.uniform(-1.2, 1.2, (100, 3)), rng.normal(size=(6, 3)) * 30.0, ref[:10],
+                        # far above the sheet: many boxes within float32's rounding of each other
+                        np.c_[rng.uniform(-1, 1, (8, 2)), np.full(8, 1e3)]]).reshape(2, -1, 3)
+    idx, brute = nearest_in_leaves(x, ref, leaves, candidates=candidates)
+    want = brute_first_min(x.reshape(-1, 3), ref).reshape(idx.shape)
+    assert np.array_equal(idx, want)
+    assert np.all(idx < 120)  # never the identical third part's copy
+    assert brute < idx.size / 2 and (brute > 0 or candidates > 2)  # with 2 leaves read, some take the fallback
 
 
 def test_tiles_shrink_to_fit_the_distance_budget():
