@@ -48,6 +48,8 @@ def compare(geom, cks) -> dict:
         "identical_sra": int(np.sum(n.sra == j.sra)),
         "max_rel_scd": _rel(n.scd, j.scd), "max_rel_part_error": _rel(n.part_errors, j.part_errors),
         "part_errors_within_1e-6_of_threshold": int(np.sum(np.abs(n.part_errors / thr - 1) <= 1e-6)),
+        # the jax lookups that the leaves certified (the rest took the brute-force path)
+        "jax_queries": int(j.stats["jax"].get("queries", 0)), "jax_brute_queries": int(j.stats["jax"].get("brute_queries", 0)),
         "numba": n, "jax": j,
     }
 
@@ -59,6 +61,10 @@ def main() -> None:
     ap.add_argument("--checkpoints", type=int, default=250, help="distinct checkpoints per part count")
     ap.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder to write the JSON to (a new file)")
     ap.add_argument("--name", default="agree_jax", help="the JSON file's name in --out, without .json")
+    ap.add_argument("--candidates", type=int, default=None, metavar="C",
+                    help="leaves a jax query reads (default the backend's); fewer than the clouds' leaves at small "
+                         "--n-fps makes the lookups take the certified path (and its fallback) instead of reading every leaf")
+    ap.add_argument("--no-knife-edges", action="store_true", help="score the protocol's thresholds only")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from _output import output_file
@@ -70,6 +76,10 @@ def main() -> None:
     from aw_eval.kernels.jaxcfg import jax_modules
 
     jax, _ = jax_modules()
+    if args.candidates is not None:
+        from aw_eval.kernels import jax_icp
+
+        jax_icp.CANDIDATES = args.candidates
     out = {"command": " ".join(["benchmarks/agree_jax.py"] + sys.argv[1:]), "device": str(jax.devices()[0]), "rows": []}
     t0 = time.perf_counter()
     for parts in args.parts:
@@ -80,7 +90,7 @@ def main() -> None:
         rows = [("protocol", base)]
         errors = base["numba"].part_errors[base["numba"].part_errors > 1e-12]
         scds = base["numba"].scd[base["numba"].scd > 1e-12]
-        for sign in (-1.0, 1.0):
+        for sign in () if args.no_knife_edges else (-1.0, 1.0):
             if not (len(errors) and len(scds)):
                 break
             st = dataclasses.replace(settings, threshold=float(np.sort(errors)[len(errors) // 2]) * (1 + sign * 1e-7),
