@@ -48,7 +48,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
-from numba import njit
+from numba import njit, types
+from numba.typed import Dict
 
 from aw.shape_bounds import SAFETY
 
@@ -58,7 +59,7 @@ __all__ = ["BoxFrame", "SearchLimits", "box_frame", "rules_out"]
 # the first two kept with each cloud, the last, read only near the best rotations, built per pair
 # for the cells read
 TABLE_LEVELS = (3, 4)
-LAZY_LEVEL = 5
+LAZY_LEVELS = (5, 6, 7)
 TABLE_PAIRS = 96  # longest pairs kept per table cell
 START_CUBES = 16  # cubes a side of the first grid over [-pi, pi]^3
 SUBSET = 256  # points of each cloud in the first pass over a cube evaluated directly
@@ -89,11 +90,14 @@ class BoxFrame:
 class SearchLimits:
     """When the search gives up (the pair then stays a candidate): more than ``max_cubes`` cubes
     looked at, or a cube of half-side below ``min_half`` (radians of angle-axis) still not ruled
-    out. ``direct_from``: the depth from which the cubes the tables leave are evaluated directly."""
+    out. ``direct_from``: the depth from which the cubes the tables leave are evaluated directly.
+    ``aligned_first``: first try the 24 rotations that map box axes onto box axes, and give up at
+    once if one of them is within the threshold (the search could not rule it out)."""
 
     min_half: float = 2e-3
     max_cubes: int = 20000
-    direct_from: int = 2
+    direct_from: int = 4
+    aligned_first: bool = True
 
 
 def box_frame(cloud: np.ndarray) -> BoxFrame:
@@ -132,8 +136,8 @@ def search(a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits = Se
     per depth the cubes looked at, ruled out by the tables, and ruled out directly."""
     limit = threshold * (1 + SAFETY[0]) + SAFETY[1]
     looked = _search(a.points, a.radii, a.half, a.table, a.step, b.points, b.radii, b.half, b.table, b.step,
-                     float(limit), np.array(TABLE_LEVELS, np.int64), LAZY_LEVEL, START_CUBES, float(limits.min_half),
-                     int(limits.max_cubes), int(limits.direct_from), SUBSET,
+                     float(limit), np.array(TABLE_LEVELS, np.int64), np.array(LAZY_LEVELS, np.int64), START_CUBES, float(limits.min_half),
+                     int(limits.max_cubes), int(limits.direct_from), bool(limits.aligned_first), SUBSET,
                      np.zeros((_MAX_DEPTH + 2, 3), np.int64) if stats is None else stats)
     return looked > 0, abs(int(looked))
 
@@ -346,14 +350,18 @@ def _cos_sin(angle):
 
 
 @njit(cache=True, nogil=True)
-def _table_term(table, step, row, width, n):
-    """``(1 / 2n) sum_j (lowered length_j - width)_+^2`` over a table row's pairs."""
+def _table_term(table, step, row, width, n, budget):
+    """``(1 / 2n) sum_j (lowered length_j - width)_+^2`` over a table row's pairs, or a partial
+    sum once past ``budget`` (the caller only asks "above it?")."""
     s = 0.0
+    enough = 2.0 * n * budget
     for j in range(table.shape[1]):
         gap = np.float64(table[row, j]) * step - width
         if gap <= 0.0:
             break  # sorted: no later pair is longer
         s += gap * gap
+        if s > enough:
+            break
     return 0.5 * s / n
 
 
@@ -450,8 +458,8 @@ def _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, 
 
 
 @njit(cache=True, nogil=True)
-def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, levels, lazy_level, start_cubes,
-            min_half, max_cubes, direct_from, subset, stats):
+def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, levels, lazy_levels, start_cubes,
+            min_half, max_cubes, direct_from, aligned_first, subset, stats):
     """The number of cubes looked at, positive when every cube of the ball ``|r| <= pi`` is
     ruled out (see the module docstring), negative when the search gave up."""
     n_max = max(ap.shape[0], bp.shape[0])
@@ -466,16 +474,14 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
     n_act = np.zeros((_MAX_DEPTH + 2, 2, 3), np.int64)
     proj, low, high = np.empty(n_max), np.empty(n_max, np.int64), np.empty(n_max, np.int64)
     spare = np.empty(n_max, np.int64)
-    # the lazy level's rows, per side, built when first read
-    lazy_rows = 3 << (2 * lazy_level)
-    lazy = np.empty((2, lazy_rows, a_table.shape[1]))
-    built = np.zeros((2, lazy_rows), np.bool_)
+    # the lazy levels' rows, per side, built when first read: slot of (side, level, row) in `lazy`
+    slots = Dict.empty(key_type=types.int64, value_type=types.int64)
+    lazy = np.empty((256, a_table.shape[1]))
     work = (_workspace(ap.shape[0]), _workspace(bp.shape[0]))
-    lazy_delta = _level_delta(len(levels), start_cubes)
 
     # the 24 rotations that map the box axes onto the box axes: a rotation whose own bound is
     # within the threshold cannot be ruled out, so such a pair is given up at once
-    for perm in range(6):
+    for perm in range(6 if aligned_first else 0):
         for signs in range(8):
             rot = np.zeros((3, 3))
             order = ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0))[perm]
@@ -531,13 +537,25 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                 if depth < len(levels):  # the level made for this depth's cubes
                     table, step = (a_table, a_step) if side == 0 else (b_table, b_step)
                     row = firsts[depth] + _cell_of(u0, u1, u2, levels[depth])
-                    bound += _table_term(table, step, row, widths[side, k], counts[side])
-                else:  # the lazy level (made for depth len(levels), valid for smaller cubes)
-                    row = _cell_of(u0, u1, u2, lazy_level)
-                    if not built[side, row]:
-                        _table_row(ap if side == 0 else bp, lazy_level, row, lazy_delta, work[side], lazy[side, row])
-                        built[side, row] = True
-                    bound += _table_term(lazy[side], 1.0, row, widths[side, k], counts[side])
+                    bound += _table_term(table, step, row, widths[side, k], counts[side], limit - bound)
+                else:  # a lazy level: the one made for this depth, or the last (valid for smaller cubes)
+                    q = min(depth - len(levels), len(lazy_levels) - 1)
+                    row = _cell_of(u0, u1, u2, lazy_levels[q])
+                    key = ((side * 16 + q) << 40) | row
+                    if key in slots:
+                        slot = slots[key]
+                    else:
+                        slot = len(slots)
+                        if slot == lazy.shape[0]:
+                            grown = np.empty((2 * slot, lazy.shape[1]))
+                            grown[:slot] = lazy
+                            lazy = grown
+                        _table_row(ap if side == 0 else bp, lazy_levels[q], row,
+                                   _level_delta(len(levels) + q, start_cubes), work[side], lazy[slot])
+                        slots[key] = slot
+                    bound += _table_term(lazy, 1.0, slot, widths[side, k], counts[side], limit - bound)
+                if bound > limit:
+                    break
             if bound > limit:
                 break
         if bound > limit:
