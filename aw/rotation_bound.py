@@ -53,7 +53,7 @@ from numba.typed import Dict
 
 from aw.shape_bounds import SAFETY
 
-__all__ = ["BoxFrame", "SearchLimits", "box_frame", "rules_out"]
+__all__ = ["BoxFrame", "SearchLimits", "at_rotation", "box_frame", "rules_out", "search"]
 
 # sphere-grid levels of the tables (8, 16 and 32 cells a side of a cube face), one per depth:
 # the first two kept with each cloud, the last, read only near the best rotations, built per pair
@@ -140,6 +140,14 @@ def search(a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits = Se
                      int(limits.max_cubes), int(limits.direct_from), bool(limits.aligned_first), SUBSET,
                      np.zeros((_MAX_DEPTH + 2, 3), np.int64) if stats is None else stats)
     return looked > 0, abs(int(looked))
+
+
+def at_rotation(a: BoxFrame, b: BoxFrame, rotation: np.ndarray) -> float:
+    """The bound for one rotation ``(3, 3)`` (``A`` turned by it, in the box frames), over every
+    translation: below ``CD(rotation A + t, B)`` for every ``t``. The search proves it above a
+    threshold for all rotations at once."""
+    rot = np.ascontiguousarray(rotation, dtype=np.float64)
+    return float(_at_rotation(a.points, a.radii, a.half, b.points, b.radii, b.half, rot))
 
 
 # ---------------------------------------------------------------- compiled kernels
@@ -455,6 +463,23 @@ def _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, 
             if bound > limit:
                 return bound, at_centre
     return bound, at_centre
+
+
+@njit(cache=True, nogil=True)
+def _at_rotation(ap, ar, ah, bp, br, bh, rot):
+    n_max = max(ap.shape[0], bp.shape[0])
+    widths = np.empty((2, 3))
+    widths[0] = 2.0 * bh
+    widths[1] = 2.0 * ah
+    act = np.empty((2, 2, 3, n_max), np.int64)
+    n_act = np.zeros((2, 2, 3), np.int64)
+    for side in range(2):
+        m = ap.shape[0] if side == 0 else bp.shape[0]
+        for k in range(3):
+            n_act[0, side, k] = m
+            act[0, side, k, :m] = np.arange(m)
+    proj, low, high, spare = np.empty(n_max), np.empty(n_max, np.int64), np.empty(n_max, np.int64), np.empty(n_max, np.int64)
+    return _direct_bound(ap, ar, bp, br, widths, rot, 0.0, np.inf, act, n_act, 0, proj, low, high, spare)[1]
 
 
 @njit(cache=True, nogil=True)

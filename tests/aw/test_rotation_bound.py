@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from aw.prepare.official_similarity import register
 from aw.rotation_bound import (LAZY_LEVELS, START_CUBES, TABLE_LEVELS, TABLE_PAIRS, SearchLimits, _cell_geometry, _cell_of,
-                               _level_delta, _tables, box_frame, rules_out, search)
+                               _level_delta, _tables, at_rotation, box_frame, rules_out, search)
 
 
 def _surface(mesh: trimesh.Trimesh, n: int, seed: int) -> np.ndarray:
@@ -175,3 +175,56 @@ def test_degenerate_clouds_are_searched_safely(cloud):
     other = box_frame(cloud + 0.01)
     assert not rules_out(frame, other, 1e-9 + _cd(cloud, cloud + 0.0))
     assert len(LAZY_LEVELS) >= 1 and np.isfinite(frame.half).all()
+
+
+def _lowest_bound(a, b) -> tuple[float, np.ndarray]:
+    """The bound's smallest value over rotations, searched (aligned rotations, random ones, then
+    Nelder-Mead from the best): an upper estimate of its minimum, attained at the rotation returned."""
+    from scipy.optimize import minimize
+
+    def f(rotvec: np.ndarray) -> float:
+        return at_rotation(a, b, Rotation.from_rotvec(rotvec).as_matrix())
+
+    rng = np.random.default_rng(0)
+    starts = [Rotation.from_matrix(m).as_rotvec() for m in _aligned()] + list(Rotation.random(300, random_state=rng).as_rotvec())
+    best = sorted(starts, key=f)[:6]
+    found = [minimize(f, s, method="Nelder-Mead", options={"xatol": 1e-7, "fatol": 1e-14, "maxiter": 3000}) for s in best]
+    top = min(found, key=lambda r: r.fun)
+    return float(top.fun), Rotation.from_rotvec(top.x).as_matrix()
+
+
+def _aligned() -> list[np.ndarray]:
+    mats = []
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1.0, -1.0), repeat=3):
+            m = np.eye(3)[list(perm)] * np.array(signs)[:, None]
+            if np.linalg.det(m) > 0:
+                mats.append(m)
+    return mats
+
+
+def test_the_bound_at_a_rotation_is_below_the_distance_for_every_translation():
+    rng = np.random.default_rng(8)
+    shapes = _shapes()
+    for k in range(10):
+        a, b = rng.choice(len(shapes), 2)
+        fa, fb = box_frame(_surface(shapes[a], 200, k)), box_frame(_surface(shapes[b], 220, k + 50))
+        for _ in range(5):
+            r = Rotation.random(random_state=rng).as_matrix() if rng.uniform() < 0.5 else _aligned()[rng.integers(12)]
+            bound = at_rotation(fa, fb, r)
+            moved = fa.points @ r.T
+            for t in [fb.points.mean(0) - moved.mean(0), rng.normal(scale=0.05, size=3), np.zeros(3)]:
+                assert bound <= _cd(moved + t, fb.points) * (1 + 1e-12) + 1e-15
+
+
+@pytest.mark.parametrize("pair", [((0.6, 0.4, 0.2), (0.5, 0.5, 0.2)), ((0.6, 0.3, 0.25), (0.45, 0.45, 0.3)),
+                                  ((0.5, 0.3, 0.1), (0.45, 0.35, 0.12))])
+def test_the_search_stops_short_of_the_bounds_own_minimum(pair):
+    # just above the bound's least value (reached at a rotation the search must not rule out) the
+    # pair is not ruled out, with every way of searching; well below it, it is
+    fa, fb = (box_frame(_surface(trimesh.creation.box(extents=e), 400, k)) for k, e in enumerate(pair))
+    lowest, rotation = _lowest_bound(fa, fb)
+    assert lowest > 0.0
+    for limits in _limits():
+        assert not rules_out(fa, fb, lowest * (1 + 1e-6), limits), limits
+    assert rules_out(fa, fb, lowest * 0.5, SearchLimits(max_cubes=100000))
