@@ -47,9 +47,9 @@ def _shapes() -> list[trimesh.Trimesh]:
 def _limits() -> list[SearchLimits]:
     # the default; and without the aligned rotations first (so that the cubes are searched), with
     # the tables alone, or every cube evaluated directly from depth 0
-    return [SearchLimits(), SearchLimits(aligned_first=False, max_cubes=3000),
-            SearchLimits(aligned_first=False, direct_from=99, max_cubes=3000),
-            SearchLimits(aligned_first=False, direct_from=0, max_cubes=1500)]
+    return [SearchLimits(), SearchLimits(aligned_first=False, max_cubes=20000),
+            SearchLimits(aligned_first=False, direct_from=99, max_cubes=20000),
+            SearchLimits(aligned_first=False, direct_from=0, max_cubes=20000)]
 
 
 @pytest.mark.parametrize("level", range(0, 8))
@@ -217,13 +217,17 @@ def test_the_bound_at_a_rotation_is_below_the_distance_for_every_translation():
                 assert bound <= _cd(moved + t, fb.points) * (1 + 1e-12) + 1e-15
 
 
-@pytest.mark.parametrize("pair", [((0.6, 0.4, 0.2), (0.5, 0.5, 0.2)), ((0.6, 0.3, 0.25), (0.45, 0.45, 0.3)),
-                                  ((0.5, 0.3, 0.1), (0.45, 0.35, 0.12))])
+@pytest.mark.parametrize("pair", ["boxes", "l-prisms", "turned half a turn"])
 def test_the_search_stops_short_of_the_bounds_own_minimum(pair):
     # just above the bound's least value (reached at a rotation the search must not rule out) the
-    # pair is not ruled out, with every way of searching; well below it, it is
-    fa, fb = (box_frame(_surface(trimesh.creation.box(extents=e), 400, k)) for k, e in enumerate(pair))
-    lowest, rotation = _lowest_bound(fa, fb)
+    # pair is not ruled out, with every way of searching; well below it, it is. The minima: near
+    # the identity, at 10 degrees, and at a half turn (|r| = pi, the edge of the searched ball).
+    meshes = {"boxes": (trimesh.creation.box(extents=(0.6, 0.4, 0.2)), trimesh.creation.box(extents=(0.5, 0.5, 0.2))),
+              "l-prisms": (_l_prism(0.5, 0.3, 0.08, 0.12), _l_prism(0.45, 0.35, 0.1, 0.1)),
+              "turned half a turn": (trimesh.creation.box(extents=(0.5, 0.3, 0.1)),
+                                     trimesh.creation.box(extents=(0.45, 0.35, 0.12)))}[pair]
+    fa, fb = (box_frame(_surface(m, 300, k + 1)) for k, m in enumerate(meshes))
+    lowest, _ = _lowest_bound(fa, fb)
     assert lowest > 0.0
     for limits in _limits():
         assert not rules_out(fa, fb, lowest * (1 + 1e-6), limits), limits
