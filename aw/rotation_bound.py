@@ -44,6 +44,7 @@ Arrays: ``points (n, 3)``.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -106,9 +107,13 @@ def box_frame(cloud: np.ndarray) -> BoxFrame:
     orthonormalized."""
     cloud = np.asarray(cloud, dtype=np.float64)
     try:
-        transform, _ = trimesh.bounds.oriented_bounds(cloud)
+        with warnings.catch_warnings(), np.errstate(all="ignore"):  # flat clouds: trimesh divides by a zero volume
+            warnings.simplefilter("ignore")
+            transform, _ = trimesh.bounds.oriented_bounds(cloud)
         u, _, vt = np.linalg.svd(transform[:3, :3])
         axes = u @ vt
+        if not np.isfinite(axes).all():
+            axes = np.eye(3)
     except Exception:  # degenerate clouds (Qhull fails on flat or tiny input): any frame holds
         axes = np.eye(3)
     local = cloud @ axes.T
