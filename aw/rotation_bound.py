@@ -90,13 +90,14 @@ class BoxFrame:
 @dataclass(frozen=True)
 class SearchLimits:
     """When the search gives up (the pair then stays a candidate): more than ``max_cubes`` cubes
-    looked at, or a cube of half-side below ``min_half`` (radians of angle-axis) still not ruled
+    looked at, more than ``max_direct`` of them evaluated directly (the costly ones), or a cube of half-side below ``min_half`` (radians of angle-axis) still not ruled
     out. ``direct_from``: the depth from which the cubes the tables leave are evaluated directly.
     ``aligned_first``: first try the 24 rotations that map box axes onto box axes, and give up at
     once if one of them is within the threshold (the search could not rule it out)."""
 
     min_half: float = 2e-3
     max_cubes: int = 20000
+    max_direct: int = 1000
     direct_from: int = 4
     aligned_first: bool = True
 
@@ -142,7 +143,8 @@ def search(a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits = Se
     limit = threshold * (1 + SAFETY[0]) + SAFETY[1]
     looked = _search(a.points, a.radii, a.half, a.table, a.step, b.points, b.radii, b.half, b.table, b.step,
                      float(limit), np.array(TABLE_LEVELS, np.int64), np.array(LAZY_LEVELS, np.int64), START_CUBES, float(limits.min_half),
-                     int(limits.max_cubes), int(limits.direct_from), bool(limits.aligned_first), SUBSET,
+                     int(limits.max_cubes), int(limits.max_direct), int(limits.direct_from), bool(limits.aligned_first),
+                     SUBSET,
                      np.zeros((_MAX_DEPTH + 2, 3), np.int64) if stats is None else stats)
     return looked > 0, abs(int(looked))
 
@@ -489,7 +491,7 @@ def _at_rotation(ap, ar, ah, bp, br, bh, rot):
 
 @njit(cache=True, nogil=True)
 def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, levels, lazy_levels, start_cubes,
-            min_half, max_cubes, direct_from, aligned_first, subset, stats):
+            min_half, max_cubes, max_direct, direct_from, aligned_first, subset, stats):
     """The number of cubes looked at, positive when every cube of the ball ``|r| <= pi`` is
     ruled out (see the module docstring), negative when the search gave up."""
     n_max = max(ap.shape[0], bp.shape[0])
@@ -548,7 +550,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                 depths[top] = 0
                 top += 1
     root3 = math.sqrt(3.0)
-    looked = 0
+    looked, direct = 0, 0
     while top > 0:
         top -= 1
         cx, cy, cz, h, depth = centres[top, 0], centres[top, 1], centres[top, 2], halves[top], depths[top]
@@ -592,6 +594,9 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
             stats[depth, 1] += 1
             continue
         if depth >= direct_from:
+            direct += 1
+            if direct > max_direct:
+                return -looked
             # at the first depth evaluated directly: first over a subset of the points (dropping
             # points only lowers the bound), then over all of them
             passes = 2 if depth == direct_from else 1
