@@ -20,25 +20,34 @@ s, I) >= p_a - p_b - 2 h_k``; so, pairing along each axis the ``j``-th highest p
 whatever ``t`` is, and ``B`` likewise with ``Y`` seen along ``R e_k`` against ``X``'s box.
 
 **A set of rotations.** The angle-axis vectors ``|r| <= pi`` give every rotation; the search covers
-them with cubes. For ``r`` in a cube of half-side ``sigma`` around ``r_0`` the rotations are within
-angle ``delta = sqrt(3) sigma`` of ``R(r_0)`` (Hartley and Kahl, "Global optimization through
-rotation space search", IJCV 2009), so each axis direction ``u`` stays within ``delta`` of the
-centre's, and a pair's projected length ``|v| cos(alpha)`` (``v = x_a - x_b`` at angle ``alpha``
-to ``u``) is at least ``|v| cos(alpha + delta)`` on the whole cube. Each of the six terms depends
-on one direction only, so it is also read from a table per cloud (:func:`box_frame`): for the
-cells of a sphere grid, the longest pairs along the cell's centre ``g`` with their ``along`` and
-``across`` components, lowered for the cap of radius ``delta + cell radius`` around ``g`` (which
-holds every direction of the cube), and only the first pairs kept (dropping pairs only lowers
-the bound). A cube whose bound exceeds the threshold holds no rotation that could make an edge;
-the others are evaluated directly (every point, their own direction; the points that cannot be
-in a long pair anywhere in a cube are skipped in its sub-cubes) and split in eight. A pair is
-ruled out when every cube is; it stays a candidate (registered, as before) as soon as a
-rotation's own bound is within the threshold, or the cubes get too small or too many.
+them with cubes (a first grid of ``START_CUBES`` a side, each split in eight when needed, depth
+first). For ``r`` in a cube of half-side ``sigma`` around ``r_0`` the rotations are within angle
+``delta = sqrt(3) sigma`` of ``R(r_0)`` (Hartley and Kahl, "Global optimization through rotation
+space search", IJCV 2009), so each axis direction ``u`` stays within ``delta`` of the centre's,
+and a pair's projected length ``|v| cos(alpha)`` (``v = x_a - x_b`` at angle ``alpha`` to ``u``)
+is at least ``|v| cos(alpha + delta)`` on the whole cube. A cube whose bound exceeds the
+threshold holds no rotation that could make an edge.
+
+**Where the time goes.** Each of the six terms depends on one direction only, and the cubes near
+each other share directions, so a cube is first bounded from *tables*: for each cell of a sphere
+grid (a cube map, ``2**level`` cells a side on each face), the longest ``TABLE_PAIRS`` pairs along
+the cell's centre ``g``, each lowered for the cap of radius ``delta + cell radius`` around ``g``
+(which holds every direction of the cubes that read it); dropping pairs only lowers the bound.
+The coarse levels (``TABLE_LEVELS``, read by the first two depths of cubes) are built once per
+cloud (:func:`box_frame`), the finer ones (``LAZY_LEVELS``) per pair, for the cells read, which
+lie near the best rotations. A cube the tables leave is split; from depth ``direct_from`` on it
+is also evaluated directly (its own directions and ``delta``, every point; the points that cannot
+be in a long pair anywhere in it are skipped in its sub-cubes, which leaves the sums as they are).
+
+A pair is ruled out when every cube is. It stays a candidate (registered, as before) as soon as
+one of the 24 rotations mapping box axes onto box axes, or the centre of a cube evaluated
+directly, is itself within the threshold (no search can rule those out), or the cubes get too
+small or too many (:class:`SearchLimits`: past that, a registration costs less).
 
 The bound is safe in the same sense as :mod:`aw.shape_bounds` (the callers' groups are those of
-registering every pair): the tables round their lengths down and ``across`` up, the angles are
-widened far above rounding, and the comparison has the :data:`aw.shape_bounds.SAFETY` slack.
-Arrays: ``points (n, 3)``.
+registering every pair): the tables keep their lengths as 16-bit multiples rounded down, the
+angles are widened far above rounding, and the comparison has the
+:data:`aw.shape_bounds.SAFETY` slack. Arrays: ``points (n, 3)``.
 """
 
 from __future__ import annotations
@@ -56,9 +65,8 @@ from aw.shape_bounds import SAFETY
 
 __all__ = ["BoxFrame", "SearchLimits", "at_rotation", "box_frame", "rules_out", "search"]
 
-# sphere-grid levels of the tables (8, 16 and 32 cells a side of a cube face), one per depth:
-# the first two kept with each cloud, the last, read only near the best rotations, built per pair
-# for the cells read
+# sphere-grid levels of the tables, one per depth of cubes: 8 and 16 cells a side of a cube face
+# kept with each cloud, then 32, 64 and 128, read only near the best rotations, built per pair
 TABLE_LEVELS = (3, 4)
 LAZY_LEVELS = (5, 6, 7)
 TABLE_PAIRS = 96  # longest pairs kept per table cell
