@@ -98,9 +98,9 @@ class BoxFrame:
 @dataclass(frozen=True)
 class SearchLimits:
     """When the search gives up (the pair then stays a candidate): more than ``max_cubes`` cubes
-    looked at, more than ``max_direct`` of them evaluated directly (the costly ones), or a cube of half-side below ``min_half`` (radians of angle-axis) still not ruled
-    out. ``direct_from``: the depth from which the cubes the tables leave are evaluated directly.
-    ``aligned_first``: first try the 24 rotations that map box axes onto box axes, and give up at
+    looked at, more than ``max_direct`` of them evaluated directly (the costly ones), or a cube
+    of half-side below ``min_half`` (radians of angle-axis) still not ruled out. ``direct_from``:
+    the depth from which the cubes the tables leave are evaluated directly. ``aligned_first``: first try the 24 rotations that map box axes onto box axes, and give up at
     once if one of them is within the threshold (the search could not rule it out)."""
 
     min_half: float = 2e-3
@@ -146,21 +146,26 @@ def rules_out(a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits =
 
 def search(a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits = SearchLimits(),
            stats: np.ndarray | None = None) -> tuple[bool, int]:
-    """:func:`rules_out`, and the cubes the search looked at. ``stats (depths, 3)``, if given, adds
-    per depth the cubes looked at, ruled out by the tables, and ruled out directly."""
+    """:func:`rules_out`, and the cubes the search looked at. ``stats (_MAX_DEPTH + 2, 3)`` int64,
+    if given, gets added per depth the cubes looked at, ruled out by the tables, and ruled out
+    directly."""
+    shape = (_MAX_DEPTH + 2, 3)
+    if stats is None:
+        stats = np.zeros(shape, np.int64)
+    elif stats.shape != shape or stats.dtype != np.int64:
+        raise ValueError(f"stats must be an int64 array of shape {shape}, got {stats.dtype} {stats.shape}")
     limit = threshold * (1 + SAFETY[0]) + SAFETY[1]
     looked = _search(a.points, a.radii, a.half, a.table, a.step, b.points, b.radii, b.half, b.table, b.step,
-                     float(limit), np.array(TABLE_LEVELS, np.int64), np.array(LAZY_LEVELS, np.int64), START_CUBES, float(limits.min_half),
-                     int(limits.max_cubes), int(limits.max_direct), int(limits.direct_from), bool(limits.aligned_first),
-                     SUBSET,
-                     np.zeros((_MAX_DEPTH + 2, 3), np.int64) if stats is None else stats)
+                     float(limit), np.array(TABLE_LEVELS, np.int64), np.array(LAZY_LEVELS, np.int64), START_CUBES,
+                     float(limits.min_half), int(limits.max_cubes), int(limits.max_direct), int(limits.direct_from),
+                     bool(limits.aligned_first), SUBSET, stats)
     return looked > 0, abs(int(looked))
 
 
 def at_rotation(a: BoxFrame, b: BoxFrame, rotation: np.ndarray) -> float:
-    """The bound for one rotation ``(3, 3)`` (``A`` turned by it, in the box frames), over every
-    translation: below ``CD(rotation A + t, B)`` for every ``t``. The search proves it above a
-    threshold for all rotations at once."""
+    """The bound for one rotation ``(3, 3)`` of ``a.points`` onto ``b.points`` (the box frames'):
+    below ``CD(a.points @ rotation.T + t, b.points)`` for every translation ``t``. The search
+    proves it above a threshold for all rotations at once."""
     rot = np.ascontiguousarray(rotation, dtype=np.float64)
     return float(_at_rotation(a.points, a.radii, a.half, b.points, b.radii, b.half, rot))
 
@@ -493,7 +498,8 @@ def _at_rotation(ap, ar, ah, bp, br, bh, rot):
         for k in range(3):
             n_act[0, side, k] = m
             act[0, side, k, :m] = np.arange(m)
-    proj, low, high, spare = np.empty(n_max), np.empty(n_max, np.int64), np.empty(n_max, np.int64), np.empty(n_max, np.int64)
+    proj, spare = np.empty(n_max), np.empty(n_max, np.int64)
+    low, high = np.empty(n_max, np.int64), np.empty(n_max, np.int64)
     return _direct_bound(ap, ar, bp, br, widths, rot, 0.0, np.inf, act, n_act, 0, proj, low, high, spare)[1]
 
 

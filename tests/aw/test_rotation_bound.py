@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 import trimesh
 from scipy.spatial import cKDTree
+from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
 from aw.prepare.official_similarity import register
-from aw.rotation_bound import (LAZY_LEVELS, START_CUBES, TABLE_LEVELS, TABLE_PAIRS, SearchLimits, _cell_geometry, _cell_of,
-                               _level_delta, _tables, at_rotation, box_frame, rules_out, search)
+from aw.rotation_bound import (LAZY_LEVELS, START_CUBES, TABLE_LEVELS, TABLE_PAIRS, SearchLimits, _cell_geometry,
+                               _cell_of, _level_delta, _tables, at_rotation, box_frame, rules_out, search)
 
 
 def _surface(mesh: trimesh.Trimesh, n: int, seed: int) -> np.ndarray:
@@ -180,15 +181,14 @@ def test_degenerate_clouds_are_searched_safely(cloud):
 def _lowest_bound(a, b) -> tuple[float, np.ndarray]:
     """The bound's smallest value over rotations, searched (aligned rotations, random ones, then
     Nelder-Mead from the best): an upper estimate of its minimum, attained at the rotation returned."""
-    from scipy.optimize import minimize
-
     def f(rotvec: np.ndarray) -> float:
         return at_rotation(a, b, Rotation.from_rotvec(rotvec).as_matrix())
 
     rng = np.random.default_rng(0)
-    starts = [Rotation.from_matrix(m).as_rotvec() for m in _aligned()] + list(Rotation.random(300, random_state=rng).as_rotvec())
-    best = sorted(starts, key=f)[:6]
-    found = [minimize(f, s, method="Nelder-Mead", options={"xatol": 1e-7, "fatol": 1e-14, "maxiter": 3000}) for s in best]
+    starts = [Rotation.from_matrix(m).as_rotvec() for m in _aligned()]
+    starts += list(Rotation.random(300, random_state=rng).as_rotvec())
+    options = {"xatol": 1e-7, "fatol": 1e-14, "maxiter": 3000}
+    found = [minimize(f, s, method="Nelder-Mead", options=options) for s in sorted(starts, key=f)[:6]]
     top = min(found, key=lambda r: r.fun)
     return float(top.fun), Rotation.from_rotvec(top.x).as_matrix()
 
