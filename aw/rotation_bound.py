@@ -100,8 +100,9 @@ class SearchLimits:
     """When the search gives up (the pair then stays a candidate): more than ``max_cubes`` cubes
     looked at, more than ``max_direct`` of them evaluated directly (the costly ones), or a cube
     of half-side below ``min_half`` (radians of angle-axis) still not ruled out. ``direct_from``:
-    the depth from which the cubes the tables leave are evaluated directly. ``aligned_first``: first try the 24 rotations that map box axes onto box axes, and give up at
-    once if one of them is within the threshold (the search could not rule it out)."""
+    the depth from which the cubes the tables leave are evaluated directly. ``aligned_first``:
+    first try the 24 rotations that map box axes onto box axes, and give up at once if one of
+    them is within the threshold (the search could not rule it out)."""
 
     min_half: float = 2e-3
     max_cubes: int = 20000
