@@ -2,11 +2,13 @@
 
 Both equivalence rules define the groups as the connected components of the graph whose edges
 are the pairs an expensive test (an ICP registration) accepts. The components do not depend on
-the order edges are found in, so the search here registers, in order of increasing lower bound
-(likely edges first):
+the order edges are found in, so the search here (:func:`registration_groups`) registers, in
+order of increasing lower bound (likely edges first):
 
-- only the *candidates*: pairs whose proven lower bound (:mod:`aw.shape_bounds`) does not exceed
-  the threshold; every other pair cannot be an edge;
+- only the *candidates*: pairs whose proven lower bound over every rigid motion does not exceed
+  the threshold; every other pair cannot be an edge. Two bounds, the second only where the first
+  leaves the pair: one from quantities no rotation changes (:mod:`aw.shape_bounds`, all pairs at
+  once), and one that searches the rotations (:mod:`aw.rotation_bound`, per pair);
 - only a candidate whose parts are not connected yet: its edge could not change the components.
 
 So the components equal those of testing every pair, also when several candidates are
@@ -31,9 +33,10 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 import numpy as np
 
 from aw.progress import WARN_AFTER_S, LongWorkWarning, progress
-from aw.shape_bounds import SAFETY
+from aw.rotation_bound import box_frame, rules_out
+from aw.shape_bounds import SAFETY, cloud_bounds, lower_bounds
 
-__all__ = ["LongWorkWarning", "candidate_pairs", "components", "local_workers", "WARN_AFTER_S"]
+__all__ = ["LongWorkWarning", "candidate_pairs", "components", "local_workers", "registration_groups", "WARN_AFTER_S"]
 
 _SAMPLE_S = 10.0  # first estimate after this long (then after twice as long, and so on)
 _BAR_FROM = 20  # fewer candidates than this need no progress display
@@ -49,6 +52,33 @@ def candidate_pairs(lower: np.ndarray, threshold: float) -> np.ndarray:
     i, j, bound = i[keep], j[keep], bound[keep]
     order = np.lexsort((j, i, bound))
     return np.stack([i[order], j[order]], axis=1).astype(np.int64)
+
+
+def registration_groups(clouds: list[np.ndarray], threshold: float, registers: Callable[[int, int], bool], *,
+                        what: str, show_progress: bool = True, workers: int | None = None) -> list[list[int]]:
+    """Components of ``range(len(clouds))`` under "``registers(i, j)``" (``i < j``: does ICP bring
+    cloud ``i`` within ``threshold`` of cloud ``j``?), ``clouds`` each ``(n, 3)`` in any frame,
+    in the units of ``threshold``; each component sorted, ordered by its lowest member.
+
+    ``registers`` is asked only for the pairs that neither bound rules out and whose parts are
+    not connected yet (:func:`components`, ``what``, ``show_progress``); ``workers``: threads
+    testing pairs at once (default :func:`local_workers`). The components are those of asking
+    it for every pair."""
+    if not clouds:
+        return []
+    candidates = candidate_pairs(lower_bounds(cloud_bounds(np.stack(clouds))), threshold)
+    frames: dict[int, object] = {}
+
+    def frame(i: int):  # built once per part, only for parts in a candidate pair
+        if i not in frames:  # two threads may both build one: the same, and the last kept
+            frames[i] = box_frame(clouds[i])
+        return frames[i]
+
+    def is_edge(i: int, j: int) -> bool:
+        return not rules_out(frame(i), frame(j), threshold) and registers(i, j)
+
+    return components(len(clouds), candidates, is_edge, what=what, show_progress=show_progress,
+                      workers=local_workers() if workers is None else workers)
 
 
 def local_workers() -> int:

@@ -2,9 +2,9 @@
 
 Same protocol as the reference: part clouds in their own PCA frames, ``q_i -> q_j`` (``i < j``)
 registered with the 24 starts ``(S, 0)``, an edge where the best CD <= ``equiv_cd``, groups =
-connected components. The search (:func:`aw.pair_search.components`) registers only the pairs
-that the proven lower bounds of :mod:`aw.shape_bounds` do not rule out, likely edges first, and
-skips a pair already connected through other edges; the components are those of registering
+connected components. The search (:func:`aw.pair_search.registration_groups`) registers only
+the pairs that the proven lower bounds of :mod:`aw.shape_bounds` and :mod:`aw.rotation_bound` do
+not rule out, likely edges first, and skips a pair already connected through other edges; the components are those of registering
 every pair (:func:`equivalence_groups_all_pairs`, kept for the tests). Each part's KD-tree and
 Delaunay graph are built once, for the parts that take part in a registration (the Qhull run
 shared with the task's index, :func:`aw_eval.kernels.delaunay.cloud_neighbours`), candidates are
@@ -16,9 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from aw.pair_search import candidate_pairs, components, local_workers
+from aw.pair_search import registration_groups
 from aw.pose import cube_rotations, pca_frame
-from aw.shape_bounds import cloud_bounds, lower_bounds
 from aw_eval.kernels import ICPProblem, build_tree, graph_for
 from aw_eval.settings import ProtocolSettings
 
@@ -65,9 +64,6 @@ def equivalence_groups(clouds: np.ndarray, divisor: float, settings: ProtocolSet
     :func:`aw.pair_search.local_workers`. The groups do not depend on it."""
     settings = settings or ProtocolSettings()
     qs = part_frames(clouds, float(divisor))
-    if not qs:
-        return []
-    candidates = candidate_pairs(lower_bounds(cloud_bounds(np.stack(qs))), settings.equiv_cd)
     structures: dict[int, tuple] = {}
 
     def search(i: int) -> tuple:  # built once per part, only for parts that are registered
@@ -81,8 +77,8 @@ def equivalence_groups(clouds: np.ndarray, divisor: float, settings: ProtocolSet
         return pair_cd(qs[i], qs[j], settings, tree_i, tree_j, decide=True, graph_i=graph_i,
                        graph_j=graph_j) <= settings.equiv_cd
 
-    return components(len(qs), candidates, is_edge, what=f"equivalence groups of {len(qs)} parts",
-                      show_progress=show_progress, workers=local_workers() if workers is None else workers)
+    return registration_groups(qs, settings.equiv_cd, is_edge, what=f"equivalence groups of {len(qs)} parts",
+                               show_progress=show_progress, workers=workers)
 
 
 def equivalence_groups_all_pairs(clouds: np.ndarray, divisor: float, settings: ProtocolSettings | None = None) -> list[list[int]]:

@@ -7,9 +7,10 @@ Each part's cloud is put in its mesh's PCA frame and divided by the scale diviso
 proper PCA axis mappings; an edge joins them when the best squared Chamfer distance is at most
 ``1e-4``; the groups are the connected components, ordered by their lowest index.
 
-The groups are found without registering every pair (:func:`aw.pair_search.components`): a pair
-whose proven Chamfer lower bound (:mod:`aw.shape_bounds`) exceeds the threshold cannot be an
-edge, and a pair already connected cannot change the components. :func:`geometry_groups_all_pairs`
+The groups are found without registering every pair (:func:`aw.pair_search.registration_groups`):
+a pair whose proven Chamfer lower bound (:mod:`aw.shape_bounds`, then :mod:`aw.rotation_bound`)
+exceeds the threshold cannot be an edge, and a pair already connected cannot change the
+components. :func:`geometry_groups_all_pairs`
 registers every pair and is kept for the tests.
 """
 
@@ -20,9 +21,8 @@ from itertools import permutations, product
 import numpy as np
 from scipy.spatial import cKDTree
 
-from aw.pair_search import candidate_pairs, components, local_workers
+from aw.pair_search import registration_groups
 from aw.prepare.official_frame import pca_frame
-from aw.shape_bounds import cloud_bounds, lower_bounds
 
 __all__ = ["THRESHOLD", "MAX_ITERATIONS", "IMPROVEMENT_TOLERANCE", "register", "geometry_groups", "geometry_groups_all_pairs"]
 
@@ -93,15 +93,12 @@ def geometry_groups(part_ids: list[str], points: np.ndarray, vertices: list[np.n
     registered at once, in threads (default :func:`aw.pair_search.local_workers`; the groups do
     not depend on it)."""
     clouds = _part_clouds(points, vertices, divisor)
-    if not clouds:
-        return []
-    candidates = candidate_pairs(lower_bounds(cloud_bounds(np.stack(clouds))), threshold)
 
     def is_edge(j: int, i: int) -> bool:  # the official order: the later part onto the earlier
         return register(clouds[i], clouds[j], enough=threshold) <= threshold
 
-    found = components(len(part_ids), candidates, is_edge, what=f"geometry groups of {len(part_ids)} parts",
-                       show_progress=show_progress, workers=local_workers() if workers is None else workers)
+    found = registration_groups(clouds, threshold, is_edge, what=f"geometry groups of {len(part_ids)} parts",
+                                show_progress=show_progress, workers=workers)
     return [[part_ids[k] for k in g] for g in found]
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from aw.rotation_bound import SearchLimits, box_frame, search
 from aw_eval.kernels.fast import coarse_icp
 from aw_eval.kernels.fps import fps_batch
 from aw_eval.kernels.icp import CertifiedNN, ICPProblem, build_tree, graph_for, nearest_positions
@@ -37,4 +38,6 @@ def compile_kernels() -> None:
     ICPProblem.for_assembly(parts, poses, 1.0, clouds, b, tree_t=tb, graph_t=graph_for(tb)).run(np.eye(3), np.zeros(3), 3, 1e-9)
     coarse_icp(a.reshape(2, 20, 3), b[:20].reshape(2, 10, 3), np.eye(3)[None], np.zeros((1, 3)), 8, 3, 1e-9)
     fps_batch(rng.normal(size=(2, 50, 3)), 10)
+    # the equivalence search's rotation bound (aw.rotation_bound), also used by aw-prepare
+    search(box_frame(a), box_frame(b), 1e-4, SearchLimits(aligned_first=False, max_cubes=50, direct_from=0))
     _COMPILED = True

@@ -173,3 +173,30 @@ def test_the_estimate_expects_a_group_of_identical_parts_to_form_fast(monkeypatc
     assert len(slow) == int(warns), slow
     if warns:
         assert "min on this machine (1.00 s a pair, 1 at a time)" in slow[0] and "about 82 min" in slow[0]
+
+
+def test_registration_groups_ask_fewer_registrations_with_the_same_groups():
+    # boxes of similar size and other proportions (the rigid-invariant bound leaves these pairs,
+    # the rotation bound does not), and moved copies of three of the parts (edges)
+    import trimesh
+    from scipy.spatial.transform import Rotation
+
+    from aw.prepare.official_similarity import register
+    from aw.shape_bounds import cloud_bounds, lower_bounds
+
+    rng = np.random.default_rng(2)
+    parts = [np.asarray(trimesh.sample.sample_surface(trimesh.creation.box(extents=e), 300, seed=k)[0])
+             for k, e in enumerate([(0.6, 0.4, 0.2), (0.5, 0.5, 0.2), (0.6, 0.3, 0.25), (0.45, 0.45, 0.3), (0.1, 0.1, 0.3)])]
+    clouds = [parts[k] @ Rotation.random(random_state=rng).as_matrix().T + rng.normal(size=3) for k in (0, 1, 2, 3, 0, 1, 4, 4)]
+    threshold = 1e-4
+    asked = []
+
+    def registers(i, j):
+        asked.append((i, j))
+        return register(clouds[i], clouds[j], enough=threshold) <= threshold
+
+    got = pair_search.registration_groups(clouds, threshold, registers, what="test", show_progress=False, workers=2)
+    assert got == _all_pairs(len(clouds), lambda i, j: register(clouds[i], clouds[j]) <= threshold)
+    assert got == [[0, 4], [1, 5], [2], [3], [6, 7]]
+    rigid = candidate_pairs(lower_bounds(cloud_bounds(np.stack(clouds))), threshold)
+    assert len(asked) <= 5 < len(rigid)  # the copies' pairs (and any the rotation bound leaves)

@@ -37,3 +37,9 @@ def test_table_names_stopped_and_skipped_steps(tmp_path):
     path.write_text(json.dumps({"rows": rows}))
     last = bench_parts.table(path).splitlines()[-1]
     assert last == "| distinct | 50 | 0.5 | 0.2 | 4.6 | 53.1 | 24.2 | 563 | 6.7 + 1.2 | stopped | not run | 50 (1) |"
+
+
+def test_candidate_counts_narrow_from_all_pairs_to_the_rotation_bound():
+    found = bench_parts.candidates("distinct", 30)
+    assert found["pairs"] == 435
+    assert 0 <= found["rotation_candidates"] < found["rigid_candidates"] < found["pairs"]
