@@ -61,6 +61,7 @@ import trimesh
 from numba import njit, types
 from numba.typed import Dict
 
+from aw.pose import cube_rotations
 from aw.shape_bounds import SAFETY
 
 __all__ = ["BoxFrame", "SearchLimits", "at_rotation", "box_frame", "rules_out", "search"]
@@ -73,6 +74,7 @@ TABLE_PAIRS = 96  # longest pairs kept per table cell
 START_CUBES = 16  # cubes a side of the first grid over [-pi, pi]^3
 SUBSET = 256  # points of each cloud in the first pass over a cube evaluated directly
 _MAX_DEPTH = 12
+_ALIGNED = np.ascontiguousarray(cube_rotations())  # the rotations mapping box axes onto box axes
 
 
 @dataclass(frozen=True)
@@ -159,7 +161,7 @@ def search(a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits = Se
     looked = _search(a.points, a.radii, a.half, a.table, a.step, b.points, b.radii, b.half, b.table, b.step,
                      float(limit), np.array(TABLE_LEVELS, np.int64), np.array(LAZY_LEVELS, np.int64), START_CUBES,
                      float(limits.min_half), int(limits.max_cubes), int(limits.max_direct), int(limits.direct_from),
-                     bool(limits.aligned_first), SUBSET, stats)
+                     _ALIGNED if limits.aligned_first else _ALIGNED[:0], SUBSET, stats)
     return looked > 0, abs(int(looked))
 
 
@@ -302,11 +304,7 @@ def _table_row(points, level, row, delta, work, out):
     for j in range(k):
         a, b = high[j], low[j]
         length = proj[a] - proj[b]
-        dx = points[a, 0] - points[b, 0]
-        dy = points[a, 1] - points[b, 1]
-        dz = points[a, 2] - points[b, 2]
-        across = math.sqrt(max(dx * dx + dy * dy + dz * dz - length * length, 0.0))
-        out[j] = length * cos_d - across * sin_d
+        out[j] = length * cos_d - _across(points, a, b, length) * sin_d
     out[:k] = -np.sort(-out[:k])
 
 
@@ -368,6 +366,15 @@ def _sort_by(idx, m, key, sign, spare):
         spare[start[b]] = idx[q]
         start[b] += 1
     idx[:m] = spare[:m]
+
+
+@njit(cache=True, nogil=True)
+def _across(points, a, b, along):
+    """The component of ``x_a - x_b`` across the direction it has length ``along`` on."""
+    dx = points[a, 0] - points[b, 0]
+    dy = points[a, 1] - points[b, 1]
+    dz = points[a, 2] - points[b, 2]
+    return math.sqrt(max(dx * dx + dy * dy + dz * dz - along * along, 0.0))
 
 
 @njit(cache=True, nogil=True)
@@ -445,11 +452,7 @@ def _direct_term(points, radii, active, n_active, u0, u1, u2, width, cos_d, sin_
         if length <= width:
             break  # sorted: no later pair is longer
         s0 += (length - width) ** 2
-        dx = points[a, 0] - points[b, 0]
-        dy = points[a, 1] - points[b, 1]
-        dz = points[a, 2] - points[b, 2]
-        across = math.sqrt(max(dx * dx + dy * dy + dz * dz - length * length, 0.0))
-        gap = length * cos_d - across * sin_d - width
+        gap = length * cos_d - _across(points, a, b, length) * sin_d - width
         if gap > 0.0:
             s += gap * gap
     return 0.5 * s / n, 0.5 * s0 / n, kept
@@ -487,32 +490,42 @@ def _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, 
 
 
 @njit(cache=True, nogil=True)
+def _widths(ah, bh):
+    """``(2, 3)``: side 0 (``A`` turned by ``R``) against ``B``'s box, side 1 against ``A``'s."""
+    out = np.empty((2, 3))
+    out[0] = 2.0 * bh
+    out[1] = 2.0 * ah
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _read_first(act, n_act, depth, counts, most):
+    """Cubes at ``depth`` read the first ``most`` points of each cloud (all of them if fewer)."""
+    for side in range(2):
+        m = min(counts[side], most)
+        for k in range(3):
+            n_act[depth, side, k] = m
+            act[depth, side, k, :m] = np.arange(m)
+
+
+@njit(cache=True, nogil=True)
 def _at_rotation(ap, ar, ah, bp, br, bh, rot):
     n_max = max(ap.shape[0], bp.shape[0])
-    widths = np.empty((2, 3))
-    widths[0] = 2.0 * bh
-    widths[1] = 2.0 * ah
     act = np.empty((2, 2, 3, n_max), np.int64)
     n_act = np.zeros((2, 2, 3), np.int64)
-    for side in range(2):
-        m = ap.shape[0] if side == 0 else bp.shape[0]
-        for k in range(3):
-            n_act[0, side, k] = m
-            act[0, side, k, :m] = np.arange(m)
+    _read_first(act, n_act, 0, (ap.shape[0], bp.shape[0]), n_max)
     proj, spare = np.empty(n_max), np.empty(n_max, np.int64)
     low, high = np.empty(n_max, np.int64), np.empty(n_max, np.int64)
-    return _direct_bound(ap, ar, bp, br, widths, rot, 0.0, np.inf, act, n_act, 0, proj, low, high, spare)[1]
+    return _direct_bound(ap, ar, bp, br, _widths(ah, bh), rot, 0.0, np.inf, act, n_act, 0, proj, low, high, spare)[1]
 
 
 @njit(cache=True, nogil=True)
 def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, levels, lazy_levels, start_cubes,
-            min_half, max_cubes, max_direct, direct_from, aligned_first, subset, stats):
+            min_half, max_cubes, max_direct, direct_from, aligned, subset, stats):
     """The number of cubes looked at, positive when every cube of the ball ``|r| <= pi`` is
     ruled out (see the module docstring), negative when the search gave up."""
     n_max = max(ap.shape[0], bp.shape[0])
-    widths = np.empty((2, 3))
-    widths[0] = 2.0 * bh  # side 0: A turned by R against B's box
-    widths[1] = 2.0 * ah  # side 1: B turned back against A's box
+    widths = _widths(ah, bh)
     counts = (ap.shape[0], bp.shape[0])
     firsts = np.zeros(len(levels), np.int64)
     for q in range(1, len(levels)):
@@ -526,28 +539,14 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
     lazy = np.empty((256, a_table.shape[1]))
     work = (_workspace(ap.shape[0]), _workspace(bp.shape[0]))
 
-    # the 24 rotations that map the box axes onto the box axes: a rotation whose own bound is
-    # within the threshold cannot be ruled out, so such a pair is given up at once
-    for perm in range(6 if aligned_first else 0):
-        for signs in range(8):
-            rot = np.zeros((3, 3))
-            order = ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0))[perm]
-            for r in range(3):
-                rot[r, order[r]] = -1.0 if (signs >> r) & 1 else 1.0
-            if np.linalg.det(rot) < 0.0:
-                continue
-            at_rot = 0.0
-            for side in range(2):
-                points, radii = (ap, ar) if side == 0 else (bp, br)
-                for k in range(3):
-                    u0, u1, u2 = _axis_direction(rot, side, k)
-                    n_act[0, side, k] = counts[side]
-                    for i in range(counts[side]):
-                        act[0, side, k, i] = i
-                    at_rot += _direct_term(points, radii, act[0, side, k], counts[side], u0, u1, u2, widths[side, k],
-                                           1.0, 0.0, 0.0, proj, low, high, act[1, side, k], spare)[1]
-            if at_rot <= limit:
-                return -1
+    # `aligned` (R, 3, 3): rotations tried first (those mapping the box axes onto the box axes): one
+    # whose own bound is within the threshold cannot be ruled out, so the pair is given up at once
+    _read_first(act, n_act, 0, counts, n_max)
+    for r in range(aligned.shape[0]):
+        at_rotation = _direct_bound(ap, ar, bp, br, widths, aligned[r], 0.0, np.inf, act, n_act, 0, proj, low, high,
+                                    spare)[1]
+        if at_rotation <= limit:
+            return -1
 
     cap = start_cubes ** 3 + 8 * (_MAX_DEPTH + 1)
     centres = np.empty((cap, 3))
@@ -617,12 +616,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
             passes = 2 if depth == direct_from else 1
             for p in range(passes):
                 if depth == direct_from:
-                    for side in range(2):
-                        m = min(counts[side], subset) if p + 1 < passes else counts[side]
-                        for k in range(3):
-                            n_act[depth, side, k] = m
-                            for i in range(m):
-                                act[depth, side, k, i] = i
+                    _read_first(act, n_act, depth, counts, subset if p + 1 < passes else n_max)
                 bound, at_centre = _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, proj,
                                                  low, high, spare)
                 if bound > limit:

@@ -12,6 +12,7 @@ from scipy.spatial import cKDTree
 from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
+from aw.pose import cube_rotations
 from aw.prepare.official_similarity import register
 from aw.rotation_bound import (LAZY_LEVELS, START_CUBES, TABLE_LEVELS, TABLE_PAIRS, SearchLimits, _cell_geometry,
                                _cell_of, _level_delta, _tables, at_rotation, box_frame, rules_out, search)
@@ -185,7 +186,7 @@ def _lowest_bound(a, b) -> tuple[float, np.ndarray]:
         return at_rotation(a, b, Rotation.from_rotvec(rotvec).as_matrix())
 
     rng = np.random.default_rng(0)
-    starts = [Rotation.from_matrix(m).as_rotvec() for m in _aligned()]
+    starts = [Rotation.from_matrix(m).as_rotvec() for m in cube_rotations()]
     starts += list(Rotation.random(300, random_state=rng).as_rotvec())
     options = {"xatol": 1e-7, "fatol": 1e-14, "maxiter": 3000}
     found = [minimize(f, s, method="Nelder-Mead", options=options) for s in sorted(starts, key=f)[:6]]
@@ -197,16 +198,6 @@ def _half_turn_about_y() -> np.ndarray:
     return trimesh.transformations.rotation_matrix(np.pi, [0.0, 1.0, 0.0])
 
 
-def _aligned() -> list[np.ndarray]:
-    mats = []
-    for perm in itertools.permutations(range(3)):
-        for signs in itertools.product((1.0, -1.0), repeat=3):
-            m = np.eye(3)[list(perm)] * np.array(signs)[:, None]
-            if np.linalg.det(m) > 0:
-                mats.append(m)
-    return mats
-
-
 def test_the_bound_at_a_rotation_is_below_the_distance_for_every_translation():
     rng = np.random.default_rng(8)
     shapes = _shapes()
@@ -214,7 +205,8 @@ def test_the_bound_at_a_rotation_is_below_the_distance_for_every_translation():
         a, b = rng.choice(len(shapes), 2)
         fa, fb = box_frame(_surface(shapes[a], 200, k)), box_frame(_surface(shapes[b], 220, k + 50))
         for _ in range(5):
-            r = Rotation.random(random_state=rng).as_matrix() if rng.uniform() < 0.5 else _aligned()[rng.integers(12)]
+            turned = rng.uniform() < 0.5
+            r = Rotation.random(random_state=rng).as_matrix() if turned else cube_rotations()[rng.integers(12)]
             bound = at_rotation(fa, fb, r)
             moved = fa.points @ r.T
             for t in [fb.points.mean(0) - moved.mean(0), rng.normal(scale=0.05, size=3), np.zeros(3)]:
