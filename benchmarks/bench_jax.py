@@ -39,6 +39,7 @@ STUDY_CHECKPOINTS = 60_000
 def one_part_count(parts: int, args) -> dict:
     import aw_eval
     from aw_eval.fixtures import make_points_geometry, trajectory_checkpoints
+    from aw_eval.kernels.jax_icp import max_lanes
     from aw_eval.kernels.leafbox import DEFAULT_CANDIDATES
 
     settings = aw_eval.ProtocolSettings(n_fps=args.n_fps, n_surface=max(4096, 4 * args.n_fps))
@@ -69,6 +70,7 @@ def one_part_count(parts: int, args) -> dict:
     return {
         "parts": parts, "points_per_part": args.n_fps, "checkpoints": int(len(cks)), "chunk": args.chunk,
         "leaf_boxes_once_per_task_s": round(leaf_s, 4),
+        "lanes_per_call_at_most": max_lanes(len(geom.index().target), len(geom.index().target)),
         "leaves_target_parts": [int(a.index.shape[1]) for a in leaves], "leaf_size": int(leaves[0].index.shape[2]),
         "leaves_read_per_query": DEFAULT_CANDIDATES,
         "jax_first_chunk_s_incl_compile": round(cold, 2),
@@ -94,6 +96,8 @@ def main() -> None:
     ap.add_argument("--numba", type=int, default=4, help="of those, how many numba scores too (agreement, ratio)")
     ap.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder to write the JSON to (a new file)")
     ap.add_argument("--name", default="bench_jax", help="the JSON file's name in --out, without .json")
+    ap.add_argument("--leaf-elements", type=int, metavar="N",
+                    help="the leaf lookups' budget of box distances held at once (default: jax_icp.leaf_elements())")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from _output import output_file
@@ -104,12 +108,17 @@ def main() -> None:
     from aw_eval.kernels.jaxcfg import jax_modules
     from aw_eval.registration import resolve_backend
 
+    from aw_eval.kernels import jax_icp
+
     jax, _ = jax_modules()
     aw_eval.scoring.JAX_CHUNK = args.chunk
+    if args.leaf_elements:
+        jax_icp.LEAF_ELEMENTS = jax_icp.ACCELERATOR_LEAF_ELEMENTS = args.leaf_elements
     out = {
         "command": " ".join(["benchmarks/bench_jax.py"] + sys.argv[1:]),
         "device": str(jax.devices()[0]), "platform": jax.devices()[0].platform, "jax": jax.__version__,
         "auto_backend_for_exact": resolve_backend("auto", "exact"),
+        "leaf_elements": jax_icp.leaf_elements(),
         "per_part_count": [],
     }
     for parts in args.parts:

@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
-# One-shot GPU measurement of the jax backend (`exact` on leaf-box certified neighbours), sized to
-# finish in about 8 minutes on one H100 (an estimate: not yet run there): 2, 8 and 20 parts at
-# 1,000 points a part, 64 checkpoints each, cold and
-# warm seconds per checkpoint, the per-stage split (leaf boxes, ICP, part CDs, host), the share
-# of queries the leaves did not certify, agreement with numba on the first 4
-# checkpoints of each, and the projection to 60,000 checkpoints. Writes
-# benchmarks/results/bench_jax_gpu.json (or $1/bench_jax_gpu.json) and prints it.
+# One-shot GPU measurement of the jax backend (`exact` on leaf-box certified neighbours): 2 and 8
+# parts at 1,000 points a part, 64 checkpoints each, then 20 parts, 8 checkpoints in calls of 8
+# (7.5 s a checkpoint on an H200): cold and warm seconds per checkpoint, the per-stage split
+# (leaf boxes, ICP, part CDs, host), the share of queries the leaves did not certify,
+# agreement with numba on the first checkpoints of each, and the projection to 60,000
+# checkpoints. Its two halves took 2.5 min (H100) and 2.7 min (H200) in the runs that docs/performance.md
+# records (a fresh machine compiles the numba kernels first). Writes bench_jax_gpu.json and bench_jax_gpu_20parts.json in
+# benchmarks/results (or $1) and prints them.
 #
 # Run from the repository root on the GPU machine, with the project's pure-Python imports that
 # a bare CUDA/JAX image may lack carried as wheels in .whl/ (downloaded beforehand, elsewhere):
@@ -23,5 +24,7 @@ fi
 export PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
 python3 -c "import jax; print('jax', jax.__version__, jax.devices())"
 nvidia-smi --query-gpu=name,memory.total --format=csv,noheader || true
-timeout 500 python3 benchmarks/bench_jax.py --parts 2 8 20 --n-fps 1000 --checkpoints 64 --chunk 32 --numba 4 \
+timeout 300 python3 benchmarks/bench_jax.py --parts 2 8 --n-fps 1000 --checkpoints 64 --chunk 32 --numba 4 \
   --out "$out_dir" --name bench_jax_gpu
+timeout 240 python3 benchmarks/bench_jax.py --parts 20 --n-fps 1000 --checkpoints 8 --chunk 8 --numba 2 \
+  --out "$out_dir" --name bench_jax_gpu_20parts

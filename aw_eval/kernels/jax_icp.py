@@ -93,8 +93,16 @@ FALLBACK_ROWS = 256
 ROUND_ITERS = 8
 MIN_LANES = 8
 # Box distances held at once by the leaf lookups (lanes x queries x leaves, float64): lanes
-# are looked up in groups that fit it (lax.map over the groups).
+# are looked up in groups that fit it (lax.map over the groups). Groups run one after the
+# other, so an accelerator, which needs many lanes at once to be busy, gets a larger budget
+# (:func:`leaf_elements`).
 LEAF_ELEMENTS = 1 << 25
+ACCELERATOR_LEAF_ELEMENTS = 1 << 28
+# Lanes per device call (at most): a lane holds about LANE_FLOATS x (n + m) float64 at once
+# (the moved predictions, both directions' pairs for the fit, the fallback's queries), and a
+# call holds at most LANE_ELEMENTS of them; more lanes are run in several calls.
+LANE_ELEMENTS = 1 << 28
+LANE_FLOATS = 24
 # Relative slack for the boxes picked in float32 (rounding to float32 moves a value by at most
 # 2^-24 relative; below float32's normal range by more, where the absolute slack fails the
 # certificate anyway).
@@ -154,15 +162,32 @@ def _lanes(jax, f, group: int, *args):
     return tuple(None if o is None else o.reshape((lanes,) + o.shape[2:]) for o in out)
 
 
+def leaf_elements() -> int:
+    """The leaf lookups' budget of box distances held at once: LEAF_ELEMENTS on a CPU,
+    ACCELERATOR_LEAF_ELEMENTS where JAX sees a GPU or TPU."""
+    return ACCELERATOR_LEAF_ELEMENTS if accelerator_present() else LEAF_ELEMENTS
+
+
 def _group(queries: int, leaves: LeafBoxes, candidates: int) -> int:
     """Lanes per leaf-lookup group: the largest power of two whose box and candidate distances
-    fit LEAF_ELEMENTS."""
+    fit :func:`leaf_elements`."""
     p, b, s = leaves[2].shape
     per_query = max(p * b, min(candidates, p * b) * s)
+    budget = leaf_elements()
     g = 1
-    while 2 * g * queries * per_query <= LEAF_ELEMENTS:
+    while 2 * g * queries * per_query <= budget:
         g *= 2
     return g
+
+
+def max_lanes(n: int, m: int) -> int:
+    """Lanes per device call for ``n`` prediction and ``m`` target points: the largest power of
+    two (at least MIN_LANES) whose lanes hold at most LANE_ELEMENTS float64 (LANE_FLOATS per
+    point of either cloud)."""
+    lanes = MIN_LANES
+    while 2 * lanes * LANE_FLOATS * (n + m) <= LANE_ELEMENTS:
+        lanes *= 2
+    return lanes
 
 
 def _brute_fix(jnp, lax, idx, answered, x, refs, lane_ref):
@@ -233,12 +258,14 @@ def _compiled_round(max_iters: int, tol: float, candidates: int, has_pred_leaves
                            _group(x.shape[1], tl, candidates), x)
         fwd, nf = _brute_fix(jnp, lax, fwd, f_ok, x, target[None], jnp.zeros(x.shape[0], jnp.int32))
         if has_pred_leaves:
-            # target points into each part's leaf frame: part maps after the inverse registration
+            def backward(rl, tl_, al, bl, xl):  # one lane: target points into each part's leaf frame
+                z = jnp.einsum("mk,kj->mj", target, rl) - (tl_ @ rl)[None, :]  # R^T (T - t), (m, 3)
+                y = jnp.einsum("mk,pjk->pmj", z, al) + bl[:, None, :]  # part maps after it, (P, m, 3)
+                return _leaf_candidates(jnp, lax, pl, y, target, xl, candidates)
+
+            # (P, m, 3) per lane: formed inside the lane groups, never for every lane at once
             a, b = maps[ck, :, :, :3], maps[ck, :, :, 3]  # (L, P, 3, 3), (L, P, 3)
-            z = jnp.einsum("mk,lkj->lmj", target, r) - jnp.einsum("lk,lkj->lj", t, r)[:, None, :]  # R^T (T - t)
-            y = jnp.einsum("lmk,lpjk->lpmj", z, a) + b[:, :, None, :]
-            bwd, b_ok = _lanes(jax, lambda yl, xl: _leaf_candidates(jnp, lax, pl, yl, target, xl, candidates),
-                               _group(target.shape[0], pl, candidates), y, x)
+            bwd, b_ok = _lanes(jax, backward, _group(target.shape[0], pl, candidates), r, t, a, b, x)
         else:
             bwd = jnp.zeros((x.shape[0], target.shape[0]), jnp.int32)
             b_ok = jnp.zeros(bwd.shape, bool)
@@ -328,9 +355,10 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
     counters = {"lanes_iterated": 0, "lane_iterations": 0, "queries": 0, "brute_queries": 0, "rounds": 0}
     per_lane = preds.shape[1] + len(target)  # neighbour queries of one evaluation, both directions
     # the starts' objectives, in buckets; then rounds over the lanes still running
+    cap = max_lanes(preds.shape[1], len(target))
     live: list[tuple] = []
-    for lo in range(0, lanes, 1 << 12):
-        ids = np.arange(lo, min(lanes, lo + (1 << 12)))
+    for lo in range(0, lanes, cap):
+        ids = np.arange(lo, min(lanes, lo + cap))
         pad = _pad(ids)
         obj, fwd, bwd, nflag = init(pr, tgt, tl, pl, maps, dev(ck_all[pad]), dev(r_all[pad]), dev(t_all[pad]))
         counters["brute_queries"] += int(nflag)
@@ -344,19 +372,21 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
     while active.any():
         keep = np.flatnonzero(active)
         ids, active, its, prev, fwd, bwd, best, br, bt = (a[keep] for a in (ids, active, its, prev, fwd, bwd, best, br, bt))
-        pad = _pad(np.arange(len(ids)))
-        state = (active[pad] & (pad < len(ids)), its[pad], prev[pad], fwd[pad], bwd[pad], best[pad], br[pad], bt[pad])
-        state = tuple(dev(a) for a in state)
-        out, nflag = round_(pr, tgt, tl, pl, maps, dev(ck_all[ids][pad]), state)
-        n = len(ids)
-        new_its = np.asarray(out[1])[:n]
-        iters = int((new_its - its).max())  # every lane of the bucket computed that many
-        counters["lanes_iterated"] += len(pad) * iters
-        counters["queries"] += len(pad) * iters * per_lane
         counters["rounds"] += 1
-        counters["lane_iterations"] += int((new_its - its).sum())
-        counters["brute_queries"] += int(nflag)
-        active, its, prev, fwd, bwd, best, br, bt = (np.asarray(a)[:n] for a in out)
+        for lo in range(0, len(ids), cap):  # the lanes still running, at most cap per call
+            part = slice(lo, min(len(ids), lo + cap))
+            n = part.stop - part.start
+            pad = _pad(np.arange(part.start, part.stop))
+            state = (active[pad] & (pad < part.stop), its[pad], prev[pad], fwd[pad], bwd[pad], best[pad], br[pad], bt[pad])
+            out, nflag = round_(pr, tgt, tl, pl, maps, dev(ck_all[ids[pad]]), tuple(dev(a) for a in state))
+            new_its = np.asarray(out[1])[:n]
+            iters = int((new_its - its[part]).max())  # every lane of the bucket computed that many
+            counters["lanes_iterated"] += len(pad) * iters
+            counters["queries"] += len(pad) * iters * per_lane
+            counters["lane_iterations"] += int((new_its - its[part]).sum())
+            counters["brute_queries"] += int(nflag)
+            for whole, got in zip((active, its, prev, fwd, bwd, best, br, bt), out):
+                whole[part] = np.asarray(got)[:n]
         best_obj[ids], best_r[ids], best_t[ids] = best, br, bt
     if stats is not None:
         stats.update(counters)

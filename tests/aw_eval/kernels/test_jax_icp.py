@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aw_eval.kernels.jax_icp import fit_tile, icp_batch, nearest_in_leaves, part_cd_batch
+from aw_eval.kernels import jax_icp
+from aw_eval.kernels.jax_icp import fit_tile, icp_batch, max_lanes, nearest_in_leaves, part_cd_batch
 from aw_eval.kernels.leafbox import brute_first_min, build_part_leaves
 from aw_eval.reference import chamfer as ref_chamfer
 from aw_eval.reference import icp as ref_icp
@@ -92,3 +93,64 @@ def test_tiles_shrink_to_fit_the_distance_budget():
     assert fit_tile(3200, 8000) == 8  # never below 8 rows
     t = fit_tile(64, 8000)
     assert t < 256 and 64 * t * 8000 <= 1 << 26 < 64 * 2 * t * 8000
+
+
+def test_lanes_past_the_budget_run_in_several_calls_with_the_same_results(monkeypatch):
+    """48 lanes (2 clouds x 24 starts) with a lane budget of 8 lanes a call: every call (the
+    starts' and each round's) holds at most 8 lanes, and every lane ends as in one call (to rounding)."""
+    clouds = [_clouds(0), _clouds(1)]
+    starts = [pca_starts(p, t) for p, t in clouds]
+    target, preds = clouds[0][1], np.stack([p for p, _ in clouds])
+    r0 = np.array([[r for r, _ in s] for s in starts])
+    t0 = np.array([[t for _, t in s] for s in starts])
+    whole = icp_batch(preds, target, r0, t0, max_iters=30, tol=1e-9)
+    monkeypatch.setattr(jax_icp, "LANE_ELEMENTS", 8 * jax_icp.LANE_FLOATS * (40 + 40))
+    assert max_lanes(40, 40) == 8
+    sizes = []
+    real_pad = jax_icp._pad
+    monkeypatch.setattr(jax_icp, "_pad", lambda ids: sizes.append(len(real_pad(ids))) or real_pad(ids))
+    split = icp_batch(preds, target, r0, t0, max_iters=30, tol=1e-9)
+    assert max(sizes) == 8 and len(sizes) > 6  # 6 calls for the starts alone
+    for a, b in zip(whole, split):
+        assert np.allclose(a, b, rtol=1e-12, atol=1e-15)  # (other shapes compile to other roundings)
+
+
+def test_lane_budget_is_a_power_of_two_within_the_elements():
+    assert max_lanes(10, 10) == 1 << 19  # tiny clouds: many lanes a call
+    for n, m in ((1000, 8000), (20_000, 20_000), (10**9, 10**9)):
+        lanes = max_lanes(n, m)
+        assert lanes & (lanes - 1) == 0 and lanes >= jax_icp.MIN_LANES
+        assert lanes == jax_icp.MIN_LANES or lanes * jax_icp.LANE_FLOATS * (n + m) <= jax_icp.LANE_ELEMENTS
+        assert 2 * lanes * jax_icp.LANE_FLOATS * (n + m) > jax_icp.LANE_ELEMENTS
+
+
+def test_a_call_holds_memory_in_proportion_to_its_lanes_points(monkeypatch):
+    """The compiled ICP of 64 lanes of a 32-part task (1,600 points a side, backward lookups in
+    every part's leaves) needs at most LANE_FLOATS float64 per lane and point of either cloud
+    (the small leaf budget set here aside): no buffer of every lane's target in every part's
+    frame, which grows with the parts squared (it ran a 20-part task out of a GPU's memory)."""
+    from aw_eval.fixtures import make_points_geometry
+    from aw_eval.settings import ProtocolSettings
+
+    monkeypatch.setattr(jax_icp, "LEAF_ELEMENTS", 1 << 16)
+    monkeypatch.setattr(jax_icp, "accelerator_present", lambda: False)
+    jax, jnp = jax_icp.jax_modules()
+    parts, n, lanes = 32, 50, 64
+    geom, _ = make_points_geometry(parts, n, seed=parts, settings=ProtocolSettings(n_fps=n, n_surface=4096))
+    index = geom.index()
+    target_leaves, part_leaves = index.part_leaves(geom.divisor)
+    target = index.target
+    init, round_ = jax_icp._compiled_round.__wrapped__(100, 1e-9, 8, True)
+    dev = lambda a: jnp.asarray(a)  # noqa: E731
+    common = (dev(target[None]), dev(target), tuple(map(dev, target_leaves)), tuple(map(dev, part_leaves)),
+              dev(np.zeros((1, parts, 3, 4))), dev(np.zeros(lanes, np.int32)))
+    rot, trans = dev(np.tile(np.eye(3), (lanes, 1, 1))), dev(np.zeros((lanes, 3)))
+    m = len(target)
+    state = (dev(np.ones(lanes, bool)), dev(np.zeros(lanes, np.int64)), dev(np.zeros(lanes)),
+             dev(np.zeros((lanes, m), np.int32)), dev(np.zeros((lanes, m), np.int32)), dev(np.zeros(lanes)), rot, trans)
+    allowed = lanes * jax_icp.LANE_FLOATS * (m + m) * 8 + 8 * 4 * (1 << 16)
+    for compiled in (init.lower(*common, rot, trans).compile(), round_.lower(*common, state).compile()):
+        used = compiled.memory_analysis()
+        if used is None:
+            pytest.skip("this JAX build reports no compiled memory")
+        assert used.temp_size_in_bytes <= allowed
