@@ -159,7 +159,7 @@ def search(a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits = Se
         raise ValueError(f"stats must be an int64 array of shape {shape}, got {stats.dtype} {stats.shape}")
     limit = threshold * (1 + SAFETY[0]) + SAFETY[1]
     looked = _search(a.points, a.radii, a.half, a.table, a.step, b.points, b.radii, b.half, b.table, b.step,
-                     float(limit), np.array(TABLE_LEVELS, np.int64), np.array(LAZY_LEVELS, np.int64), START_CUBES,
+                     float(limit), np.array(TABLE_LEVELS, np.int64), np.array(LAZY_LEVELS, np.int64), START_CUBES, _grid(),
                      float(limits.min_half), int(limits.max_cubes), int(limits.max_direct), int(limits.direct_from),
                      _ALIGNED if limits.aligned_first else _ALIGNED[:0], SUBSET, stats)
     return looked > 0, abs(int(looked))
@@ -196,6 +196,68 @@ def _rotation(rx, ry, rz):
     out[2, 1] = kz * ky * v + kx * s
     out[2, 2] = c + kz * kz * v
     return out
+
+
+@njit(cache=True, nogil=True)
+def _start_centre(i, j, k, h0):
+    """Centre of start cube ``(i, j, k)`` of the first grid (half-side ``h0``)."""
+    return -math.pi + (2 * i + 1) * h0, -math.pi + (2 * j + 1) * h0, -math.pi + (2 * k + 1) * h0
+
+
+@njit(cache=True, nogil=True)
+def _child_centre(cx, cy, cz, h, d):
+    """Centre of sub-cube ``d`` (0-7) of the cube of centre ``c`` and half-side ``h``."""
+    return (cx + (0.5 if d & 1 else -0.5) * h, cy + (0.5 if d & 2 else -0.5) * h,
+            cz + (0.5 if d & 4 else -0.5) * h)
+
+
+@njit(cache=True, nogil=True)
+def _grid_rows(levels, start_cubes):
+    """``(cubes, 6)`` int32: for every cube of the first ``len(levels)`` depths (the start grid,
+    then each cube's eight sub-cubes: cube ``c`` of depth ``q`` has sub-cubes ``8 c + d`` of depth
+    ``q + 1``; depth ``q``'s cubes from row ``start_cubes**3 (8**q - 1) / 7``), the table cell
+    (counted from its level's first row) of each side's and axis's direction at its centre,
+    column ``3 side + k``. The same for every pair: the cubes of those depths read it instead of
+    turning their centres into directions."""
+    first = start_cubes ** 3
+    total, count = 0, first
+    for q in range(len(levels)):
+        total += count
+        count *= 8
+    out = np.empty((total, 6), np.int32)
+    centres = np.empty((total, 3))
+    h = math.pi / start_cubes
+    for i in range(start_cubes):
+        for j in range(start_cubes):
+            for k in range(start_cubes):
+                c = (i * start_cubes + j) * start_cubes + k
+                centres[c, 0], centres[c, 1], centres[c, 2] = _start_centre(i, j, k, h)
+    begin, count = 0, first
+    for q in range(len(levels)):
+        for c in range(count):
+            cx, cy, cz = centres[begin + c, 0], centres[begin + c, 1], centres[begin + c, 2]
+            rot = _rotation(cx, cy, cz)
+            for side in range(2):
+                for k in range(3):
+                    u0, u1, u2 = _axis_direction(rot, side, k)
+                    out[begin + c, 3 * side + k] = _cell_of(u0, u1, u2, levels[q])
+            if q + 1 < len(levels):
+                for d in range(8):
+                    child = begin + count + 8 * c + d
+                    centres[child, 0], centres[child, 1], centres[child, 2] = _child_centre(cx, cy, cz, h, d)
+        begin += count
+        count *= 8
+        h *= 0.5
+    return out
+
+
+_GRID_ROWS: list[np.ndarray] = []  # the grid's rows, computed once per process (a few milliseconds)
+
+
+def _grid() -> np.ndarray:
+    if not _GRID_ROWS:
+        _GRID_ROWS.append(_grid_rows(np.array(TABLE_LEVELS, np.int64), START_CUBES))
+    return _GRID_ROWS[0]
 
 
 @njit(cache=True, nogil=True)
@@ -521,71 +583,93 @@ def _at_rotation(ap, ar, ah, bp, br, bh, rot):
 
 @njit(cache=True, nogil=True)
 def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, levels, lazy_levels, start_cubes,
-            min_half, max_cubes, max_direct, direct_from, aligned, subset, stats):
+            grid, min_half, max_cubes, max_direct, direct_from, aligned, subset, stats):
     """The number of cubes looked at, positive when every cube of the ball ``|r| <= pi`` is
-    ruled out (see the module docstring), negative when the search gave up."""
+    ruled out (see the module docstring), negative when the search gave up. ``grid``:
+    :func:`_grid_rows`."""
     n_max = max(ap.shape[0], bp.shape[0])
     widths = _widths(ah, bh)
     counts = (ap.shape[0], bp.shape[0])
-    firsts = np.zeros(len(levels), np.int64)
-    for q in range(1, len(levels)):
-        firsts[q] = firsts[q - 1] + (3 << (2 * levels[q - 1]))
+    firsts = np.zeros(len(levels) + 1, np.int64)  # each table level's first row, and the rows in all
+    grid_firsts = np.zeros(len(levels) + 1, np.int64)  # each depth's first row in `grid`
+    for q in range(len(levels)):
+        firsts[q + 1] = firsts[q] + (3 << (2 * levels[q]))
+        grid_firsts[q + 1] = grid_firsts[q] + start_cubes ** 3 * 8 ** q
     act = np.empty((_MAX_DEPTH + 2, 2, 3, n_max), np.int64)  # act[d]: the points a cube at depth d reads
     n_act = np.zeros((_MAX_DEPTH + 2, 2, 3), np.int64)
     proj, low, high = np.empty(n_max), np.empty(n_max, np.int64), np.empty(n_max, np.int64)
     spare = np.empty(n_max, np.int64)
-    # the lazy levels' rows, per side, built when first read: slot of (side, level, row) in `lazy`
-    slots = Dict.empty(key_type=types.int64, value_type=types.int64)
-    lazy = np.empty((256, a_table.shape[1]))
-    work = (_workspace(ap.shape[0]), _workspace(bp.shape[0]))
 
     # `aligned` (R, 3, 3): rotations tried first (those mapping the box axes onto the box axes): one
     # whose own bound is within the threshold cannot be ruled out, so the pair is given up at once
-    _read_first(act, n_act, 0, counts, n_max)
+    # (first over a subset of the points: a bound above the limit there is above it over all)
     for r in range(aligned.shape[0]):
-        at_rotation = _direct_bound(ap, ar, bp, br, widths, aligned[r], 0.0, np.inf, act, n_act, 0, proj, low, high,
-                                    spare)[1]
-        if at_rotation <= limit:
+        for most in (subset, n_max):
+            _read_first(act, n_act, 0, counts, most)
+            bound, at_rotation = _direct_bound(ap, ar, bp, br, widths, aligned[r], 0.0, limit, act, n_act, 0, proj,
+                                               low, high, spare)
+            if bound > limit:
+                break
+        if bound <= limit and at_rotation <= limit:
             return -1
+
+    # Each term depends on the pair, a table row and a width only, and many cubes read the same
+    # row: every term is computed once (up to past `limit`: "above it" is all a cube asks), at
+    # the table levels in `memo` (row, 3 side + k), at the lazy ones per slot of `lazy`
+    memo = np.full((firsts[len(levels)], 6), -1.0)
+    # the lazy levels' rows, per side, built when first read: slot of (side, level, row) in `lazy`
+    slots = Dict.empty(key_type=types.int64, value_type=types.int64)
+    lazy = np.empty((256, a_table.shape[1]))
+    lazy_memo = np.empty((256, 3))
+    work = (_workspace(ap.shape[0]), _workspace(bp.shape[0]))
 
     cap = start_cubes ** 3 + 8 * (_MAX_DEPTH + 1)
     centres = np.empty((cap, 3))
     halves = np.empty(cap)
     depths = np.empty(cap, np.int64)
+    ids = np.empty(cap, np.int64)  # a cube's row in `grid` (from its depth's first), at the table depths
     top = 0
     h0 = math.pi / start_cubes
     for i in range(start_cubes):
         for j in range(start_cubes):
             for k in range(start_cubes):
-                centres[top, 0] = -math.pi + (2 * i + 1) * h0
-                centres[top, 1] = -math.pi + (2 * j + 1) * h0
-                centres[top, 2] = -math.pi + (2 * k + 1) * h0
+                centres[top, 0], centres[top, 1], centres[top, 2] = _start_centre(i, j, k, h0)
                 halves[top] = h0
                 depths[top] = 0
+                ids[top] = (i * start_cubes + j) * start_cubes + k
                 top += 1
     root3 = math.sqrt(3.0)
     looked, direct = 0, 0
     while top > 0:
         top -= 1
-        cx, cy, cz, h, depth = centres[top, 0], centres[top, 1], centres[top, 2], halves[top], depths[top]
+        cx, cy, cz, h, depth, cube = centres[top, 0], centres[top, 1], centres[top, 2], halves[top], depths[top], ids[top]
         if math.sqrt(cx * cx + cy * cy + cz * cz) - root3 * h > math.pi:
             continue  # no rotation needs it: the ball |r| <= pi holds them all
         looked += 1
         stats[depth, 0] += 1
         if looked > max_cubes:
             return -looked
-        rot = _rotation(cx, cy, cz)
         delta = root3 * h
         bound = 0.0
-        for side in range(2):
-            for k in range(3):
-                u0, u1, u2 = _axis_direction(rot, side, k)
-                if depth < len(levels):  # the level made for this depth's cubes
+        if depth < len(levels):  # the level made for this depth's cubes, its cells read off the grid
+            for c in range(6):
+                side, k = c // 3, c % 3
+                row = firsts[depth] + grid[grid_firsts[depth] + cube, c]
+                term = memo[row, c]
+                if term < 0.0:
                     table, step = (a_table, a_step) if side == 0 else (b_table, b_step)
-                    row = firsts[depth] + _cell_of(u0, u1, u2, levels[depth])
-                    bound += _table_term(table, step, row, widths[side, k], counts[side], limit - bound)
-                else:  # a lazy level: the one made for this depth, or the last (valid for smaller cubes)
-                    q = min(depth - len(levels), len(lazy_levels) - 1)
+                    term = _table_term(table, step, row, widths[side, k], counts[side], limit)
+                    memo[row, c] = term
+                bound += term
+                if bound > limit:
+                    break
+            rot = _rotation(cx, cy, cz) if bound <= limit and depth >= direct_from else np.eye(3)
+        else:  # a lazy level: the one made for this depth, or the last (valid for smaller cubes)
+            rot = _rotation(cx, cy, cz)
+            q = min(depth - len(levels), len(lazy_levels) - 1)
+            for side in range(2):
+                for k in range(3):
+                    u0, u1, u2 = _axis_direction(rot, side, k)
                     row = _cell_of(u0, u1, u2, lazy_levels[q])
                     key = ((side * 16 + q) << 40) | row
                     if key in slots:
@@ -596,14 +680,22 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                             grown = np.empty((2 * slot, lazy.shape[1]))
                             grown[:slot] = lazy
                             lazy = grown
+                            grown_memo = np.empty((2 * slot, 3))
+                            grown_memo[:slot] = lazy_memo
+                            lazy_memo = grown_memo
                         _table_row(ap if side == 0 else bp, lazy_levels[q], row,
                                    _level_delta(len(levels) + q, start_cubes), work[side], lazy[slot])
+                        lazy_memo[slot] = -1.0
                         slots[key] = slot
-                    bound += _table_term(lazy, 1.0, slot, widths[side, k], counts[side], limit - bound)
+                    term = lazy_memo[slot, k]
+                    if term < 0.0:
+                        term = _table_term(lazy, 1.0, slot, widths[side, k], counts[side], limit)
+                        lazy_memo[slot, k] = term
+                    bound += term
+                    if bound > limit:
+                        break
                 if bound > limit:
                     break
-            if bound > limit:
-                break
         if bound > limit:
             stats[depth, 1] += 1
             continue
@@ -629,10 +721,9 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
         if h < min_half or depth + 1 > _MAX_DEPTH:
             return -looked  # too fine to go on
         for d in range(8):
-            centres[top, 0] = cx + (0.5 if d & 1 else -0.5) * h
-            centres[top, 1] = cy + (0.5 if d & 2 else -0.5) * h
-            centres[top, 2] = cz + (0.5 if d & 4 else -0.5) * h
+            centres[top, 0], centres[top, 1], centres[top, 2] = _child_centre(cx, cy, cz, h, d)
             halves[top] = 0.5 * h
             depths[top] = depth + 1
+            ids[top] = 8 * cube + d if depth + 1 < len(levels) else -1
             top += 1
     return looked
