@@ -530,24 +530,26 @@ def _axis_direction(rot, side, k):
 
 
 @njit(cache=True, nogil=True)
-def _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, proj, low, high, spare):
+def _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, proj, low, high, spare, order):
     """The six terms of a cube evaluated directly over the points ``act[depth]``: ``(bound over
     the cube, bound at its centre)`` (the second complete when the first is not above
-    ``limit``); the points its sub-cubes need go to ``act[depth + 1]``."""
+    ``limit``); the points its sub-cubes need go to ``act[depth + 1]``. ``order (6,)``: the
+    terms ``3 side + k`` in the order to evaluate them (the likely largest first: the sooner
+    the sum passes ``limit``, the fewer are evaluated)."""
     cos_d, sin_d = _cos_sin(delta)
     bound, at_centre = 0.0, 0.0
-    for side in range(2):
+    for c in order:
+        side, k = c // 3, c % 3
         points, radii = (ap, ar) if side == 0 else (bp, br)
-        for k in range(3):
-            u0, u1, u2 = _axis_direction(rot, side, k)
-            f, f0, kept = _direct_term(points, radii, act[depth, side, k], n_act[depth, side, k], u0, u1, u2,
-                                       widths[side, k], cos_d, sin_d, delta * (1.0 + 1e-9) + 1e-12, proj, low, high,
-                                       act[depth + 1, side, k], spare)
-            n_act[depth + 1, side, k] = kept
-            bound += f
-            at_centre += f0
-            if bound > limit:
-                return bound, at_centre
+        u0, u1, u2 = _axis_direction(rot, side, k)
+        f, f0, kept = _direct_term(points, radii, act[depth, side, k], n_act[depth, side, k], u0, u1, u2,
+                                   widths[side, k], cos_d, sin_d, delta * (1.0 + 1e-9) + 1e-12, proj, low, high,
+                                   act[depth + 1, side, k], spare)
+        n_act[depth + 1, side, k] = kept
+        bound += f
+        at_centre += f0
+        if bound > limit:
+            return bound, at_centre
     return bound, at_centre
 
 
@@ -578,7 +580,8 @@ def _at_rotation(ap, ar, ah, bp, br, bh, rot):
     _read_first(act, n_act, 0, (ap.shape[0], bp.shape[0]), n_max)
     proj, spare = np.empty(n_max), np.empty(n_max, np.int64)
     low, high = np.empty(n_max, np.int64), np.empty(n_max, np.int64)
-    return _direct_bound(ap, ar, bp, br, _widths(ah, bh), rot, 0.0, np.inf, act, n_act, 0, proj, low, high, spare)[1]
+    return _direct_bound(ap, ar, bp, br, _widths(ah, bh), rot, 0.0, np.inf, act, n_act, 0, proj, low, high, spare,
+                         np.arange(6))[1]
 
 
 @njit(cache=True, nogil=True)
@@ -603,11 +606,12 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
     # `aligned` (R, 3, 3): rotations tried first (those mapping the box axes onto the box axes): one
     # whose own bound is within the threshold cannot be ruled out, so the pair is given up at once
     # (first over a subset of the points: a bound above the limit there is above it over all)
+    in_turn = np.arange(6)
     for r in range(aligned.shape[0]):
         for most in (subset, n_max):
             _read_first(act, n_act, 0, counts, most)
             bound, at_rotation = _direct_bound(ap, ar, bp, br, widths, aligned[r], 0.0, limit, act, n_act, 0, proj,
-                                               low, high, spare)
+                                               low, high, spare, in_turn)
             if bound > limit:
                 break
         if bound <= limit and at_rotation <= limit:
@@ -639,6 +643,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                 ids[top] = (i * start_cubes + j) * start_cubes + k
                 top += 1
     root3 = math.sqrt(3.0)
+    terms = np.zeros(6)
     looked, direct = 0, 0
     while top > 0:
         top -= 1
@@ -651,6 +656,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
             return -looked
         delta = root3 * h
         bound = 0.0
+        terms[:] = 0.0  # each (side, axis)'s table term, where read
         if depth < len(levels):  # the level made for this depth's cubes, its cells read off the grid
             for c in range(6):
                 side, k = c // 3, c % 3
@@ -660,6 +666,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                     table, step = (a_table, a_step) if side == 0 else (b_table, b_step)
                     term = _table_term(table, step, row, widths[side, k], counts[side], limit)
                     memo[row, c] = term
+                terms[c] = term
                 bound += term
                 if bound > limit:
                     break
@@ -691,6 +698,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                     if term < 0.0:
                         term = _table_term(lazy, 1.0, slot, widths[side, k], counts[side], limit)
                         lazy_memo[slot, k] = term
+                    terms[3 * side + k] = term
                     bound += term
                     if bound > limit:
                         break
@@ -710,7 +718,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                 if depth == direct_from:
                     _read_first(act, n_act, depth, counts, subset if p + 1 < passes else n_max)
                 bound, at_centre = _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, proj,
-                                                 low, high, spare)
+                                                 low, high, spare, np.argsort(-terms))
                 if bound > limit:
                     break
             if bound > limit:
