@@ -74,6 +74,7 @@ TABLE_PAIRS = 96  # longest pairs kept per table cell
 START_CUBES = 16  # cubes a side of the first grid over [-pi, pi]^3
 SUBSET = 256  # points of each cloud in the first pass over a cube evaluated directly
 _MAX_DEPTH = 12
+_SORT_BINS = 512
 _ALIGNED = np.ascontiguousarray(cube_rotations())  # the rotations mapping box axes onto box axes
 
 
@@ -159,7 +160,7 @@ def search(a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits = Se
         raise ValueError(f"stats must be an int64 array of shape {shape}, got {stats.dtype} {stats.shape}")
     limit = threshold * (1 + SAFETY[0]) + SAFETY[1]
     looked = _search(a.points, a.radii, a.half, a.table, a.step, b.points, b.radii, b.half, b.table, b.step,
-                     float(limit), np.array(TABLE_LEVELS, np.int64), np.array(LAZY_LEVELS, np.int64), START_CUBES, _grid(),
+                     float(limit), np.array(TABLE_LEVELS, np.int64), np.array(LAZY_LEVELS, np.int64), START_CUBES, *_fixed(),
                      float(limits.min_half), int(limits.max_cubes), int(limits.max_direct), int(limits.direct_from),
                      _ALIGNED if limits.aligned_first else _ALIGNED[:0], SUBSET, stats)
     return looked > 0, abs(int(looked))
@@ -251,13 +252,30 @@ def _grid_rows(levels, start_cubes):
     return out
 
 
-_GRID_ROWS: list[np.ndarray] = []  # the grid's rows, computed once per process (a few milliseconds)
+@njit(cache=True, nogil=True)
+def _cell_table(levels):
+    """``(cells, 4)``: :func:`_cell_geometry` of every cell of ``levels``, level after level."""
+    rows = 0
+    for level in levels:
+        rows += 3 << (2 * level)
+    out = np.empty((rows, 4))
+    first = 0
+    for level in levels:
+        for row in range(3 << (2 * level)):
+            out[first + row, 0], out[first + row, 1], out[first + row, 2], out[first + row, 3] = _cell_geometry(row, level)
+        first += 3 << (2 * level)
+    return out
 
 
-def _grid() -> np.ndarray:
-    if not _GRID_ROWS:
-        _GRID_ROWS.append(_grid_rows(np.array(TABLE_LEVELS, np.int64), START_CUBES))
-    return _GRID_ROWS[0]
+_FIXED: dict[str, np.ndarray] = {}  # the same for every pair, computed once per process (milliseconds)
+
+
+def _fixed() -> tuple[np.ndarray, np.ndarray]:
+    """The grid's rows (:func:`_grid_rows`) and the lazy levels' cells (:func:`_cell_table`)."""
+    if not _FIXED:
+        _FIXED["cells"] = _cell_table(np.array(LAZY_LEVELS, np.int64))
+        _FIXED["grid"] = _grid_rows(np.array(TABLE_LEVELS, np.int64), START_CUBES)
+    return _FIXED["grid"], _FIXED["cells"]
 
 
 @njit(cache=True, nogil=True)
@@ -315,17 +333,18 @@ def _level_delta(q, start_cubes):
 
 
 @njit(cache=True, nogil=True)
-def _table_row(points, level, row, delta, work, out):
-    """``out (pairs,)``: the row of cell ``row`` of ``level`` for cubes within ``delta`` of their
-    centre: the longest pairs along the cell's centre ``g`` (the ``j``-th highest projection with
-    the ``j``-th lowest), each lowered to ``along cos(rho) - across sin(rho)`` for ``rho = delta +``
-    the cell's radius, in decreasing order, zero-padded. ``work``: :func:`_workspace`."""
-    proj, where, high, low, spare, count = work
+def _table_row(points, cell, delta, work, out):
+    """``out (pairs,)``: the row of a cell (``cell``: its centre ``g`` and radius, a row of
+    :func:`_cell_table`) for cubes within ``delta`` of their centre: the longest pairs along ``g``
+    (the ``j``-th highest projection with the ``j``-th lowest), each lowered to ``along cos(rho) -
+    across sin(rho)`` for ``rho = delta +`` the cell's radius, in decreasing order, zero-padded.
+    ``work``: :func:`_workspace`."""
+    proj, where, high, low, spare, count, start = work
     n, pairs = points.shape[0], out.shape[0]
     bins = count.shape[0]
     out[:] = 0.0
     k = min(pairs, n // 2)
-    g0, g1, g2, radius = _cell_geometry(row, level)
+    g0, g1, g2, radius = cell[0], cell[1], cell[2], cell[3]
     lo_v, hi_v = np.inf, -np.inf
     for i in range(n):
         v = g0 * points[i, 0] + g1 * points[i, 1] + g2 * points[i, 2]
@@ -360,20 +379,24 @@ def _table_row(points, level, row, delta, work, out):
         elif where[i] <= bottom:
             low[n_lo] = i
             n_lo += 1
-    _sort_by(high, n_hi, proj, -1.0, spare)
-    _sort_by(low, n_lo, proj, 1.0, spare)
+    _sort_by(high, n_hi, proj, -1.0, spare, start)
+    _sort_by(low, n_lo, proj, 1.0, spare, start)
     cos_d, sin_d = _cos_sin(delta + radius)
-    for j in range(k):
+    for j in range(k):  # nearly in decreasing order already: sorted by insertion
         a, b = high[j], low[j]
         length = proj[a] - proj[b]
-        out[j] = length * cos_d - _across(points, a, b, length) * sin_d
-    out[:k] = -np.sort(-out[:k])
+        v = length * cos_d - _across(points, a, b, length) * sin_d
+        r = j - 1
+        while r >= 0 and out[r] < v:
+            out[r + 1] = out[r]
+            r -= 1
+        out[r + 1] = v
 
 
 @njit(cache=True, nogil=True)
 def _workspace(n):
     return (np.empty(n), np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64),
-            np.zeros(256, np.int64))
+            np.zeros(256, np.int64), np.empty(_SORT_BINS + 1, np.int64))
 
 
 @njit(cache=True, nogil=True)
@@ -388,17 +411,18 @@ def _tables(points, levels, pairs, start_cubes):
     first = 0
     for q in range(len(levels)):
         for row in range(3 << (2 * levels[q])):
-            _table_row(points, levels[q], row, _level_delta(q, start_cubes), work, out[first + row])
+            g0, g1, g2, radius = _cell_geometry(row, levels[q])
+            _table_row(points, np.array((g0, g1, g2, radius)), _level_delta(q, start_cubes), work, out[first + row])
         first += 3 << (2 * levels[q])
     return out
 
 
 @njit(cache=True, nogil=True)
-def _sort_by(idx, m, key, sign, spare):
+def _sort_by(idx, m, key, sign, spare, start):
     """Order ``idx[:m]`` by ``sign * key[idx]``, increasing: exactly (insertion sort) for short
-    lists, else by 512 bins of the keys' range (a counting sort; ``spare``: room for ``m``
-    indices). Any order gives a valid bound (it only chooses which points are paired); a
-    nearly sorted one pairs nearly as the sorted one does."""
+    lists, else by _SORT_BINS bins of the keys' range (a counting sort; ``spare``: room for ``m``
+    indices, ``start``: for _SORT_BINS + 1 counts). Any order gives a valid bound (it only
+    chooses which points are paired); a nearly sorted one pairs nearly as the sorted one does."""
     if m <= 32:
         for q in range(1, m):
             v = idx[q]
@@ -409,7 +433,7 @@ def _sort_by(idx, m, key, sign, spare):
                 r -= 1
             idx[r + 1] = v
         return
-    bins = 512
+    bins = _SORT_BINS
     lo, hi = np.inf, -np.inf
     for q in range(m):
         v = sign * key[idx[q]]
@@ -418,7 +442,7 @@ def _sort_by(idx, m, key, sign, spare):
     if hi <= lo:
         return
     scale = bins / (hi - lo)
-    start = np.zeros(bins + 1, np.int64)
+    start[:] = 0
     for q in range(m):
         start[min(int((sign * key[idx[q]] - lo) * scale), bins - 1) + 1] += 1
     for b in range(bins):
@@ -465,7 +489,7 @@ def _table_term(table, step, row, width, n, budget):
 
 @njit(cache=True, nogil=True)
 def _direct_term(points, radii, active, n_active, u0, u1, u2, width, cos_d, sin_d, delta, proj, low, high,
-                 next_active, spare):
+                 next_active, spare, start):
     """One (side, axis) term evaluated directly: ``(bound over the cube, bound at its centre,
     points kept)``.
 
@@ -505,8 +529,8 @@ def _direct_term(points, radii, active, n_active, u0, u1, u2, width, cos_d, sin_
         if proj[i] > lo_v + width:
             high[n_hi] = i
             n_hi += 1
-    _sort_by(low, n_lo, proj, 1.0, spare)
-    _sort_by(high, n_hi, proj, -1.0, spare)
+    _sort_by(low, n_lo, proj, 1.0, spare, start)
+    _sort_by(high, n_hi, proj, -1.0, spare, start)
     s, s0 = 0.0, 0.0
     for j in range(min(n_lo, n_hi, n // 2)):
         a, b = high[j], low[j]
@@ -530,7 +554,7 @@ def _axis_direction(rot, side, k):
 
 
 @njit(cache=True, nogil=True)
-def _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, proj, low, high, spare, order):
+def _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, proj, low, high, spare, start, order):
     """The six terms of a cube evaluated directly over the points ``act[depth]``: ``(bound over
     the cube, bound at its centre)`` (the second complete when the first is not above
     ``limit``); the points its sub-cubes need go to ``act[depth + 1]``. ``order (6,)``: the
@@ -544,7 +568,7 @@ def _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, 
         u0, u1, u2 = _axis_direction(rot, side, k)
         f, f0, kept = _direct_term(points, radii, act[depth, side, k], n_act[depth, side, k], u0, u1, u2,
                                    widths[side, k], cos_d, sin_d, delta * (1.0 + 1e-9) + 1e-12, proj, low, high,
-                                   act[depth + 1, side, k], spare)
+                                   act[depth + 1, side, k], spare, start)
         n_act[depth + 1, side, k] = kept
         bound += f
         at_centre += f0
@@ -581,15 +605,15 @@ def _at_rotation(ap, ar, ah, bp, br, bh, rot):
     proj, spare = np.empty(n_max), np.empty(n_max, np.int64)
     low, high = np.empty(n_max, np.int64), np.empty(n_max, np.int64)
     return _direct_bound(ap, ar, bp, br, _widths(ah, bh), rot, 0.0, np.inf, act, n_act, 0, proj, low, high, spare,
-                         np.arange(6))[1]
+                         np.empty(_SORT_BINS + 1, np.int64), np.arange(6))[1]
 
 
 @njit(cache=True, nogil=True)
 def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, levels, lazy_levels, start_cubes,
-            grid, min_half, max_cubes, max_direct, direct_from, aligned, subset, stats):
+            grid, lazy_cells, min_half, max_cubes, max_direct, direct_from, aligned, subset, stats):
     """The number of cubes looked at, positive when every cube of the ball ``|r| <= pi`` is
     ruled out (see the module docstring), negative when the search gave up. ``grid``:
-    :func:`_grid_rows`."""
+    :func:`_grid_rows`; ``lazy_cells``: :func:`_cell_table` of ``lazy_levels``."""
     n_max = max(ap.shape[0], bp.shape[0])
     widths = _widths(ah, bh)
     counts = (ap.shape[0], bp.shape[0])
@@ -598,10 +622,13 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
     for q in range(len(levels)):
         firsts[q + 1] = firsts[q] + (3 << (2 * levels[q]))
         grid_firsts[q + 1] = grid_firsts[q] + start_cubes ** 3 * 8 ** q
+    lazy_firsts = np.zeros(len(lazy_levels), np.int64)  # each lazy level's first row in `lazy_cells`
+    for q in range(1, len(lazy_levels)):
+        lazy_firsts[q] = lazy_firsts[q - 1] + (3 << (2 * lazy_levels[q - 1]))
     act = np.empty((_MAX_DEPTH + 2, 2, 3, n_max), np.int64)  # act[d]: the points a cube at depth d reads
     n_act = np.zeros((_MAX_DEPTH + 2, 2, 3), np.int64)
     proj, low, high = np.empty(n_max), np.empty(n_max, np.int64), np.empty(n_max, np.int64)
-    spare = np.empty(n_max, np.int64)
+    spare, start = np.empty(n_max, np.int64), np.empty(_SORT_BINS + 1, np.int64)
 
     # `aligned` (R, 3, 3): rotations tried first (those mapping the box axes onto the box axes): one
     # whose own bound is within the threshold cannot be ruled out, so the pair is given up at once
@@ -611,7 +638,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
         for most in (subset, n_max):
             _read_first(act, n_act, 0, counts, most)
             bound, at_rotation = _direct_bound(ap, ar, bp, br, widths, aligned[r], 0.0, limit, act, n_act, 0, proj,
-                                               low, high, spare, in_turn)
+                                               low, high, spare, start, in_turn)
             if bound > limit:
                 break
         if bound <= limit and at_rotation <= limit:
@@ -690,7 +717,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                             grown_memo = np.empty((2 * slot, 3))
                             grown_memo[:slot] = lazy_memo
                             lazy_memo = grown_memo
-                        _table_row(ap if side == 0 else bp, lazy_levels[q], row,
+                        _table_row(ap if side == 0 else bp, lazy_cells[lazy_firsts[q] + row],
                                    _level_delta(len(levels) + q, start_cubes), work[side], lazy[slot])
                         lazy_memo[slot] = -1.0
                         slots[key] = slot
@@ -718,7 +745,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                 if depth == direct_from:
                     _read_first(act, n_act, depth, counts, subset if p + 1 < passes else n_max)
                 bound, at_centre = _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, proj,
-                                                 low, high, spare, np.argsort(-terms))
+                                                 low, high, spare, start, np.argsort(-terms))
                 if bound > limit:
                     break
             if bound > limit:
