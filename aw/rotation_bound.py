@@ -35,9 +35,13 @@ the cell's centre ``g``, each lowered for the cap of radius ``delta + cell radiu
 (which holds every direction of the cubes that read it); dropping pairs only lowers the bound.
 The coarse levels (``TABLE_LEVELS``, read by the first two depths of cubes) are built once per
 cloud (:func:`box_frame`), the finer ones (``LAZY_LEVELS``) per pair, for the cells read, which
-lie near the best rotations. A cube the tables leave is split; from depth ``direct_from`` on it
-is also evaluated directly (its own directions and ``delta``, every point; the points that cannot
-be in a long pair anywhere in it are skipped in its sub-cubes, which leaves the sums as they are).
+lie near the best rotations. A term depends on the pair, the cell and the other box's width
+only, so each is computed once per pair and then read by every cube of its cell; the cells of
+the first two depths' cubes are read off a grid computed once (:func:`_grid_rows`). A cube the
+tables leave is split; from depth ``direct_from`` on it is also evaluated directly (its own
+directions and ``delta``, every point, the terms with the largest table term first; the points
+that cannot be in a long pair anywhere in it are skipped in its sub-cubes, which leaves the sums
+as they are).
 
 A pair is ruled out when every cube is. It stays a candidate (registered, as before) as soon as
 one of the 24 rotations mapping box axes onto box axes, or the centre of a cube evaluated
@@ -613,7 +617,8 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
             grid, lazy_cells, min_half, max_cubes, max_direct, direct_from, aligned, subset, stats):
     """The number of cubes looked at, positive when every cube of the ball ``|r| <= pi`` is
     ruled out (see the module docstring), negative when the search gave up. ``grid``:
-    :func:`_grid_rows`; ``lazy_cells``: :func:`_cell_table` of ``lazy_levels``."""
+    :func:`_grid_rows` (none, ``(0, 6)``: the cells are found from the cubes' centres instead);
+    ``lazy_cells``: :func:`_cell_table` of ``lazy_levels``."""
     n_max = max(ap.shape[0], bp.shape[0])
     widths = _widths(ah, bh)
     counts = (ap.shape[0], bp.shape[0])
@@ -685,9 +690,14 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
         bound = 0.0
         terms[:] = 0.0  # each (side, axis)'s table term, where read
         if depth < len(levels):  # the level made for this depth's cubes, its cells read off the grid
+            centre_rot = np.eye(3) if grid.shape[0] else _rotation(cx, cy, cz)
             for c in range(6):
                 side, k = c // 3, c % 3
-                row = firsts[depth] + grid[grid_firsts[depth] + cube, c]
+                if grid.shape[0]:
+                    row = firsts[depth] + grid[grid_firsts[depth] + cube, c]
+                else:  # no grid given: the cells of the centre's directions (what the grid holds)
+                    u0, u1, u2 = _axis_direction(centre_rot, side, k)
+                    row = firsts[depth] + _cell_of(u0, u1, u2, levels[depth])
                 term = memo[row, c]
                 if term < 0.0:
                     table, step = (a_table, a_step) if side == 0 else (b_table, b_step)
