@@ -184,10 +184,19 @@ def at_rotation(a: BoxFrame, b: BoxFrame, rotation: np.ndarray) -> float:
 @njit(cache=True, nogil=True)
 def _rotation(rx, ry, rz):
     """The rotation of angle-axis vector ``r`` (Rodrigues)."""
+    out = np.empty((3, 3))
+    _set_rotation(out, rx, ry, rz)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _set_rotation(out, rx, ry, rz):
+    """:func:`_rotation` written into ``out (3, 3)`` (the search turns many cubes: no allocation)."""
     angle = math.sqrt(rx * rx + ry * ry + rz * rz)
-    out = np.eye(3)
     if angle == 0.0:
-        return out
+        out[:] = 0.0
+        out[0, 0] = out[1, 1] = out[2, 2] = 1.0
+        return
     kx, ky, kz = rx / angle, ry / angle, rz / angle
     c, s = math.cos(angle), math.sin(angle)
     v = 1.0 - c
@@ -200,7 +209,6 @@ def _rotation(rx, ry, rz):
     out[2, 0] = kz * kx * v - ky * s
     out[2, 1] = kz * ky * v + kx * s
     out[2, 2] = c + kz * kz * v
-    return out
 
 
 @njit(cache=True, nogil=True)
@@ -676,6 +684,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                 top += 1
     root3 = math.sqrt(3.0)
     terms = np.zeros(6)
+    rot = np.empty((3, 3))  # the rotation at the centre of the cube looked at
     looked, direct = 0, 0
     while top > 0:
         top -= 1
@@ -690,13 +699,14 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
         bound = 0.0
         terms[:] = 0.0  # each (side, axis)'s table term, where read
         if depth < len(levels):  # the level made for this depth's cubes, its cells read off the grid
-            centre_rot = np.eye(3) if grid.shape[0] else _rotation(cx, cy, cz)
+            if not grid.shape[0]:
+                _set_rotation(rot, cx, cy, cz)
             for c in range(6):
                 side, k = c // 3, c % 3
                 if grid.shape[0]:
                     row = firsts[depth] + grid[grid_firsts[depth] + cube, c]
                 else:  # no grid given: the cells of the centre's directions (what the grid holds)
-                    u0, u1, u2 = _axis_direction(centre_rot, side, k)
+                    u0, u1, u2 = _axis_direction(rot, side, k)
                     row = firsts[depth] + _cell_of(u0, u1, u2, levels[depth])
                 term = memo[row, c]
                 if term < 0.0:
@@ -707,9 +717,10 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                 bound += term
                 if bound > limit:
                     break
-            rot = _rotation(cx, cy, cz) if bound <= limit and depth >= direct_from else np.eye(3)
+            if bound <= limit and depth >= direct_from and grid.shape[0]:
+                _set_rotation(rot, cx, cy, cz)  # (for the direct evaluation)
         else:  # a lazy level: the one made for this depth, or the last (valid for smaller cubes)
-            rot = _rotation(cx, cy, cz)
+            _set_rotation(rot, cx, cy, cz)
             q = min(depth - len(levels), len(lazy_levels) - 1)
             for side in range(2):
                 for k in range(3):
