@@ -59,6 +59,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import trimesh
@@ -279,15 +280,13 @@ def _cell_table(levels):
     return out
 
 
-_FIXED: dict[str, np.ndarray] = {}  # the same for every pair, computed once per process (milliseconds)
-
-
+@lru_cache(maxsize=1)
 def _fixed() -> tuple[np.ndarray, np.ndarray]:
-    """The grid's rows (:func:`_grid_rows`) and the lazy levels' cells (:func:`_cell_table`)."""
-    if not _FIXED:
-        _FIXED["cells"] = _cell_table(np.array(LAZY_LEVELS, np.int64))
-        _FIXED["grid"] = _grid_rows(np.array(TABLE_LEVELS, np.int64), START_CUBES)
-    return _FIXED["grid"], _FIXED["cells"]
+    """The grid's rows (:func:`_grid_rows`) and the lazy levels' cells (:func:`_cell_table`): the
+    same for every pair, computed once per process (milliseconds; threads that ask at once may
+    each compute them, and each gets both)."""
+    return (_grid_rows(np.array(TABLE_LEVELS, np.int64), START_CUBES),
+            _cell_table(np.array(LAZY_LEVELS, np.int64)))
 
 
 @njit(cache=True, nogil=True)

@@ -274,3 +274,33 @@ def test_the_search_stops_short_of_the_bounds_own_minimum(pair):
     for limits in _limits():
         assert not rules_out(fa, fb, lowest * (1 + 1e-6), limits), limits
     assert rules_out(fa, fb, lowest * 0.5, SearchLimits(max_cubes=100000))
+
+
+def test_threads_that_search_first_all_get_an_answer():
+    """The fixed grid is built on first use: a fresh process whose first searches start in
+    several threads a few milliseconds apart (as the equivalence search starts them) answers
+    every one (a thread that came while the first one built it once got a KeyError)."""
+    import subprocess
+    import sys
+
+    script = """
+import threading, time, numpy as np
+from aw.rotation_bound import box_frame, rules_out
+rng = np.random.default_rng(0)
+frames = [box_frame(rng.normal(size=(300, 3)) * s) for s in ([0.3, 0.2, 0.1], [0.31, 0.2, 0.1])]
+barrier, answers, errors = threading.Barrier(12), [], []
+def one(k):
+    barrier.wait()
+    time.sleep(0.002 * k)  # one after the other, while the first ones build the grid
+    try:
+        answers.append(rules_out(frames[0], frames[1], 1e-4))
+    except Exception as exc:
+        errors.append(repr(exc))
+threads = [threading.Thread(target=one, args=(k,)) for k in range(12)]
+[t.start() for t in threads]
+[t.join() for t in threads]
+print(len(answers), errors)
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split("\n")[-2] == "12 []"
