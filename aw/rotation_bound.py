@@ -69,7 +69,7 @@ from numba.typed import Dict
 from aw.pose import cube_rotations
 from aw.shape_bounds import SAFETY
 
-__all__ = ["BoxFrame", "SearchLimits", "at_rotation", "box_frame", "rules_out", "search"]
+__all__ = ["BoxFrame", "SearchLimits", "at_rotation", "box_frame", "compile_search", "rules_out", "search"]
 
 # sphere-grid levels of the tables, one per depth of cubes: 8 and 16 cells a side of a cube face
 # kept with each cloud, then 32, 64 and 128, read only near the best rotations, built per pair
@@ -177,6 +177,15 @@ def at_rotation(a: BoxFrame, b: BoxFrame, rotation: np.ndarray) -> float:
     proves it above a threshold for all rotations at once."""
     rot = np.ascontiguousarray(rotation, dtype=np.float64)
     return float(_at_rotation(a.points, a.radii, a.half, b.points, b.radii, b.half, rot))
+
+
+def compile_search() -> None:
+    """Run the search's kernels on tiny inputs (numba caches them beside this module): the
+    install step and each scoring thread call it, so that no search waits for a compile."""
+    rng = np.random.default_rng(0)
+    a, b = box_frame(rng.normal(size=(40, 3))), box_frame(rng.normal(size=(30, 3)))
+    search(a, b, 1e-4, SearchLimits(aligned_first=False, max_cubes=50, direct_from=0))
+    search(a, b, 1e-4)
 
 
 # ---------------------------------------------------------------- compiled kernels
