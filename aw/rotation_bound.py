@@ -35,9 +35,13 @@ the cell's centre ``g``, each lowered for the cap of radius ``delta + cell radiu
 (which holds every direction of the cubes that read it); dropping pairs only lowers the bound.
 The coarse levels (``TABLE_LEVELS``, read by the first two depths of cubes) are built once per
 cloud (:func:`box_frame`), the finer ones (``LAZY_LEVELS``) per pair, for the cells read, which
-lie near the best rotations. A cube the tables leave is split; from depth ``direct_from`` on it
-is also evaluated directly (its own directions and ``delta``, every point; the points that cannot
-be in a long pair anywhere in it are skipped in its sub-cubes, which leaves the sums as they are).
+lie near the best rotations. A term depends on the pair, the cell and the other box's width
+only, so each is computed once per pair and then read by every cube of its cell; the cells of
+the first two depths' cubes are read off a grid computed once (:func:`_grid_rows`). A cube the
+tables leave is split; from depth ``direct_from`` on it is also evaluated directly (its own
+directions and ``delta``, every point, the terms with the largest table term first; the points
+that cannot be in a long pair anywhere in it are skipped in its sub-cubes, which leaves the sums
+as they are).
 
 A pair is ruled out when every cube is. It stays a candidate (registered, as before) as soon as
 one of the 24 rotations mapping box axes onto box axes, or the centre of a cube evaluated
@@ -55,6 +59,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import trimesh
@@ -64,7 +69,7 @@ from numba.typed import Dict
 from aw.pose import cube_rotations
 from aw.shape_bounds import SAFETY
 
-__all__ = ["BoxFrame", "SearchLimits", "at_rotation", "box_frame", "rules_out", "search"]
+__all__ = ["BoxFrame", "SearchLimits", "at_rotation", "box_frame", "compile_search", "rules_out", "search"]
 
 # sphere-grid levels of the tables, one per depth of cubes: 8 and 16 cells a side of a cube face
 # kept with each cloud, then 32, 64 and 128, read only near the best rotations, built per pair
@@ -74,6 +79,7 @@ TABLE_PAIRS = 96  # longest pairs kept per table cell
 START_CUBES = 16  # cubes a side of the first grid over [-pi, pi]^3
 SUBSET = 256  # points of each cloud in the first pass over a cube evaluated directly
 _MAX_DEPTH = 12
+_SORT_BINS = 512
 _ALIGNED = np.ascontiguousarray(cube_rotations())  # the rotations mapping box axes onto box axes
 
 
@@ -159,7 +165,7 @@ def search(a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits = Se
         raise ValueError(f"stats must be an int64 array of shape {shape}, got {stats.dtype} {stats.shape}")
     limit = threshold * (1 + SAFETY[0]) + SAFETY[1]
     looked = _search(a.points, a.radii, a.half, a.table, a.step, b.points, b.radii, b.half, b.table, b.step,
-                     float(limit), np.array(TABLE_LEVELS, np.int64), np.array(LAZY_LEVELS, np.int64), START_CUBES,
+                     float(limit), np.array(TABLE_LEVELS, np.int64), np.array(LAZY_LEVELS, np.int64), START_CUBES, *_fixed(),
                      float(limits.min_half), int(limits.max_cubes), int(limits.max_direct), int(limits.direct_from),
                      _ALIGNED if limits.aligned_first else _ALIGNED[:0], SUBSET, stats)
     return looked > 0, abs(int(looked))
@@ -173,16 +179,34 @@ def at_rotation(a: BoxFrame, b: BoxFrame, rotation: np.ndarray) -> float:
     return float(_at_rotation(a.points, a.radii, a.half, b.points, b.radii, b.half, rot))
 
 
+def compile_search() -> None:
+    """Run the search's kernels on tiny inputs (numba caches them beside this module): the
+    install step and each scoring thread call it, so that no search waits for a compile."""
+    rng = np.random.default_rng(0)
+    a, b = box_frame(rng.normal(size=(40, 3))), box_frame(rng.normal(size=(30, 3)))
+    search(a, b, 1e-4, SearchLimits(aligned_first=False, max_cubes=50, direct_from=0))
+    search(a, b, 1e-4)
+
+
 # ---------------------------------------------------------------- compiled kernels
 
 
 @njit(cache=True, nogil=True)
 def _rotation(rx, ry, rz):
     """The rotation of angle-axis vector ``r`` (Rodrigues)."""
+    out = np.empty((3, 3))
+    _set_rotation(out, rx, ry, rz)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _set_rotation(out, rx, ry, rz):
+    """:func:`_rotation` written into ``out (3, 3)`` (the search turns many cubes: no allocation)."""
     angle = math.sqrt(rx * rx + ry * ry + rz * rz)
-    out = np.eye(3)
     if angle == 0.0:
-        return out
+        out[:] = 0.0
+        out[0, 0] = out[1, 1] = out[2, 2] = 1.0
+        return
     kx, ky, kz = rx / angle, ry / angle, rz / angle
     c, s = math.cos(angle), math.sin(angle)
     v = 1.0 - c
@@ -195,7 +219,83 @@ def _rotation(rx, ry, rz):
     out[2, 0] = kz * kx * v - ky * s
     out[2, 1] = kz * ky * v + kx * s
     out[2, 2] = c + kz * kz * v
+
+
+@njit(cache=True, nogil=True)
+def _start_centre(i, j, k, h0):
+    """Centre of start cube ``(i, j, k)`` of the first grid (half-side ``h0``)."""
+    return -math.pi + (2 * i + 1) * h0, -math.pi + (2 * j + 1) * h0, -math.pi + (2 * k + 1) * h0
+
+
+@njit(cache=True, nogil=True)
+def _child_centre(cx, cy, cz, h, d):
+    """Centre of sub-cube ``d`` (0-7) of the cube of centre ``c`` and half-side ``h``."""
+    return (cx + (0.5 if d & 1 else -0.5) * h, cy + (0.5 if d & 2 else -0.5) * h,
+            cz + (0.5 if d & 4 else -0.5) * h)
+
+
+@njit(cache=True, nogil=True)
+def _grid_rows(levels, start_cubes):
+    """``(cubes, 6)`` int32: for every cube of the first ``len(levels)`` depths (the start grid,
+    then each cube's eight sub-cubes: cube ``c`` of depth ``q`` has sub-cubes ``8 c + d`` of depth
+    ``q + 1``; depth ``q``'s cubes from row ``start_cubes**3 (8**q - 1) / 7``), the table cell
+    (counted from its level's first row) of each side's and axis's direction at its centre,
+    column ``3 side + k``. The same for every pair: the cubes of those depths read it instead of
+    turning their centres into directions."""
+    first = start_cubes ** 3
+    total, count = 0, first
+    for q in range(len(levels)):
+        total += count
+        count *= 8
+    out = np.empty((total, 6), np.int32)
+    centres = np.empty((total, 3))
+    h = math.pi / start_cubes
+    for i in range(start_cubes):
+        for j in range(start_cubes):
+            for k in range(start_cubes):
+                c = (i * start_cubes + j) * start_cubes + k
+                centres[c, 0], centres[c, 1], centres[c, 2] = _start_centre(i, j, k, h)
+    begin, count = 0, first
+    for q in range(len(levels)):
+        for c in range(count):
+            cx, cy, cz = centres[begin + c, 0], centres[begin + c, 1], centres[begin + c, 2]
+            rot = _rotation(cx, cy, cz)
+            for side in range(2):
+                for k in range(3):
+                    u0, u1, u2 = _axis_direction(rot, side, k)
+                    out[begin + c, 3 * side + k] = _cell_of(u0, u1, u2, levels[q])
+            if q + 1 < len(levels):
+                for d in range(8):
+                    child = begin + count + 8 * c + d
+                    centres[child, 0], centres[child, 1], centres[child, 2] = _child_centre(cx, cy, cz, h, d)
+        begin += count
+        count *= 8
+        h *= 0.5
     return out
+
+
+@njit(cache=True, nogil=True)
+def _cell_table(levels):
+    """``(cells, 4)``: :func:`_cell_geometry` of every cell of ``levels``, level after level."""
+    rows = 0
+    for level in levels:
+        rows += 3 << (2 * level)
+    out = np.empty((rows, 4))
+    first = 0
+    for level in levels:
+        for row in range(3 << (2 * level)):
+            out[first + row, 0], out[first + row, 1], out[first + row, 2], out[first + row, 3] = _cell_geometry(row, level)
+        first += 3 << (2 * level)
+    return out
+
+
+@lru_cache(maxsize=1)
+def _fixed() -> tuple[np.ndarray, np.ndarray]:
+    """The grid's rows (:func:`_grid_rows`) and the lazy levels' cells (:func:`_cell_table`): the
+    same for every pair, computed once per process (milliseconds; threads that ask at once may
+    each compute them, and each gets both)."""
+    return (_grid_rows(np.array(TABLE_LEVELS, np.int64), START_CUBES),
+            _cell_table(np.array(LAZY_LEVELS, np.int64)))
 
 
 @njit(cache=True, nogil=True)
@@ -253,17 +353,18 @@ def _level_delta(q, start_cubes):
 
 
 @njit(cache=True, nogil=True)
-def _table_row(points, level, row, delta, work, out):
-    """``out (pairs,)``: the row of cell ``row`` of ``level`` for cubes within ``delta`` of their
-    centre: the longest pairs along the cell's centre ``g`` (the ``j``-th highest projection with
-    the ``j``-th lowest), each lowered to ``along cos(rho) - across sin(rho)`` for ``rho = delta +``
-    the cell's radius, in decreasing order, zero-padded. ``work``: :func:`_workspace`."""
-    proj, where, high, low, spare, count = work
+def _table_row(points, cell, delta, work, out):
+    """``out (pairs,)``: the row of a cell (``cell``: its centre ``g`` and radius, a row of
+    :func:`_cell_table`) for cubes within ``delta`` of their centre: the longest pairs along ``g``
+    (the ``j``-th highest projection with the ``j``-th lowest), each lowered to ``along cos(rho) -
+    across sin(rho)`` for ``rho = delta +`` the cell's radius, in decreasing order, zero-padded.
+    ``work``: :func:`_workspace`."""
+    proj, where, high, low, spare, count, start = work
     n, pairs = points.shape[0], out.shape[0]
     bins = count.shape[0]
     out[:] = 0.0
     k = min(pairs, n // 2)
-    g0, g1, g2, radius = _cell_geometry(row, level)
+    g0, g1, g2, radius = cell[0], cell[1], cell[2], cell[3]
     lo_v, hi_v = np.inf, -np.inf
     for i in range(n):
         v = g0 * points[i, 0] + g1 * points[i, 1] + g2 * points[i, 2]
@@ -298,20 +399,24 @@ def _table_row(points, level, row, delta, work, out):
         elif where[i] <= bottom:
             low[n_lo] = i
             n_lo += 1
-    _sort_by(high, n_hi, proj, -1.0, spare)
-    _sort_by(low, n_lo, proj, 1.0, spare)
+    _sort_by(high, n_hi, proj, -1.0, spare, start)
+    _sort_by(low, n_lo, proj, 1.0, spare, start)
     cos_d, sin_d = _cos_sin(delta + radius)
-    for j in range(k):
+    for j in range(k):  # nearly in decreasing order already: sorted by insertion
         a, b = high[j], low[j]
         length = proj[a] - proj[b]
-        out[j] = length * cos_d - _across(points, a, b, length) * sin_d
-    out[:k] = -np.sort(-out[:k])
+        v = length * cos_d - _across(points, a, b, length) * sin_d
+        r = j - 1
+        while r >= 0 and out[r] < v:
+            out[r + 1] = out[r]
+            r -= 1
+        out[r + 1] = v
 
 
 @njit(cache=True, nogil=True)
 def _workspace(n):
     return (np.empty(n), np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64),
-            np.zeros(256, np.int64))
+            np.zeros(256, np.int64), np.empty(_SORT_BINS + 1, np.int64))
 
 
 @njit(cache=True, nogil=True)
@@ -326,17 +431,18 @@ def _tables(points, levels, pairs, start_cubes):
     first = 0
     for q in range(len(levels)):
         for row in range(3 << (2 * levels[q])):
-            _table_row(points, levels[q], row, _level_delta(q, start_cubes), work, out[first + row])
+            g0, g1, g2, radius = _cell_geometry(row, levels[q])
+            _table_row(points, np.array((g0, g1, g2, radius)), _level_delta(q, start_cubes), work, out[first + row])
         first += 3 << (2 * levels[q])
     return out
 
 
 @njit(cache=True, nogil=True)
-def _sort_by(idx, m, key, sign, spare):
+def _sort_by(idx, m, key, sign, spare, start):
     """Order ``idx[:m]`` by ``sign * key[idx]``, increasing: exactly (insertion sort) for short
-    lists, else by 512 bins of the keys' range (a counting sort; ``spare``: room for ``m``
-    indices). Any order gives a valid bound (it only chooses which points are paired); a
-    nearly sorted one pairs nearly as the sorted one does."""
+    lists, else by _SORT_BINS bins of the keys' range (a counting sort; ``spare``: room for ``m``
+    indices, ``start``: for _SORT_BINS + 1 counts). Any order gives a valid bound (it only
+    chooses which points are paired); a nearly sorted one pairs nearly as the sorted one does."""
     if m <= 32:
         for q in range(1, m):
             v = idx[q]
@@ -347,7 +453,7 @@ def _sort_by(idx, m, key, sign, spare):
                 r -= 1
             idx[r + 1] = v
         return
-    bins = 512
+    bins = _SORT_BINS
     lo, hi = np.inf, -np.inf
     for q in range(m):
         v = sign * key[idx[q]]
@@ -356,7 +462,7 @@ def _sort_by(idx, m, key, sign, spare):
     if hi <= lo:
         return
     scale = bins / (hi - lo)
-    start = np.zeros(bins + 1, np.int64)
+    start[:] = 0
     for q in range(m):
         start[min(int((sign * key[idx[q]] - lo) * scale), bins - 1) + 1] += 1
     for b in range(bins):
@@ -403,7 +509,7 @@ def _table_term(table, step, row, width, n, budget):
 
 @njit(cache=True, nogil=True)
 def _direct_term(points, radii, active, n_active, u0, u1, u2, width, cos_d, sin_d, delta, proj, low, high,
-                 next_active, spare):
+                 next_active, spare, start):
     """One (side, axis) term evaluated directly: ``(bound over the cube, bound at its centre,
     points kept)``.
 
@@ -443,8 +549,8 @@ def _direct_term(points, radii, active, n_active, u0, u1, u2, width, cos_d, sin_
         if proj[i] > lo_v + width:
             high[n_hi] = i
             n_hi += 1
-    _sort_by(low, n_lo, proj, 1.0, spare)
-    _sort_by(high, n_hi, proj, -1.0, spare)
+    _sort_by(low, n_lo, proj, 1.0, spare, start)
+    _sort_by(high, n_hi, proj, -1.0, spare, start)
     s, s0 = 0.0, 0.0
     for j in range(min(n_lo, n_hi, n // 2)):
         a, b = high[j], low[j]
@@ -468,24 +574,26 @@ def _axis_direction(rot, side, k):
 
 
 @njit(cache=True, nogil=True)
-def _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, proj, low, high, spare):
+def _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, proj, low, high, spare, start, order):
     """The six terms of a cube evaluated directly over the points ``act[depth]``: ``(bound over
     the cube, bound at its centre)`` (the second complete when the first is not above
-    ``limit``); the points its sub-cubes need go to ``act[depth + 1]``."""
+    ``limit``); the points its sub-cubes need go to ``act[depth + 1]``. ``order (6,)``: the
+    terms ``3 side + k`` in the order to evaluate them (the likely largest first: the sooner
+    the sum passes ``limit``, the fewer are evaluated)."""
     cos_d, sin_d = _cos_sin(delta)
     bound, at_centre = 0.0, 0.0
-    for side in range(2):
+    for c in order:
+        side, k = c // 3, c % 3
         points, radii = (ap, ar) if side == 0 else (bp, br)
-        for k in range(3):
-            u0, u1, u2 = _axis_direction(rot, side, k)
-            f, f0, kept = _direct_term(points, radii, act[depth, side, k], n_act[depth, side, k], u0, u1, u2,
-                                       widths[side, k], cos_d, sin_d, delta * (1.0 + 1e-9) + 1e-12, proj, low, high,
-                                       act[depth + 1, side, k], spare)
-            n_act[depth + 1, side, k] = kept
-            bound += f
-            at_centre += f0
-            if bound > limit:
-                return bound, at_centre
+        u0, u1, u2 = _axis_direction(rot, side, k)
+        f, f0, kept = _direct_term(points, radii, act[depth, side, k], n_act[depth, side, k], u0, u1, u2,
+                                   widths[side, k], cos_d, sin_d, delta * (1.0 + 1e-9) + 1e-12, proj, low, high,
+                                   act[depth + 1, side, k], spare, start)
+        n_act[depth + 1, side, k] = kept
+        bound += f
+        at_centre += f0
+        if bound > limit:
+            return bound, at_centre
     return bound, at_centre
 
 
@@ -516,76 +624,115 @@ def _at_rotation(ap, ar, ah, bp, br, bh, rot):
     _read_first(act, n_act, 0, (ap.shape[0], bp.shape[0]), n_max)
     proj, spare = np.empty(n_max), np.empty(n_max, np.int64)
     low, high = np.empty(n_max, np.int64), np.empty(n_max, np.int64)
-    return _direct_bound(ap, ar, bp, br, _widths(ah, bh), rot, 0.0, np.inf, act, n_act, 0, proj, low, high, spare)[1]
+    return _direct_bound(ap, ar, bp, br, _widths(ah, bh), rot, 0.0, np.inf, act, n_act, 0, proj, low, high, spare,
+                         np.empty(_SORT_BINS + 1, np.int64), np.arange(6))[1]
 
 
 @njit(cache=True, nogil=True)
 def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, levels, lazy_levels, start_cubes,
-            min_half, max_cubes, max_direct, direct_from, aligned, subset, stats):
+            grid, lazy_cells, min_half, max_cubes, max_direct, direct_from, aligned, subset, stats):
     """The number of cubes looked at, positive when every cube of the ball ``|r| <= pi`` is
-    ruled out (see the module docstring), negative when the search gave up."""
+    ruled out (see the module docstring), negative when the search gave up. ``grid``:
+    :func:`_grid_rows` (none, ``(0, 6)``: the cells are found from the cubes' centres instead);
+    ``lazy_cells``: :func:`_cell_table` of ``lazy_levels``."""
     n_max = max(ap.shape[0], bp.shape[0])
     widths = _widths(ah, bh)
     counts = (ap.shape[0], bp.shape[0])
-    firsts = np.zeros(len(levels), np.int64)
-    for q in range(1, len(levels)):
-        firsts[q] = firsts[q - 1] + (3 << (2 * levels[q - 1]))
+    firsts = np.zeros(len(levels) + 1, np.int64)  # each table level's first row, and the rows in all
+    grid_firsts = np.zeros(len(levels) + 1, np.int64)  # each depth's first row in `grid`
+    for q in range(len(levels)):
+        firsts[q + 1] = firsts[q] + (3 << (2 * levels[q]))
+        grid_firsts[q + 1] = grid_firsts[q] + start_cubes ** 3 * 8 ** q
+    lazy_firsts = np.zeros(len(lazy_levels), np.int64)  # each lazy level's first row in `lazy_cells`
+    for q in range(1, len(lazy_levels)):
+        lazy_firsts[q] = lazy_firsts[q - 1] + (3 << (2 * lazy_levels[q - 1]))
     act = np.empty((_MAX_DEPTH + 2, 2, 3, n_max), np.int64)  # act[d]: the points a cube at depth d reads
     n_act = np.zeros((_MAX_DEPTH + 2, 2, 3), np.int64)
     proj, low, high = np.empty(n_max), np.empty(n_max, np.int64), np.empty(n_max, np.int64)
-    spare = np.empty(n_max, np.int64)
-    # the lazy levels' rows, per side, built when first read: slot of (side, level, row) in `lazy`
-    slots = Dict.empty(key_type=types.int64, value_type=types.int64)
-    lazy = np.empty((256, a_table.shape[1]))
-    work = (_workspace(ap.shape[0]), _workspace(bp.shape[0]))
+    spare, start = np.empty(n_max, np.int64), np.empty(_SORT_BINS + 1, np.int64)
 
     # `aligned` (R, 3, 3): rotations tried first (those mapping the box axes onto the box axes): one
     # whose own bound is within the threshold cannot be ruled out, so the pair is given up at once
-    _read_first(act, n_act, 0, counts, n_max)
+    # (first over a subset of the points: a bound above the limit there is above it over all)
+    in_turn = np.arange(6)
     for r in range(aligned.shape[0]):
-        at_rotation = _direct_bound(ap, ar, bp, br, widths, aligned[r], 0.0, np.inf, act, n_act, 0, proj, low, high,
-                                    spare)[1]
-        if at_rotation <= limit:
+        for most in (subset, n_max):
+            _read_first(act, n_act, 0, counts, most)
+            bound, at_rotation = _direct_bound(ap, ar, bp, br, widths, aligned[r], 0.0, limit, act, n_act, 0, proj,
+                                               low, high, spare, start, in_turn)
+            if bound > limit:
+                break
+        if bound <= limit and at_rotation <= limit:
             return -1
+
+    # Each term depends on the pair, a table row and a width only, and many cubes read the same
+    # row: every term is computed once (up to past `limit`: "above it" is all a cube asks), at
+    # the table levels in `memo` (row, 3 side + k), at the lazy ones per slot of `lazy`
+    memo = np.full((firsts[len(levels)], 6), -1.0)
+    # the lazy levels' rows, per side, built when first read: slot of (side, level, row) in `lazy`
+    slots = Dict.empty(key_type=types.int64, value_type=types.int64)
+    lazy = np.empty((256, a_table.shape[1]))
+    lazy_memo = np.empty((256, 3))
+    work = (_workspace(ap.shape[0]), _workspace(bp.shape[0]))
 
     cap = start_cubes ** 3 + 8 * (_MAX_DEPTH + 1)
     centres = np.empty((cap, 3))
     halves = np.empty(cap)
     depths = np.empty(cap, np.int64)
+    ids = np.empty(cap, np.int64)  # a cube's row in `grid` (from its depth's first), at the table depths
     top = 0
     h0 = math.pi / start_cubes
     for i in range(start_cubes):
         for j in range(start_cubes):
             for k in range(start_cubes):
-                centres[top, 0] = -math.pi + (2 * i + 1) * h0
-                centres[top, 1] = -math.pi + (2 * j + 1) * h0
-                centres[top, 2] = -math.pi + (2 * k + 1) * h0
+                centres[top, 0], centres[top, 1], centres[top, 2] = _start_centre(i, j, k, h0)
                 halves[top] = h0
                 depths[top] = 0
+                ids[top] = (i * start_cubes + j) * start_cubes + k
                 top += 1
     root3 = math.sqrt(3.0)
+    terms = np.zeros(6)
+    rot = np.empty((3, 3))  # the rotation at the centre of the cube looked at
     looked, direct = 0, 0
     while top > 0:
         top -= 1
-        cx, cy, cz, h, depth = centres[top, 0], centres[top, 1], centres[top, 2], halves[top], depths[top]
+        cx, cy, cz, h, depth, cube = centres[top, 0], centres[top, 1], centres[top, 2], halves[top], depths[top], ids[top]
         if math.sqrt(cx * cx + cy * cy + cz * cz) - root3 * h > math.pi:
             continue  # no rotation needs it: the ball |r| <= pi holds them all
         looked += 1
         stats[depth, 0] += 1
         if looked > max_cubes:
             return -looked
-        rot = _rotation(cx, cy, cz)
         delta = root3 * h
         bound = 0.0
-        for side in range(2):
-            for k in range(3):
-                u0, u1, u2 = _axis_direction(rot, side, k)
-                if depth < len(levels):  # the level made for this depth's cubes
-                    table, step = (a_table, a_step) if side == 0 else (b_table, b_step)
+        terms[:] = 0.0  # each (side, axis)'s table term, where read
+        if depth < len(levels):  # the level made for this depth's cubes, its cells read off the grid
+            if not grid.shape[0]:
+                _set_rotation(rot, cx, cy, cz)
+            for c in range(6):
+                side, k = c // 3, c % 3
+                if grid.shape[0]:
+                    row = firsts[depth] + grid[grid_firsts[depth] + cube, c]
+                else:  # no grid given: the cells of the centre's directions (what the grid holds)
+                    u0, u1, u2 = _axis_direction(rot, side, k)
                     row = firsts[depth] + _cell_of(u0, u1, u2, levels[depth])
-                    bound += _table_term(table, step, row, widths[side, k], counts[side], limit - bound)
-                else:  # a lazy level: the one made for this depth, or the last (valid for smaller cubes)
-                    q = min(depth - len(levels), len(lazy_levels) - 1)
+                term = memo[row, c]
+                if term < 0.0:
+                    table, step = (a_table, a_step) if side == 0 else (b_table, b_step)
+                    term = _table_term(table, step, row, widths[side, k], counts[side], limit)
+                    memo[row, c] = term
+                terms[c] = term
+                bound += term
+                if bound > limit:
+                    break
+            if bound <= limit and depth >= direct_from and grid.shape[0]:
+                _set_rotation(rot, cx, cy, cz)  # (for the direct evaluation)
+        else:  # a lazy level: the one made for this depth, or the last (valid for smaller cubes)
+            _set_rotation(rot, cx, cy, cz)
+            q = min(depth - len(levels), len(lazy_levels) - 1)
+            for side in range(2):
+                for k in range(3):
+                    u0, u1, u2 = _axis_direction(rot, side, k)
                     row = _cell_of(u0, u1, u2, lazy_levels[q])
                     key = ((side * 16 + q) << 40) | row
                     if key in slots:
@@ -596,14 +743,23 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                             grown = np.empty((2 * slot, lazy.shape[1]))
                             grown[:slot] = lazy
                             lazy = grown
-                        _table_row(ap if side == 0 else bp, lazy_levels[q], row,
+                            grown_memo = np.empty((2 * slot, 3))
+                            grown_memo[:slot] = lazy_memo
+                            lazy_memo = grown_memo
+                        _table_row(ap if side == 0 else bp, lazy_cells[lazy_firsts[q] + row],
                                    _level_delta(len(levels) + q, start_cubes), work[side], lazy[slot])
+                        lazy_memo[slot] = -1.0
                         slots[key] = slot
-                    bound += _table_term(lazy, 1.0, slot, widths[side, k], counts[side], limit - bound)
+                    term = lazy_memo[slot, k]
+                    if term < 0.0:
+                        term = _table_term(lazy, 1.0, slot, widths[side, k], counts[side], limit)
+                        lazy_memo[slot, k] = term
+                    terms[3 * side + k] = term
+                    bound += term
+                    if bound > limit:
+                        break
                 if bound > limit:
                     break
-            if bound > limit:
-                break
         if bound > limit:
             stats[depth, 1] += 1
             continue
@@ -618,7 +774,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                 if depth == direct_from:
                     _read_first(act, n_act, depth, counts, subset if p + 1 < passes else n_max)
                 bound, at_centre = _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, proj,
-                                                 low, high, spare)
+                                                 low, high, spare, start, np.argsort(-terms))
                 if bound > limit:
                     break
             if bound > limit:
@@ -629,10 +785,9 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
         if h < min_half or depth + 1 > _MAX_DEPTH:
             return -looked  # too fine to go on
         for d in range(8):
-            centres[top, 0] = cx + (0.5 if d & 1 else -0.5) * h
-            centres[top, 1] = cy + (0.5 if d & 2 else -0.5) * h
-            centres[top, 2] = cz + (0.5 if d & 4 else -0.5) * h
+            centres[top, 0], centres[top, 1], centres[top, 2] = _child_centre(cx, cy, cz, h, d)
             halves[top] = 0.5 * h
             depths[top] = depth + 1
+            ids[top] = 8 * cube + d if depth + 1 < len(levels) else -1
             top += 1
     return looked

@@ -170,7 +170,8 @@ class TaskGeometry:
         if "index" not in self._derived:
             from aw_eval.kernels import TaskIndex
 
-            self._derived["index"] = TaskIndex(self.target_parts(), self.clouds, self.target_poses, self.divisor)
+            self._derived["index"] = TaskIndex(self.target_parts(), self.clouds, self.target_poses, self.divisor,
+                                               self.target_rotations())
         return self._derived["index"]
 
     def checkpoint(self, poses) -> "Checkpoint":

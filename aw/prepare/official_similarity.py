@@ -7,6 +7,12 @@ Each part's cloud is put in its mesh's PCA frame and divided by the scale diviso
 proper PCA axis mappings; an edge joins them when the best squared Chamfer distance is at most
 ``1e-4``; the groups are the connected components, ordered by their lowest index.
 
+The official ICP is the protocol's iteration (both directions' nearest neighbours, one proper
+Kabsch fit of all pairs, at most 100 fits, stop when the objective improves by less than
+``1e-9``, keep the best), so it runs here in the evaluator's compiled kernel
+(:class:`aw_eval.kernels.ICPProblem`, exact neighbours) from the official starts: the same
+numbers up to summation order (tested against a NumPy transcription of the official code).
+
 The groups are found without registering every pair (:func:`aw.pair_search.registration_groups`):
 a pair whose proven Chamfer lower bound (:mod:`aw.shape_bounds`, then :mod:`aw.rotation_bound`)
 exceeds the threshold cannot be an edge, and a pair already connected cannot change the
@@ -19,30 +25,23 @@ from __future__ import annotations
 from itertools import permutations, product
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from aw.pair_search import registration_groups
 from aw.prepare.official_frame import pca_frame
+from aw_eval.kernels import ICPProblem, build_tree, graph_for
 
-__all__ = ["THRESHOLD", "MAX_ITERATIONS", "IMPROVEMENT_TOLERANCE", "register", "geometry_groups", "geometry_groups_all_pairs"]
+__all__ = ["THRESHOLD", "MAX_ITERATIONS", "IMPROVEMENT_TOLERANCE", "official_starts", "register", "search_structures",
+           "geometry_groups", "geometry_groups_all_pairs"]
 
 THRESHOLD = 1e-4
 MAX_ITERATIONS = 100
 IMPROVEMENT_TOLERANCE = 1e-9
 
 
-def _kabsch(source: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    a, b = source.mean(0), target.mean(0)
-    u, _, vt = np.linalg.svd((source - a).T @ (target - b))
-    flip = np.eye(3)
-    flip[-1, -1] = np.linalg.det(vt.T @ u.T)
-    rotation = vt.T @ flip @ u.T
-    return rotation, b - rotation @ a
-
-
-def register(moving: np.ndarray, fixed: np.ndarray, enough: float = -np.inf) -> float:
-    """Smallest squared Chamfer distance of ``moving (n, 3)`` onto ``fixed (n, 3)`` met by ICP from
-    the 24 PCA starts. ``enough``: return as soon as a start reaches it (an edge is then decided)."""
+def official_starts(moving: np.ndarray, fixed: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The 24 starts ``(R (3, 3), t (3,))`` of ``moving (n, 3)`` onto ``fixed (m, 3)``: each proper
+    mapping of ``moving``'s PCA axes onto ``fixed``'s (axis permutations, then signs), centre onto
+    centre."""
     mc, mb = pca_frame(moving)
     fc, fb = pca_frame(fixed)
     starts = []
@@ -52,28 +51,31 @@ def register(moving: np.ndarray, fixed: np.ndarray, enough: float = -np.inf) -> 
             if np.linalg.det(axes) > 0:
                 r = fb @ axes @ mb.T
                 starts.append((r, fc - r @ mc))
-    fixed_tree, moving_tree = cKDTree(fixed), cKDTree(moving)
+    return starts
 
-    def cost(r, t):
-        ahead, fwd = fixed_tree.query(moving @ r.T + t)
-        back, bwd = moving_tree.query((fixed - t) @ r)
-        return float(np.mean(ahead * ahead) + np.mean(back * back)), fwd, bwd
 
+def register(moving: np.ndarray, fixed: np.ndarray, enough: float = -np.inf, structures: tuple | None = None) -> float:
+    """Smallest squared Chamfer distance of ``moving (n, 3)`` onto ``fixed (n, 3)`` met by ICP from
+    the 24 PCA starts. ``enough``: return as soon as a registration reaches it (an edge is then
+    decided). ``structures``: ``(tree, graph)`` of ``moving`` and of ``fixed``
+    (:func:`search_structures`), built here when not given."""
+    (tree_m, graph_m), (tree_f, graph_f) = structures or (search_structures(moving), search_structures(fixed))
+    problem = ICPProblem(moving, fixed, tree_t=tree_f, tree_p=tree_m, graph_t=graph_f, graph_p=graph_m)
+    stop = None if enough == -np.inf else float(enough)
     best = np.inf
-    for r, t in starts:
-        value, fwd, bwd = cost(r, t)
-        lowest = value
-        for _ in range(MAX_ITERATIONS):
-            r, t = _kabsch(np.concatenate((moving, moving[bwd])), np.concatenate((fixed[fwd], fixed)))
-            updated, fwd, bwd = cost(r, t)
-            lowest = min(lowest, updated)
-            gain, value = value - updated, updated
-            if gain < IMPROVEMENT_TOLERANCE:
-                break
-        best = min(best, lowest)
+    for r, t in official_starts(moving, fixed):
+        best = min(best, problem.run(r, t, MAX_ITERATIONS, IMPROVEMENT_TOLERANCE, stop_at=stop).objective)
         if best <= enough:
             break
-    return best
+    return float(best)
+
+
+def search_structures(cloud: np.ndarray) -> tuple:
+    """``(tree, graph)``: the exact nearest-neighbour structures :func:`register` searches
+    ``cloud (n, 3)`` with (a KD-tree and its Delaunay graph)."""
+    cloud = np.ascontiguousarray(cloud, dtype=np.float64)
+    tree = build_tree(cloud)
+    return tree, graph_for(tree)
 
 
 def _part_clouds(points: np.ndarray, vertices: list[np.ndarray], divisor: float) -> list[np.ndarray]:
@@ -93,9 +95,15 @@ def geometry_groups(part_ids: list[str], points: np.ndarray, vertices: list[np.n
     registered at once, in threads (default :func:`aw.pair_search.local_workers`; the groups do
     not depend on it)."""
     clouds = _part_clouds(points, vertices, divisor)
+    structures: dict[int, tuple] = {}
+
+    def search(i: int) -> tuple:  # built once per part, only for parts that are registered
+        if i not in structures:  # two threads may both build one: the same, and the last kept
+            structures[i] = search_structures(clouds[i])
+        return structures[i]
 
     def is_edge(j: int, i: int) -> bool:  # the official order: the later part onto the earlier
-        return register(clouds[i], clouds[j], enough=threshold) <= threshold
+        return register(clouds[i], clouds[j], enough=threshold, structures=(search(i), search(j))) <= threshold
 
     found = registration_groups(clouds, threshold, is_edge, what=f"geometry groups of {len(part_ids)} parts",
                                 show_progress=show_progress, workers=workers)

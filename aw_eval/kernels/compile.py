@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from aw.rotation_bound import SearchLimits, box_frame, search
 from aw_eval.kernels.fast import coarse_icp
 from aw_eval.kernels.fps import fps_batch
 from aw_eval.kernels.icp import CertifiedNN, ICPProblem, build_tree, graph_for, nearest_positions
@@ -17,8 +16,9 @@ _COMPILED = False
 
 def compile_kernels() -> None:
     """Run every kernel of the evaluator on tiny inputs, so that scoring processes start warm
-    (numba caches compiled kernels beside their modules). The install step runs it once; later
-    calls in the same process return at once."""
+    (numba caches compiled kernels beside their modules). The install step runs it once, with
+    :func:`aw.rotation_bound.compile_search` (the equivalence search's bound, which lives in
+    ``aw``, above these kernels); later calls in the same process return at once."""
     global _COMPILED
     if _COMPILED:
         return
@@ -35,9 +35,8 @@ def compile_kernels() -> None:
     trees = [build_tree(c) for c in parts]
     clouds = build_part_clouds([(tree, graph_for(tree)) for tree in trees])
     poses = np.array([[0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], [0.0, 0.2, 0.0, 0.0, 1.0, 0.0, 0.0]])
-    ICPProblem.for_assembly(parts, poses, 1.0, clouds, b, tree_t=tb, graph_t=graph_for(tb)).run(np.eye(3), np.zeros(3), 3, 1e-9)
+    turns = np.array([np.eye(3), np.diag([1.0, -1.0, -1.0])])  # the poses' rotations: identity, half turn about x
+    ICPProblem.for_assembly(parts, poses, 1.0, clouds, b, turns, tree_t=tb, graph_t=graph_for(tb)).run(np.eye(3), np.zeros(3), 3, 1e-9)
     coarse_icp(a.reshape(2, 20, 3), b[:20].reshape(2, 10, 3), np.eye(3)[None], np.zeros((1, 3)), 8, 3, 1e-9)
     fps_batch(rng.normal(size=(2, 50, 3)), 10)
-    # the equivalence search's rotation bound (aw.rotation_bound), also used by aw-prepare
-    search(box_frame(a), box_frame(b), 1e-4, SearchLimits(aligned_first=False, max_cubes=50, direct_from=0))
     _COMPILED = True

@@ -298,12 +298,12 @@ class ICPProblem:
 
     @classmethod
     def for_assembly(cls, pred_parts: np.ndarray, poses: np.ndarray, divisor: float, clouds: PartClouds,
-                     t_pts: np.ndarray, tree_t: KDTree | None = None, graph_t: DelaunayGraph | None = None,
-                     rotations: np.ndarray | None = None) -> "ICPProblem":
-        """The prediction ``pred_parts (P, n, 3)`` of the poses ``(P, 7)`` (normalized by
-        ``divisor``), searched by walks in its parts' baked clouds ``clouds`` (built once per
-        task, :func:`aw_eval.kernels.partwalk.build_part_clouds`) instead of a tree of its own.
-        ``rotations``: the poses' rotation matrices ``(P, 3, 3)`` where the caller has them."""
+                     t_pts: np.ndarray, rotations: np.ndarray, tree_t: KDTree | None = None,
+                     graph_t: DelaunayGraph | None = None) -> "ICPProblem":
+        """The prediction ``pred_parts (P, n, 3)`` of the poses ``(P, 7)`` with rotation matrices
+        ``rotations (P, 3, 3)`` (normalized by ``divisor``), searched by walks in its parts' baked
+        clouds ``clouds`` (built once per task, :func:`aw_eval.kernels.partwalk.build_part_clouds`)
+        instead of a tree of its own."""
         prob = cls.__new__(cls)
         prob.tree_t = build_tree(t_pts) if tree_t is None else tree_t
         prob.tree_p = _no_tree()

@@ -29,16 +29,17 @@ _UNBUILT = object()
 class TaskIndex:
     """Search structures of one task: ``target_parts (P, n, 3)`` normalized target points,
     ``clouds (P, n, 3)`` the parts' samples in their baked frames (unnormalized), and the target
-    ``poses (P, 7)`` and ``divisor`` with ``target_parts = (R clouds + t) / divisor`` (needed by
-    :meth:`part_cd`)."""
+    ``poses (P, 7)``, their ``rotations (P, 3, 3)`` and ``divisor`` with ``target_parts = (R
+    clouds + t) / divisor`` (needed by :meth:`part_cd`)."""
 
     def __init__(self, target_parts: np.ndarray, clouds: np.ndarray, poses: np.ndarray | None = None,
-                 divisor: float | None = None):
+                 divisor: float | None = None, rotations: np.ndarray | None = None):
         self.target_parts = target_parts
         self.target = np.ascontiguousarray(target_parts.reshape(-1, 3))  # (P n, 3)
         self.tree_t = build_tree(self.target)
         self._clouds = clouds
         self._poses = None if poses is None else np.asarray(poses, dtype=np.float64)
+        self._rotations = rotations
         self._divisor = divisor
         self._graph_t = _UNBUILT
         self._parts_built = False
@@ -61,7 +62,7 @@ class TaskIndex:
         self.baked = [(tree, graph_for(tree, c)) for tree, c in ((build_tree(c), c) for c in self._clouds)]
         self.part_clouds = build_part_clouds(self.baked)  # None: a part has no graph
         # normalized target -> baked frames (c = A y + b), for part_cd's forward searches
-        self.target_maps = None if self._poses is None else part_maps(self._poses, self._divisor)
+        self.target_maps = None if self._poses is None else part_maps(self._poses, self._divisor, self._rotations)
         self._parts_built = True
 
     def assembly_problem(self, poses: np.ndarray, rotations: np.ndarray, pred_parts: np.ndarray,
@@ -72,8 +73,8 @@ class TaskIndex:
         the prediction gets its own tree and graph (same results, slower)."""
         self._build_parts()
         if self.part_clouds is not None:
-            return ICPProblem.for_assembly(pred_parts, poses, divisor, self.part_clouds, self.target, tree_t=self.tree_t,
-                                           graph_t=self.graph_t, rotations=rotations)
+            return ICPProblem.for_assembly(pred_parts, poses, divisor, self.part_clouds, self.target, rotations,
+                                           tree_t=self.tree_t, graph_t=self.graph_t)
         return self.own_problem(pred_parts)[0]
 
     def own_problem(self, pred_parts: np.ndarray) -> tuple[ICPProblem, bool]:

@@ -81,14 +81,12 @@ def no_part_clouds() -> PartClouds:
     return PartClouds(z3, zi, zi, zi, z3, z3, (zi, zi, np.zeros((3, 0)), np.zeros(0)))
 
 
-def part_maps(poses: np.ndarray, divisor: float, rotations: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def part_maps(poses: np.ndarray, divisor: float, rotations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Maps of normalized prediction coordinates ``x`` into each part's baked frame,
     ``c = A_q x + b_q``: ``A (P, 3, 3) = divisor R_q^T``, ``b (P, 3) = -R_q^T t_q`` for the poses
-    ``(P, 7)`` (the prediction is ``(R_q c + t_q) / divisor``); ``rotations``: the poses'
-    ``R_q (P, 3, 3)`` where the caller has them."""
-    from aw.pose import quat_to_matrix
-
-    rt = np.swapaxes(quat_to_matrix(poses[:, 3:]) if rotations is None else rotations, 1, 2)
+    ``(P, 7)`` (the prediction is ``(R_q c + t_q) / divisor``) and their rotations ``R_q (P, 3,
+    3)`` (from the caller, which owns the poses' convention)."""
+    rt = np.swapaxes(rotations, 1, 2)
     return np.ascontiguousarray(divisor * rt), np.ascontiguousarray(-(rt @ poses[:, :3, None])[:, :, 0])
 
 

@@ -15,7 +15,8 @@ from scipy.spatial.transform import Rotation
 from aw.pose import cube_rotations
 from aw.prepare.official_similarity import register
 from aw.rotation_bound import (LAZY_LEVELS, START_CUBES, TABLE_LEVELS, TABLE_PAIRS, SearchLimits, _cell_geometry,
-                               _cell_of, _level_delta, _tables, at_rotation, box_frame, rules_out, search)
+                               _cell_of, _cell_table, _fixed, _level_delta, _rotation, _tables, at_rotation, box_frame,
+                               rules_out, search)
 
 
 def _surface(mesh: trimesh.Trimesh, n: int, seed: int) -> np.ndarray:
@@ -52,6 +53,51 @@ def _limits() -> list[SearchLimits]:
     return [SearchLimits(), SearchLimits(aligned_first=False, max_cubes=20000),
             SearchLimits(aligned_first=False, direct_from=99, max_cubes=20000),
             SearchLimits(aligned_first=False, direct_from=0, max_cubes=20000)]
+
+
+def test_the_grid_gives_each_cube_the_cells_of_its_centres_directions():
+    """The first two depths' cubes read their table cells off a grid computed once: each row is
+    the cell of the directions ``R^T e_k`` (side 0) and ``R e_k`` (side 1) of the rotation at the
+    cube's centre, sub-cube ``d`` of cube ``c`` at row ``8 c + d`` of the next depth."""
+    grid, cells = _fixed()
+    h0 = np.pi / START_CUBES
+    first = START_CUBES ** 3
+    assert grid.shape == (first * 9, 6)
+    rng = np.random.default_rng(5)
+    for c in rng.choice(first, 40, replace=False):
+        i, j, k = c // START_CUBES ** 2, (c // START_CUBES) % START_CUBES, c % START_CUBES
+        centre = -np.pi + (2 * np.array([i, j, k]) + 1) * h0
+        for row, where, level in [(c, centre, TABLE_LEVELS[0])] + [
+                (first + 8 * c + d, centre + np.where([d & 1, d & 2, d & 4], 0.5, -0.5) * h0, TABLE_LEVELS[1])
+                for d in range(8)]:
+            rot = _rotation(*where)
+            want = [_cell_of(*rot[axis], level) for axis in range(3)] + [_cell_of(*rot[:, axis], level) for axis in range(3)]
+            assert grid[row].tolist() == want
+    lazy = sum(3 << (2 * level) for level in LAZY_LEVELS)
+    assert cells.shape == (lazy, 4)
+    assert np.array_equal(cells[:5], [_cell_geometry(row, LAZY_LEVELS[0]) for row in range(5)])
+    assert np.array_equal(_cell_table(np.array([2], np.int64))[-1], _cell_geometry((3 << 4) - 1, 2))
+
+
+def test_the_search_reads_the_grid_as_the_cubes_centres_give_it(monkeypatch):
+    """Every way of searching looks at the same cubes and rules out the same pairs whether the
+    first two depths read their cells off the grid or find them from each cube's centre."""
+    import aw.rotation_bound as rb
+
+    frames = [box_frame(_surface(m, 400, 3 + k)) for k, m in enumerate(_shapes())]
+    pairs = [(0, 1), (0, 2), (3, 0), (5, 9), (7, 8), (6, 3)]
+    shape = (rb._MAX_DEPTH + 2, 3)
+    found = {}
+    for name, grid in (("grid", None), ("centres", np.zeros((0, 6), np.int32))):
+        if grid is not None:
+            monkeypatch.setattr(rb, "_fixed", lambda grid=grid, cells=_fixed()[1]: (grid, cells))
+        found[name] = []
+        for i, j in pairs:
+            for limits in _limits()[1::2]:  # the cubes searched, by the tables and directly
+                stats = np.zeros(shape, np.int64)
+                found[name].append((search(frames[i], frames[j], 1e-4, limits, stats), stats.tolist()))
+    assert found["grid"] == found["centres"]
+    assert any(r[0][0] for r in found["grid"]) and not all(r[0][0] for r in found["grid"])
 
 
 @pytest.mark.parametrize("level", range(0, 8))
@@ -228,3 +274,33 @@ def test_the_search_stops_short_of_the_bounds_own_minimum(pair):
     for limits in _limits():
         assert not rules_out(fa, fb, lowest * (1 + 1e-6), limits), limits
     assert rules_out(fa, fb, lowest * 0.5, SearchLimits(max_cubes=100000))
+
+
+def test_threads_that_search_first_all_get_an_answer():
+    """The fixed grid is built on first use: a fresh process whose first searches start in
+    several threads a few milliseconds apart (as the equivalence search starts them) answers
+    every one (a thread that came while the first one built it once got a KeyError)."""
+    import subprocess
+    import sys
+
+    script = """
+import threading, time, numpy as np
+from aw.rotation_bound import box_frame, rules_out
+rng = np.random.default_rng(0)
+frames = [box_frame(rng.normal(size=(300, 3)) * s) for s in ([0.3, 0.2, 0.1], [0.31, 0.2, 0.1])]
+barrier, answers, errors = threading.Barrier(12), [], []
+def one(k):
+    barrier.wait()
+    time.sleep(0.002 * k)  # one after the other, while the first ones build the grid
+    try:
+        answers.append(rules_out(frames[0], frames[1], 1e-4))
+    except Exception as exc:
+        errors.append(repr(exc))
+threads = [threading.Thread(target=one, args=(k,)) for k in range(12)]
+[t.start() for t in threads]
+[t.join() for t in threads]
+print(len(answers), errors)
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split("\n")[-2] == "12 []"

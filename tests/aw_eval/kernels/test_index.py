@@ -22,7 +22,7 @@ def test_part_cd_is_the_chamfer_distance_of_the_moved_parts():
     """``TaskIndex.part_cd`` (forward walks in the target part, backward walks in the baked cloud)
     equals the plain Chamfer distance of a moved predicted part and a target part."""
     geom, _ = make_points_geometry(3, 40, seed=1)
-    index = TaskIndex(geom.target_parts(), geom.clouds, geom.target_poses, geom.divisor)
+    index = TaskIndex(geom.target_parts(), geom.clouds, geom.target_poses, geom.divisor, geom.target_rotations())
     rng = np.random.default_rng(3)
     poses = np.array(geom.target_poses)
     poses[:, :3] += rng.normal(scale=0.05, size=(3, 3))

@@ -7,6 +7,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import aw_eval
+from aw.pose import quat_to_matrix
 from aw_eval.registration import checkpoint_starts
 from aw_eval.fixtures import make_points_geometry, trajectory_checkpoints
 from aw_eval.kernels.icp import ICPProblem, build_tree, graph_for
@@ -35,7 +36,7 @@ def test_nearest_in_the_union_along_a_moving_path(n_parts):
     rng = np.random.default_rng(n_parts)
     clouds, poses, posed, divisor = _assembly(rng, n_parts)
     union = posed[clouds.part_of, clouds.rows]  # rows of the clouds' order
-    a, b = part_maps(poses, divisor)
+    a, b = part_maps(poses, divisor, quat_to_matrix(poses[:, 3:]))
     x = np.concatenate([rng.normal(size=(200, 3)) * 0.4, rng.normal(size=(100, 3)) * 3.0, union[::7] + 1e-3])
     cand, xref, slack = np.zeros(len(x), np.int64), np.zeros((len(x), 3)), np.zeros((len(x), 2))
     warm, stats = np.zeros(n_parts, np.int64), np.zeros(2, np.int64)
@@ -58,7 +59,7 @@ def test_certificate_state_bounds_the_union():
     rng = np.random.default_rng(7)
     clouds, poses, posed, divisor = _assembly(rng, 4)
     union = posed[clouds.part_of, clouds.rows]
-    a, b = part_maps(poses, divisor)
+    a, b = part_maps(poses, divisor, quat_to_matrix(poses[:, 3:]))
     x = np.ascontiguousarray(rng.normal(size=(300, 3)))
     cand, xref, slack = np.zeros(len(x), np.int64), np.zeros((len(x), 3)), np.zeros((len(x), 2))
     parts_pass(tuple(clouds), a, b, divisor, x, cand, xref, slack, True, np.zeros(4, np.int64), np.zeros(2, np.int64))
