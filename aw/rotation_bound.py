@@ -180,8 +180,8 @@ def at_rotation(a: BoxFrame, b: BoxFrame, rotation: np.ndarray) -> float:
 
 
 def compile_search() -> None:
-    """Run the search's kernels on tiny inputs (numba caches them beside this module): the
-    install step and each scoring thread call it, so that no search waits for a compile."""
+    """Run the search's kernels on tiny inputs (numba caches them beside this module), so that
+    no search waits for a compile (:func:`aw_eval.kernels.compile_kernels` calls it)."""
     rng = np.random.default_rng(0)
     a, b = box_frame(rng.normal(size=(40, 3))), box_frame(rng.normal(size=(30, 3)))
     search(a, b, 1e-4, SearchLimits(aligned_first=False, max_cubes=50, direct_from=0))

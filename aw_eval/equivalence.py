@@ -7,7 +7,7 @@ the pairs that the proven lower bounds of :mod:`aw.shape_bounds` and :mod:`aw.ro
 not rule out, likely edges first, and skips a pair already connected through other edges; the components are those of registering
 every pair (:func:`equivalence_groups_all_pairs`, kept for the tests). Each part's KD-tree and
 Delaunay graph are built once, for the parts that take part in a registration (the Qhull run
-shared with the task's index, :func:`aw_eval.kernels.delaunay.cloud_neighbours`), candidates are
+shared with the task's index, :func:`aw.kernels.delaunay.cloud_neighbours`), candidates are
 registered in threads (:func:`aw.pair_search.local_workers`), and a registration stops as soon
 as any start reaches ``equiv_cd`` (the edge is then decided).
 """

@@ -5,7 +5,7 @@ start of the protocol at full resolution, timing the ICP runs (best of ``--repea
 what is built for the checkpoint, and counts ICP iterations, query evaluations (points x
 evaluations, both directions) and searches (walks or tree searches; the rest were certified).
 Searches (``--searches``): ``parts`` (what ``exact`` does: the backward direction walks the
-parts' baked clouds, built once per task, ``aw_eval.kernels.partwalk``), ``graph`` (the prediction's
+parts' baked clouds, built once per task, ``aw.kernels.partwalk``), ``graph`` (the prediction's
 own Delaunay graph, built per checkpoint: the previous round), ``kd`` (KD-trees alone: the round
 before). Objectives are compared: ``kd`` and ``graph`` bitwise, ``parts`` to 1e-12 relative (it
 sums in another point order). The cost outside the searches is measured by 200 more

@@ -52,7 +52,7 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   touch "$stamp"
 fi
 # numba caches compiled kernels beside their modules; compile them once here, not in every process
-.venv/bin/python -W ignore -c "from aw_eval.kernels import compile_kernels; from aw.rotation_bound import compile_search; compile_kernels(); compile_search()" >>.venv/install.log 2>&1 || {
+.venv/bin/python -W ignore -c "from aw_eval.kernels import compile_kernels; compile_kernels()" >>.venv/install.log 2>&1 || {
   tail -n 30 .venv/install.log >&2
   echo "[install] ERROR: compiling the evaluator's kernels (numba) failed; see .venv/install.log" >&2; exit 1; }
 echo "[install] ready: $(.venv/bin/python --version), .venv/bin/aw-*"

@@ -10,7 +10,7 @@ proper PCA axis mappings; an edge joins them when the best squared Chamfer dista
 The official ICP is the protocol's iteration (both directions' nearest neighbours, one proper
 Kabsch fit of all pairs, at most 100 fits, stop when the objective improves by less than
 ``1e-9``, keep the best), so it runs here in the evaluator's compiled kernel
-(:class:`aw_eval.kernels.ICPProblem`, exact neighbours) from the official starts: the same
+(:class:`aw.kernels.icp.ICPProblem`, exact neighbours) from the official starts: the same
 numbers up to summation order (tested against a NumPy transcription of the official code).
 
 The groups are found without registering every pair (:func:`aw.pair_search.registration_groups`):
@@ -28,7 +28,7 @@ import numpy as np
 
 from aw.pair_search import registration_groups
 from aw.prepare.official_frame import pca_frame
-from aw_eval.kernels import ICPProblem, build_tree, graph_for
+from aw.kernels.icp import ICPProblem, build_tree, graph_for
 
 __all__ = ["THRESHOLD", "MAX_ITERATIONS", "IMPROVEMENT_TOLERANCE", "official_starts", "register", "search_structures",
            "geometry_groups", "geometry_groups_all_pairs"]

@@ -11,18 +11,19 @@ The protocol asks two things of it, and only through the names exported here:
   exact certified neighbours; :meth:`TaskIndex.assembly_problem` builds one for a checkpoint)
   and :func:`coarse_to_fine` (``fast`` mode's pruning of starts).
 
-Inside: compiled KD-trees (``kdtree``), Delaunay walks with Voronoi certificates
-(``delaunay``), walks through a posed assembly's parts (``partwalk``), the fused ICP kernel
-(``icp``) and the coarse stage (``fast``); and their XLA counterpart for accelerators
+Beneath it, in :mod:`aw.kernels` (shared with the official preparation's geometry groups):
+compiled KD-trees (``kdtree``), Delaunay walks with Voronoi certificates (``delaunay``), walks
+through a posed assembly's parts (``partwalk``) and the fused ICP kernel (``icp``). Here: the
+coarse stage (``fast``), the task's index (``index``); and their XLA counterpart for accelerators
 (``jax_icp``: the same ICP batched over checkpoints x starts, its neighbours from fixed-shape
 per-query leaf-box certificates of ``leafbox``, exact). Nothing here decides what is scored: every result is
 the protocol's (``fast`` excepted, whose agreement is measured).
 """
 
+from aw.kernels.icp import ICPProblem, ICPResult, build_tree, graph_for
 from aw_eval.kernels.compile import compile_kernels
 from aw_eval.kernels.fast import FastSettings, coarse_to_fine, fast_settings, same_basin
 from aw_eval.kernels.fps import fps_batch
-from aw_eval.kernels.icp import ICPProblem, ICPResult, build_tree, graph_for
 from aw_eval.kernels.index import TaskIndex, mean_squared_norm
 from aw_eval.kernels.jax_icp import accelerator_present, icp_batch, part_cd_batch
 

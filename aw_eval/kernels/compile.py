@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from aw.kernels.icp import CertifiedNN, ICPProblem, build_tree, graph_for, nearest_positions
+from aw.kernels.partwalk import build_part_clouds
+from aw.rotation_bound import compile_search
 from aw_eval.kernels.fast import coarse_icp
 from aw_eval.kernels.fps import fps_batch
-from aw_eval.kernels.icp import CertifiedNN, ICPProblem, build_tree, graph_for, nearest_positions
-from aw_eval.kernels.partwalk import build_part_clouds
 
 __all__ = ["compile_kernels"]
 
@@ -16,9 +17,9 @@ _COMPILED = False
 
 def compile_kernels() -> None:
     """Run every kernel of the evaluator on tiny inputs, so that scoring processes start warm
-    (numba caches compiled kernels beside their modules). The install step runs it once, with
-    :func:`aw.rotation_bound.compile_search` (the equivalence search's bound, which lives in
-    ``aw``, above these kernels); later calls in the same process return at once."""
+    (numba caches compiled kernels beside their modules), the equivalence search's rotation
+    bound included. The install step runs it once; later calls in the same process return at
+    once."""
     global _COMPILED
     if _COMPILED:
         return
@@ -39,4 +40,5 @@ def compile_kernels() -> None:
     ICPProblem.for_assembly(parts, poses, 1.0, clouds, b, turns, tree_t=tb, graph_t=graph_for(tb)).run(np.eye(3), np.zeros(3), 3, 1e-9)
     coarse_icp(a.reshape(2, 20, 3), b[:20].reshape(2, 10, 3), np.eye(3)[None], np.zeros((1, 3)), 8, 3, 1e-9)
     fps_batch(rng.normal(size=(2, 50, 3)), 10)
+    compile_search()
     _COMPILED = True

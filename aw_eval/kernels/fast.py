@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from aw_eval.kernels.icp import ICPProblem, ICPResult, kabsch_pairs
+from aw.kernels.icp import ICPProblem, ICPResult, kabsch_pairs
 from aw_eval.kernels.index import TaskIndex
 
 __all__ = ["FastSettings", "FAST", "fast_settings", "coarse_to_fine", "coarse_icp", "same_basin"]

@@ -4,7 +4,7 @@ which the protocol asks for nearest neighbours and ICP problems.
 ``TaskIndex`` holds the normalized target (``(P, n, 3)`` parts, ``(P n, 3)`` joined) with the
 joined target's KD-tree, and every part's cloud in its baked frame (which a checkpoint only moves
 rigidly) with its KD-tree and Delaunay graph, joined for walks through a posed assembly
-(:mod:`aw_eval.kernels.partwalk`). A part-to-part distance walks the baked graphs both ways (a
+(:mod:`aw.kernels.partwalk`). A part-to-part distance walks the baked graphs both ways (a
 target part is its baked cloud posed), so no target part has structures of its own, and a
 part's Qhull run is shared with the equivalence search. The joined target's Delaunay graph
 (``graph_t``, one Qhull run over all the points) is built on the first checkpoint's ICP: a
@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from aw_eval.kernels.icp import ICPProblem, graph_for, nearest_positions
-from aw_eval.kernels.kdtree import build_tree
+from aw.kernels.icp import ICPProblem, graph_for, nearest_positions
+from aw.kernels.kdtree import build_tree
+from aw.kernels.partwalk import build_part_clouds, part_maps
 from aw_eval.kernels.leafbox import build_leaf_boxes, build_part_leaves
-from aw_eval.kernels.partwalk import build_part_clouds, part_maps
 
 __all__ = ["TaskIndex", "mean_squared_norm"]
 

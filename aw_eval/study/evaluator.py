@@ -44,13 +44,10 @@ def evaluator_version() -> str:
 
 def prepare_thread() -> None:
     """Per-thread setup before scoring in this thread: loads the compiled kernels (numba's
-    on-disk cache) up front, the equivalence search's bound included, so the first
-    checkpoint's timing is not a compile."""
-    from aw.rotation_bound import compile_search
+    on-disk cache) up front, so the first checkpoint's timing is not a compile."""
     from aw_eval.kernels import compile_kernels
 
     compile_kernels()
-    compile_search()
 
 
 def protocol_settings(overrides=()):

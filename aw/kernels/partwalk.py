@@ -4,7 +4,7 @@ Why: a checkpoint's prediction is the union of its parts' clouds, each moved rig
 baked frame. The backward half of ICP (target points into the prediction) needs the union's
 nearest neighbours; a KD-tree of the union costs a build per checkpoint and about 1 us per
 search far from the cloud, a Delaunay graph of the union a Qhull run per checkpoint. The parts'
-own clouds never change within a task, so their graphs are built once (:mod:`aw_eval.kernels.delaunay`)
+own clouds never change within a task, so their graphs are built once (:mod:`aw.kernels.delaunay`)
 and a query is walked in each part's graph in that part's baked frame (``c = A_q x + b_q``):
 
 - the union's nearest is the nearest of the per-part nearests; a part whose bounding box (baked
@@ -12,18 +12,18 @@ and a query is walked in each part's graph in that part's baked frame (``c = A_q
 - the parts' graphs are stored as one disjoint graph (no edge joins two parts), so a walk started
   in a part stays in it; each part keeps the last answer of the previous query as its warm start
   (queries come in a spatially coherent order);
-- the certificate for the next query of a moving point (see :mod:`aw_eval.kernels.icp`): the winner
+- the certificate for the next query of a moving point (see :mod:`aw.kernels.icp`): the winner
   stays nearest while the query moves less than ``min(its Voronoi margin in its part, (other -
   nearest) / 2)`` (every other part's distance shrinks by at most the motion while the
   winner's grows by at most as much). Queries are certified first, then those that failed are
-  searched, in order (:func:`aw_eval.kernels.delaunay.to_search`).
+  searched, in order (:func:`aw.kernels.delaunay.to_search`).
 
 Exact (up to exact distance ties), like the walks it is made of. Distances are compared in
 baked units (normalized distance times the divisor; rigid maps keep the order).
 
 Arrays: ``points (N, 3)`` baked coordinates of all parts, each part's rows contiguous and in its
 own KD-tree order; ``offsets (P + 1,)``; ``part_of (N,)``; boxes ``(P, 3)``; the disjoint graph in
-the CSR layout of :class:`aw_eval.kernels.delaunay.DelaunayGraph` over the rows of ``points``.
+the CSR layout of :class:`aw.kernels.delaunay.DelaunayGraph` over the rows of ``points``.
 """
 
 from __future__ import annotations
@@ -33,12 +33,12 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from aw_eval.kernels.delaunay import DelaunayGraph, to_search, walk
-from aw_eval.kernels.kdtree import box_d2
+from aw.kernels.delaunay import DelaunayGraph, to_search, walk
+from aw.kernels.kdtree import box_d2
 
 __all__ = ["PartClouds", "build_part_clouds", "no_part_clouds", "part_maps", "parts_pass"]
 
-# Safety margin of the certificates in normalized units, as in :mod:`aw_eval.kernels.icp`.
+# Safety margin of the certificates in normalized units, as in :mod:`aw.kernels.icp`.
 _SAFETY = 1e-10
 
 
@@ -104,7 +104,7 @@ def parts_pass(clouds, a: np.ndarray, b: np.ndarray, divisor: float, x: np.ndarr
     """Update ``cand (k,)`` (rows of ``clouds.points``) to the exact nearest neighbours of the
     queries ``x (k, 3)`` (normalized prediction frame) in the posed assembly; returns the number
     of queries searched. ``a (P, 3, 3)``, ``b (P, 3)``: :func:`part_maps` for ``divisor``.
-    Certificate state as in :func:`aw_eval.kernels.icp._certified_pass`, in baked units: ``xref (k, 3)``
+    Certificate state as in :func:`aw.kernels.icp._certified_pass`, in baked units: ``xref (k, 3)``
     (normalized) where each query was last searched, ``slack (k, 2)``: column 1 the squared
     union margin less a safety margin (-1 where none is left; column 0 is not used here).
     ``warm (P,)``: scratch for each part's last answer. ``stats (2,)`` int64 adds

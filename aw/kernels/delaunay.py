@@ -14,12 +14,12 @@ to exact distance ties):
   descent from any start ends at the nearest point;
 - the second-nearest point of ``x`` is a Delaunay neighbour of the nearest (shrink the ball
   through it towards it until the nearest leaves), so the last scan also gives ``d2`` for the
-  ball certificate of :mod:`aw_eval.kernels.kdtree`;
+  ball certificate of :mod:`aw.kernels.kdtree`;
 - the Voronoi cell of a point is cut out by the bisector planes with its Delaunay neighbours
   alone, so the last scan of a walk also gives the distance from ``x`` to the nearest face of
   the cell of its nearest point: a certificate for the next query of a moving point (it keeps
   its nearest point while it moves less than that). Far from a cloud this slack is about the
-  sample spacing, where the ball certificate of :mod:`aw_eval.kernels.kdtree` (half the gap between the
+  sample spacing, where the ball certificate of :mod:`aw.kernels.kdtree` (half the gap between the
   nearest and second-nearest distances) shrinks like ``spacing^2 / distance``.
 
 The graph comes from Qhull (``scipy.spatial.Delaunay``), built once per fixed cloud (a target

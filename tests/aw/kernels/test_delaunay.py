@@ -7,9 +7,9 @@ import pytest
 from numba import njit
 from scipy.spatial import Delaunay
 
-from aw_eval.kernels.delaunay import LANES, SENTINEL, _scan, build_graph, uncertified, walk
+from aw.kernels.delaunay import LANES, SENTINEL, _scan, build_graph, uncertified, walk
+from aw.kernels.icp import ICPProblem, build_tree, graph_for
 from aw_eval.fixtures import make_points_geometry, trajectory_checkpoints
-from aw_eval.kernels.icp import ICPProblem, build_tree, graph_for
 from aw_eval.reference import icp as ref_icp
 
 

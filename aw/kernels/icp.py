@@ -7,18 +7,18 @@ up to floating-point summation order; only the nearest-neighbour search differs:
   points into the prediction's frame (``R^T (T - t)``) instead of building a tree of the moved
   prediction in every iteration, and searches there either the prediction's own tree and graph
   or, for a checkpoint of a task (:meth:`ICPProblem.for_assembly`), each part's baked cloud,
-  whose structures are built once per task too (:mod:`aw_eval.kernels.partwalk`);
+  whose structures are built once per task too (:mod:`aw.kernels.partwalk`);
 - consecutive iterations move little, so most neighbours are *certified* unchanged without a
   search. Where the reference cloud has a Delaunay graph, the Voronoi certificate (a point
   last searched at ``x_ref`` keeps its nearest ``j`` while ``|x - x_ref|`` is below the
   distance from ``x_ref`` to the nearest face of ``j``'s Voronoi cell; see
-  :mod:`aw_eval.kernels.delaunay`), which stays wide far from the cloud; else the ball one (nearest
+  :mod:`aw.kernels.delaunay`), which stays wide far from the cloud; else the ball one (nearest
   ``j``, second-nearest distance ``d2``: ``j`` stays while ``|x - y_j| + |x - x_ref| < d2``).
   Checking the ball one as well where there is a graph saved 1-3% of the searches and cost
   more than they did (its roots, a branch per query);
 - a point that fails both is searched again: by a walk on the Delaunay graph from its previous
   neighbour (or from the previous query's answer, when nearer), else by a warm-started KD-tree
-  search (:func:`aw_eval.kernels.kdtree.nearest2`) where Qhull gave no graph. Either way the result is
+  search (:func:`aw.kernels.kdtree.nearest2`) where Qhull gave no graph. Either way the result is
   the exact nearest neighbour (up to exact distance ties), not an approximation;
 - one compiled pass per direction and iteration does the transform, the certificate or search,
   the objective and the pairs of the next Kabsch fit (no NumPy temporaries).
@@ -33,9 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from aw_eval.kernels.delaunay import DelaunayGraph, build_graph, cloud_neighbours, graph_of, no_graph, to_search, walk
-from aw_eval.kernels.kdtree import STACK, KDTree, build_tree, nearest2
-from aw_eval.kernels.partwalk import PartClouds, build_part_clouds, no_part_clouds, part_maps, parts_pass
+from aw.kernels.delaunay import DelaunayGraph, build_graph, cloud_neighbours, graph_of, no_graph, to_search, walk
+from aw.kernels.kdtree import STACK, KDTree, build_tree, nearest2
+from aw.kernels.partwalk import PartClouds, build_part_clouds, no_part_clouds, part_maps, parts_pass
 
 __all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "build_tree", "graph_for", "kabsch_pairs", "nearest_positions"]
 
@@ -50,7 +50,7 @@ def _certified_pass(tree, graph, x: np.ndarray, cand: np.ndarray, xref: np.ndarr
     returns the number of points searched. Certificate state: ``xref (k, 3)`` where each point
     was last searched, ``slack (k, 2)`` the second-nearest squared distance there (the ball
     certificate, KD-tree searches) and the square of its Voronoi margin less the safety margin
-    (graph searches, -1 where none is left; see :mod:`aw_eval.kernels.delaunay`).
+    (graph searches, -1 where none is left; see :mod:`aw.kernels.delaunay`).
     ``graph``: Delaunay graph of the tree's points in tree order (empty: KD-tree searches).
 
     With a graph only the Voronoi certificate is checked: the ball one saved 1-3% of the
@@ -129,7 +129,7 @@ def _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r, tr, fc, fx, fd, bc, bx, bd
     """Objective at ``(r, tr)`` and neighbours of both directions (tree positions into ``fc``,
     ``bc``); returns ``(objective, searched)``. ``p (n, 3)``, ``t (m, 3)`` in tree order (``p`` in
     the part clouds' order when ``parts = (clouds, A, b, divisor, warm)`` has parts: the
-    backward search then walks the parts' graphs, see :mod:`aw_eval.kernels.partwalk`, adding its
+    backward search then walks the parts' graphs, see :mod:`aw.kernels.partwalk`, adding its
     searches and walks to ``stats (2,)``)."""
     n, m = p.shape[0], t.shape[0]
     for i in range(n):
@@ -280,7 +280,7 @@ class ICPProblem:
     """Registration of one prediction ``p (n, 3)`` onto one target ``t_pts (m, 3)``.
 
     ``tree_t`` (target) may be shared across checkpoints of a task; ``tree_p`` is built here
-    unless given (both from :func:`aw_eval.kernels.kdtree.build_tree`). The search always certifies
+    unless given (both from :func:`aw.kernels.kdtree.build_tree`). The search always certifies
     (it never changes a result). :meth:`for_assembly` searches the prediction through its parts'
     clouds instead (no structure built per checkpoint).
     """
@@ -302,7 +302,7 @@ class ICPProblem:
                      graph_t: DelaunayGraph | None = None) -> "ICPProblem":
         """The prediction ``pred_parts (P, n, 3)`` of the poses ``(P, 7)`` with rotation matrices
         ``rotations (P, 3, 3)`` (normalized by ``divisor``), searched by walks in its parts' baked
-        clouds ``clouds`` (built once per task, :func:`aw_eval.kernels.partwalk.build_part_clouds`)
+        clouds ``clouds`` (built once per task, :func:`aw.kernels.partwalk.build_part_clouds`)
         instead of a tree of its own."""
         prob = cls.__new__(cls)
         prob.tree_t = build_tree(t_pts) if tree_t is None else tree_t
@@ -344,7 +344,7 @@ def graph_for(tree: KDTree, cloud: np.ndarray | None = None) -> DelaunayGraph | 
     """Delaunay graph of a tree's points in tree order (``None`` where Qhull cannot build one).
     ``cloud (n, 3)``: a similar image of the tree's points, row for row (``tree.points[k]`` is the
     image of ``cloud[tree.index[k]]``), whose Qhull run is shared by every frame it is searched in
-    (:func:`aw_eval.kernels.delaunay.cloud_neighbours`)."""
+    (:func:`aw.kernels.delaunay.cloud_neighbours`)."""
     if cloud is None:
         return build_graph(tree.points)
     found = cloud_neighbours(cloud)

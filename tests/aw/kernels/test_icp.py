@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from aw_eval.kernels.icp import CertifiedNN, ICPProblem, build_tree
+from aw.kernels.icp import CertifiedNN, ICPProblem, build_tree
 from aw_eval.reference import icp as ref_icp
 from aw_eval.reference import kabsch
 

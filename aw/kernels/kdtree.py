@@ -8,7 +8,7 @@ little between calls (ICP iterations). This tree is built once per cloud and ans
   start: the search begins at the leaf of the previous neighbour and climbs only until the
   second-nearest ball lies inside the current node's cell, so a query that barely moved visits
   a leaf or two;
-- the *certificate* used by :mod:`aw_eval.kernels.icp`: a query last searched at ``x_ref`` with second
+- the *certificate* used by :mod:`aw.kernels.icp`: a query last searched at ``x_ref`` with second
   nearest distance ``d2`` keeps its neighbour ``j`` at a new position ``x`` without any search
   while ``|x - y_j| + |x - x_ref| < d2`` (every other point is at least ``d2 - |x - x_ref|``
   away, by the triangle inequality). Exact, not approximate (up to exact distance ties).

@@ -1,4 +1,4 @@
-"""Nearest neighbours in a posed assembly by walks in its parts' baked clouds (``aw_eval.kernels.partwalk``)."""
+"""Nearest neighbours in a posed assembly by walks in its parts' baked clouds (``aw.kernels.partwalk``)."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import aw_eval
+from aw.kernels.icp import ICPProblem, build_tree, graph_for
+from aw.kernels.partwalk import build_part_clouds, part_maps, parts_pass
 from aw.pose import quat_to_matrix
-from aw_eval.registration import checkpoint_starts
 from aw_eval.fixtures import make_points_geometry, trajectory_checkpoints
-from aw_eval.kernels.icp import ICPProblem, build_tree, graph_for
-from aw_eval.kernels.partwalk import build_part_clouds, part_maps, parts_pass
+from aw_eval.registration import checkpoint_starts
 
 
 def _assembly(rng, n_parts, n=300, divisor=2.5):

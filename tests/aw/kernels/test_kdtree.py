@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aw_eval.kernels.kdtree import STACK, build_tree, nearest2
+from aw.kernels.kdtree import STACK, build_tree, nearest2
 
 
 def _brute(x, ref):
@@ -57,7 +57,7 @@ def test_empty_cloud_is_rejected():
 def test_tree_layout_invariants(kind):
     """Splits separate the children (left <= split <= right), the permutation is complete and
     leaves hold at most LEAF_SIZE points, also with many equal coordinates (quickselect ties)."""
-    from aw_eval.kernels.kdtree import LEAF_SIZE
+    from aw.kernels.kdtree import LEAF_SIZE
 
     rng = np.random.default_rng(11)
     pts = rng.normal(size=(3000, 3))
