@@ -49,7 +49,7 @@ class Camera:
         self.target, self.yaw, self.pitch, self.distance = target, yaw, pitch, distance
 
     @classmethod
-    def framing(cls, lo: np.ndarray, hi: np.ndarray, margin: float = 1.15) -> "Camera":
+    def framing(cls, lo: np.ndarray, hi: np.ndarray, margin: float = 1.15) -> Camera:
         """Default view that fits the axis-aligned box ``[lo, hi]`` in the frame."""
         lo, hi = np.asarray(lo, float), np.asarray(hi, float)
         centre = 0.5 * (lo + hi)
@@ -90,7 +90,7 @@ class Camera:
         m[:3, 3] = self.position
         return m
 
-    def copy(self) -> "Camera":
+    def copy(self) -> Camera:
         return Camera(self.target.copy(), self.yaw, self.pitch, self.distance)
 
     def to_dict(self) -> dict:
@@ -115,5 +115,5 @@ class Camera:
         return d
 
     @classmethod
-    def from_dict(cls, d: dict) -> "Camera":
+    def from_dict(cls, d: dict) -> Camera:
         return cls(np.asarray(d["target"], float), float(d["yaw"]), float(d["pitch"]), float(d["distance"]))

@@ -20,7 +20,16 @@ import sys
 import time
 from pathlib import Path
 
-from aw.cli.common import add_jobs, add_overwrite, check_out_dir, new_parser, nonnegative_float, plural, positive_int, run_main
+from aw.cli.common import (
+    add_jobs,
+    add_overwrite,
+    check_out_dir,
+    new_parser,
+    nonnegative_float,
+    plural,
+    positive_int,
+    run_main,
+)
 from aw.runner.batch import system_label
 
 DEFAULT_PER_SOURCE = 5
@@ -84,28 +93,51 @@ def plan_line(per_source: int, blocks: str | None, noise_levels: tuple[float, ..
     lo, hi = (episodes / jobs * m for m in MINUTES_PER_EPISODE_CORE)
     took = "under a minute" if hi < 1 else f"about {max(1, round(lo))} to {max(2, round(hi))} minutes"
     basis = "" if (episodes, jobs) == (100, 2) else " (scaled from 3 to 10 minutes with the defaults on 2 cores)"
-    return (f"aw-demo: builds a synthetic suite of {plural(n_tasks, 'task')}, runs {plural(n_systems, 'system')} on "
-            f"every task ({plural(episodes, 'episode')} through aw-serve, {jobs} at a time), rescores every "
-            f"trajectory with aw-score and writes the report; expect {took} on {plural(jobs, 'core')}{basis}, "
-            "longer when other work shares the cores")
+    return (
+        f"aw-demo: builds a synthetic suite of {plural(n_tasks, 'task')}, runs {plural(n_systems, 'system')} on "
+        f"every task ({plural(episodes, 'episode')} through aw-serve, {jobs} at a time), rescores every "
+        f"trajectory with aw-score and writes the report; expect {took} on {plural(jobs, 'core')}{basis}, "
+        "longer when other work shares the cores"
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = new_parser("aw-demo", "The whole loop of the paper on the embedded synthetic benchmark, in one command.",
-                   epilog=__doc__.split("\n\n")[1] + "\n\nThe oracle systems read the hidden targets: calibration "
-                   "upper bounds, never results. A second call reuses the suite and every finished episode.")
-    p.add_argument("--out", type=Path, default=Path("aw-demo"), metavar="DIR", help="working directory (default ./aw-demo)")
-    p.add_argument("--per-source", type=positive_int("--per-source"), default=DEFAULT_PER_SOURCE, metavar="N",
-                   help=f"objects per benchmark source (default {DEFAULT_PER_SOURCE}; the paper's suite has 20)")
+    p = new_parser(
+        "aw-demo",
+        "The whole loop of the paper on the embedded synthetic benchmark, in one command.",
+        epilog=__doc__.split("\n\n")[1] + "\n\nThe oracle systems read the hidden targets: calibration "
+        "upper bounds, never results. A second call reuses the suite and every finished episode.",
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("aw-demo"), metavar="DIR", help="working directory (default ./aw-demo)"
+    )
+    p.add_argument(
+        "--per-source",
+        type=positive_int("--per-source"),
+        default=DEFAULT_PER_SOURCE,
+        metavar="N",
+        help=f"objects per benchmark source (default {DEFAULT_PER_SOURCE}; the paper's suite has 20)",
+    )
     add_jobs(p, "objects prepared, episodes and scoring workers")
-    p.add_argument("--noise", type=nonnegative_float("--noise"), nargs="+", default=list(DEFAULT_NOISE), metavar="LEVEL",
-                   help="oracle noise levels, one oracle system each (default " + " ".join(f"{n:g}" for n in DEFAULT_NOISE) + ")")
-    p.add_argument("--blocks", metavar="B1,B2", help="comma-separated subset of the benchmark sources (default: all four)")
+    p.add_argument(
+        "--noise",
+        type=nonnegative_float("--noise"),
+        nargs="+",
+        default=list(DEFAULT_NOISE),
+        metavar="LEVEL",
+        help="oracle noise levels, one oracle system each (default " + " ".join(f"{n:g}" for n in DEFAULT_NOISE) + ")",
+    )
+    p.add_argument(
+        "--blocks", metavar="B1,B2", help="comma-separated subset of the benchmark sources (default: all four)"
+    )
     p.add_argument("--seed", type=int, default=0, metavar="S", help="suite generation and agent seed (default 0)")
     add_overwrite(p, "the suite, runs and report in --out (default: reuse the suite and the finished episodes)")
-    p.add_argument("--paper-draws", action="store_true",
-                   help="intervals and tests from the paper's 10,000 bootstrap draws and 100,000 relabellings "
-                   "(default: 1,000 and 10,000, to fit the demo's time; the scores themselves are the protocol's either way)")
+    p.add_argument(
+        "--paper-draws",
+        action="store_true",
+        help="intervals and tests from the paper's 10,000 bootstrap draws and 100,000 relabellings "
+        "(default: 1,000 and 10,000, to fit the demo's time; the scores themselves are the protocol's either way)",
+    )
     return p
 
 
@@ -137,8 +169,18 @@ def _demo(args: argparse.Namespace) -> int:
     if (suite / "manifest.json").is_file() and recipe.is_file() and recipe.read_text() == want:
         print("  reusing the suite already there")
     else:
-        cmd = _bin("aw-prepare") + ["synthetic", "--out", str(suite), "--per-source", str(args.per_source),
-                                    "--seed", str(args.seed), "--jobs", str(args.jobs), "--overwrite"]
+        cmd = _bin("aw-prepare") + [
+            "synthetic",
+            "--out",
+            str(suite),
+            "--per-source",
+            str(args.per_source),
+            "--seed",
+            str(args.seed),
+            "--jobs",
+            str(args.jobs),
+            "--overwrite",
+        ]
         if args.blocks:
             cmd += ["--blocks", args.blocks]
         if runs.exists():  # runs of another suite must not be mixed in
@@ -148,12 +190,19 @@ def _demo(args: argparse.Namespace) -> int:
     timings["suite"] = time.monotonic() - t0
 
     sys_list = systems(tuple(args.noise))
-    _stage(2, total, f"running {len(sys_list)} systems on every task through aw-serve (MCP over stdio), {args.jobs} at a time")
+    _stage(
+        2,
+        total,
+        f"running {len(sys_list)} systems on every task through aw-serve (MCP over stdio), {args.jobs} at a time",
+    )
     t0 = time.monotonic()
     problems = []
     for label, agent, noise in sys_list:
-        res = run_batch(BatchConfig(suite_dir=suite, system=label, out_dir=runs, agent=agent, noise=noise,
-                                    jobs=args.jobs, seed=args.seed))
+        res = run_batch(
+            BatchConfig(
+                suite_dir=suite, system=label, out_dir=runs, agent=agent, noise=noise, jobs=args.jobs, seed=args.seed
+            )
+        )
         bad = {k: v for k, v in res.endings().items() if k != "finished"}
         if bad:
             problems.append(f"{label}: {bad}")
@@ -161,12 +210,26 @@ def _demo(args: argparse.Namespace) -> int:
     if problems:
         print("  episodes that did not finish (recorded in their run.json):", "; ".join(problems))
 
-    draws = "the paper's 10,000 bootstrap draws" if args.paper_draws else "1,000 bootstrap draws (--paper-draws: 10,000)"
-    _stage(3, total, f"rescoring every checkpoint of every trajectory (aw-score: final states by the protocol, exact "
-           f"registration; intervals from {draws}) into {report}")
+    draws = (
+        "the paper's 10,000 bootstrap draws" if args.paper_draws else "1,000 bootstrap draws (--paper-draws: 10,000)"
+    )
+    _stage(
+        3,
+        total,
+        f"rescoring every checkpoint of every trajectory (aw-score: final states by the protocol, exact "
+        f"registration; intervals from {draws}) into {report}",
+    )
     t0 = time.monotonic()
-    score_cmd = _bin("aw-score") + [str(suite), str(runs), "--out", str(report), "--jobs", str(args.jobs),
-                                    "--final-mode", "exact"]
+    score_cmd = _bin("aw-score") + [
+        str(suite),
+        str(runs),
+        "--out",
+        str(report),
+        "--jobs",
+        str(args.jobs),
+        "--final-mode",
+        "exact",
+    ]
     if not args.paper_draws:
         score_cmd += list(QUICK_DRAWS)
     _run(score_cmd)

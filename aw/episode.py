@@ -33,7 +33,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -115,7 +115,7 @@ class _Outcome:
 
 
 def _utc_now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+    return datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
 def _recordable_text(s: str) -> str:
@@ -190,8 +190,9 @@ class Episode:
             raise ValueError(f"{len(meshes)} meshes for {len(task.parts)} parts")
         budget = task.budget_minutes if budget_minutes is None else float(budget_minutes)
         if not (math.isfinite(budget) and 0 < budget <= MAX_BUDGET_MINUTES):
-            raise ValueError(f"budget_minutes must be a positive number of at most {MAX_BUDGET_MINUTES:g}, "
-                             f"got {budget_minutes!r}")
+            raise ValueError(
+                f"budget_minutes must be a positive number of at most {MAX_BUDGET_MINUTES:g}, got {budget_minutes!r}"
+            )
         self.task = task
         self.part_ids = task.part_ids
         self.budget_s = 60.0 * budget
@@ -417,8 +418,10 @@ class Episode:
         return out.result
 
     def _recording_failed_message(self) -> str:
-        return (f"recording failed ({self.recording_failure}): this call was not carried out and the episode "
-                "takes no further calls")
+        return (
+            f"recording failed ({self.recording_failure}): this call was not carried out and the episode "
+            "takes no further calls"
+        )
 
     def reject(self, tool: str, raw_args: Mapping[str, Any] | Any, message: str) -> str:
         """Record a call that the adapter refused before it reached the scene (schema errors).
@@ -435,8 +438,16 @@ class Episode:
                 return self._recording_failed_message()
         return message
 
-    def _record(self, tool: str, args: Mapping[str, Any], *, ok: bool, error: str | None = None,
-                changed: Sequence[str] = (), image: str | None = None) -> None:
+    def _record(
+        self,
+        tool: str,
+        args: Mapping[str, Any],
+        *,
+        ok: bool,
+        error: str | None = None,
+        changed: Sequence[str] = (),
+        image: str | None = None,
+    ) -> None:
         """Write one call line; raises ``_RecordingFailed`` (and latches it) if it cannot be written."""
         rec = TrajectoryCall(
             seq=self._seq + 1,
@@ -482,9 +493,13 @@ class Episode:
                 message = f"recording failed ({self.recording_failure})"
             try:
                 self._writer.end(
-                    TrajectoryEnd(reason=final_reason, t=round(self.elapsed(), 6) if self.started else None,
-                                  server_t=self._server_t(), message=_recordable_text(message),
-                                  poses=self.scene.pose_dict())
+                    TrajectoryEnd(
+                        reason=final_reason,
+                        t=round(self.elapsed(), 6) if self.started else None,
+                        server_t=self._server_t(),
+                        message=_recordable_text(message),
+                        poses=self.scene.pose_dict(),
+                    )
                 )
             except RecordingError as exc:
                 log.error("the closing line of %s could not be written (%s)", self.run_dir, exc.reason)
@@ -500,8 +515,10 @@ class Episode:
 
     def _write_final(self, reason: str) -> None:
         try:
-            write_final(self.run_dir / FINAL_FILE, FinalState(task_id=self.task.task_id, reason=reason,
-                                                              poses=self.scene.pose_dict()))
+            write_final(
+                self.run_dir / FINAL_FILE,
+                FinalState(task_id=self.task.task_id, reason=reason, poses=self.scene.pose_dict()),
+            )
         except OSError as exc:  # write_final is atomic: an older final.json, if any, is left whole
             log.error("%s could not be written (%s)", self.run_dir / FINAL_FILE, exc.strerror or exc)
 
@@ -516,10 +533,12 @@ class Episode:
         raise SceneError(f"unknown id {id!r}; use list_objects for the object and group ids")
 
     def _list_objects(self) -> _Outcome:
-        return _Outcome({
-            "objects": [{"id": pid, "name": self.scene.parts[pid].name} for pid in self.part_ids],
-            "groups": self.scene.groups_list(),
-        })
+        return _Outcome(
+            {
+                "objects": [{"id": pid, "name": self.scene.parts[pid].name} for pid in self.part_ids],
+                "groups": self.scene.groups_list(),
+            }
+        )
 
     def _get_object(self, id) -> _Outcome:
         return _Outcome(self._object_or_group(id))
@@ -534,33 +553,39 @@ class Episode:
             "move_camera_ranges": {"yaw": list(YAW_RANGE), "pitch": list(PITCH_RANGE), "zoom": list(ZOOM_RANGE)},
             "default_rotation_pivot": "mean of the selected objects' body origins",
             "rotation": "angles in degrees applied about the X, then Y, then Z axes of the chosen space "
-                        "(world X/Y/Z, or camera right/up/forward), right-hand rule",
+            "(world X/Y/Z, or camera right/up/forward), right-hand rule",
             "camera_space_axes": "right, up, forward (forward points from the camera into the scene)",
             "initial_poses": "identity: initial placements are baked into the part meshes, so body origins "
-                             "need not coincide with visual part centers",
+            "need not coincide with visual part centers",
         }
 
     def _get_scene(self) -> _Outcome:
-        return _Outcome({
-            "units": self.task.conventions.get("units", "normalized scene units"),
-            "conventions": dict(self.task.conventions),
-            "settings": self.settings(),
-            "reference": {"condition": self.task.condition, "images": len(self.task.references)},
-            "objects": [self.scene.object_record(pid) for pid in self.part_ids],
-            "groups": self.scene.groups_list(),
-            "camera": self.scene.camera.describe(),
-            "episode": self.episode_info(),
-        })
+        return _Outcome(
+            {
+                "units": self.task.conventions.get("units", "normalized scene units"),
+                "conventions": dict(self.task.conventions),
+                "settings": self.settings(),
+                "reference": {"condition": self.task.condition, "images": len(self.task.references)},
+                "objects": [self.scene.object_record(pid) for pid in self.part_ids],
+                "groups": self.scene.groups_list(),
+                "camera": self.scene.camera.describe(),
+                "episode": self.episode_info(),
+            }
+        )
 
     def _get_state(self) -> _Outcome:
-        poses = {pid: {"position": [float(v) for v in p[:3]], "quaternion": [float(v) for v in p[3:]]}
-                 for pid, p in self.scene.poses.items()}
-        return _Outcome({
-            "poses": poses,
-            "groups": self.scene.groups_list(),
-            "camera": self.scene.camera.describe(),
-            "episode": self.episode_info(),
-        })
+        poses = {
+            pid: {"position": [float(v) for v in p[:3]], "quaternion": [float(v) for v in p[3:]]}
+            for pid, p in self.scene.poses.items()
+        }
+        return _Outcome(
+            {
+                "poses": poses,
+                "groups": self.scene.groups_list(),
+                "camera": self.scene.camera.describe(),
+                "episode": self.episode_info(),
+            }
+        )
 
     # ------------------------------------------------------------------ edits
     @staticmethod
@@ -615,17 +640,21 @@ class Episode:
         if task is not None and (not isinstance(task, str) or len(task) > MAX_GROUP_NAME):
             raise SceneError(f"task must be a string of at most {MAX_GROUP_NAME} characters")
         if self._t0 is not None:
-            return _Outcome({
-                "status": "ok",
-                "message": f"the episode was already started {self.elapsed():.1f} s ago; nothing changed",
-                "episode": self.episode_info(),
-            })
+            return _Outcome(
+                {
+                    "status": "ok",
+                    "message": f"the episode was already started {self.elapsed():.1f} s ago; nothing changed",
+                    "episode": self.episode_info(),
+                }
+            )
         self._begin()
-        return _Outcome({
-            "status": "ok",
-            "message": f"episode started; the execution budget is {self.budget_s / 60:.4g} minutes",
-            "episode": self.episode_info(),
-        })
+        return _Outcome(
+            {
+                "status": "ok",
+                "message": f"episode started; the execution budget is {self.budget_s / 60:.4g} minutes",
+                "episode": self.episode_info(),
+            }
+        )
 
     # ------------------------------------------------------------------ capture
     def _render_png(self) -> tuple[bytes, int, int]:

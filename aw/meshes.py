@@ -28,8 +28,9 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
     if not np.all(np.isfinite(mesh.vertices)):
         raise FormatError(path, "has non-finite vertex coordinates")
     if np.abs(mesh.vertices).max() > MAX_VERTEX_COORDINATE:
-        raise FormatError(path, f"has vertex coordinates beyond +-{MAX_VERTEX_COORDINATE:g} (scene units are "
-                                "normalized, about 1)")
+        raise FormatError(
+            path, f"has vertex coordinates beyond +-{MAX_VERTEX_COORDINATE:g} (scene units are normalized, about 1)"
+        )
     return mesh
 
 

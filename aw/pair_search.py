@@ -54,8 +54,15 @@ def candidate_pairs(lower: np.ndarray, threshold: float) -> np.ndarray:
     return np.stack([i[order], j[order]], axis=1).astype(np.int64)
 
 
-def registration_groups(clouds: list[np.ndarray], threshold: float, registers: Callable[[int, int], bool], *,
-                        what: str, show_progress: bool = True, workers: int | None = None) -> list[list[int]]:
+def registration_groups(
+    clouds: list[np.ndarray],
+    threshold: float,
+    registers: Callable[[int, int], bool],
+    *,
+    what: str,
+    show_progress: bool = True,
+    workers: int | None = None,
+) -> list[list[int]]:
     """Components of ``range(len(clouds))`` under "``registers(i, j)``" (``i < j``: does ICP bring
     cloud ``i`` within ``threshold`` of cloud ``j``?), ``clouds`` each ``(n, 3)`` in any frame,
     in the units of ``threshold``; each component sorted, ordered by its lowest member.
@@ -77,8 +84,14 @@ def registration_groups(clouds: list[np.ndarray], threshold: float, registers: C
     def is_edge(i: int, j: int) -> bool:
         return not rules_out(frame(i), frame(j), threshold) and registers(i, j)
 
-    return components(len(clouds), candidates, is_edge, what=what, show_progress=show_progress,
-                      workers=local_workers() if workers is None else workers)
+    return components(
+        len(clouds),
+        candidates,
+        is_edge,
+        what=what,
+        show_progress=show_progress,
+        workers=local_workers() if workers is None else workers,
+    )
 
 
 def local_workers() -> int:
@@ -93,8 +106,15 @@ def local_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def components(n: int, candidates: np.ndarray, is_edge: Callable[[int, int], bool], *, what: str,
-               show_progress: bool = True, workers: int = 1) -> list[list[int]]:
+def components(
+    n: int,
+    candidates: np.ndarray,
+    is_edge: Callable[[int, int], bool],
+    *,
+    what: str,
+    show_progress: bool = True,
+    workers: int = 1,
+) -> list[list[int]]:
     """Components of ``range(n)`` under the edges ``is_edge(i, j)`` (``i < j``) among ``candidates
     (K, 2)``; each sorted, ordered by their lowest member. ``what`` names the work in the progress
     display and the warning (e.g. ``"equivalence groups of 500 parts"``). ``workers``: threads
@@ -161,9 +181,13 @@ def components(n: int, candidates: np.ndarray, is_edge: Callable[[int, int], boo
                     estimate = timed_s / timed * _registrations_left(left, edges, non_edges, n - joined) / workers
                     if estimate > WARN_AFTER_S:
                         warned = True
-                        warnings.warn(f"{what}: up to {left} of {total} candidate pairs left to register, about "
-                                      f"{estimate / 60:.0f} min on this machine ({timed_s / timed:.2f} s a pair, "
-                                      f"{workers} at a time)", LongWorkWarning, stacklevel=2)
+                        warnings.warn(
+                            f"{what}: up to {left} of {total} candidate pairs left to register, about "
+                            f"{estimate / 60:.0f} min on this machine ({timed_s / timed:.2f} s a pair, "
+                            f"{workers} at a time)",
+                            LongWorkWarning,
+                            stacklevel=2,
+                        )
     finally:
         if pool is not None:
             for fut in running:

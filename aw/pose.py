@@ -199,7 +199,9 @@ def matrix_from_euler_xyz(angles_rad) -> np.ndarray:
     """Intrinsic XYZ Euler angles ``(..., 3)`` (radians) to ``R = Rx @ Ry @ Rz``, ``(..., 3, 3)``."""
     a = as_finite(angles_rad, (3,), "Euler angles")
     flat = a.reshape(-1, 3)
-    out = np.stack([rotation_about_axis(0, x) @ rotation_about_axis(1, y) @ rotation_about_axis(2, z) for x, y, z in flat])
+    out = np.stack(
+        [rotation_about_axis(0, x) @ rotation_about_axis(1, y) @ rotation_about_axis(2, z) for x, y, z in flat]
+    )
     return out.reshape(a.shape[:-1] + (3, 3))
 
 
@@ -240,17 +242,17 @@ class Pose:
         object.__setattr__(self, "quaternion", normalize_quaternion(np.reshape(self.quaternion, 4)))
 
     @classmethod
-    def identity(cls) -> "Pose":
+    def identity(cls) -> Pose:
         return cls(np.zeros(3), np.array([1.0, 0, 0, 0]))
 
     @classmethod
-    def from_array(cls, values) -> "Pose":
+    def from_array(cls, values) -> Pose:
         """From the wire form ``[x, y, z, qw, qx, qy, qz]``."""
         arr = as_finite(values, (7,), "pose").reshape(7)
         return cls(arr[:3], arr[3:])
 
     @classmethod
-    def from_matrix(cls, m) -> "Pose":
+    def from_matrix(cls, m) -> Pose:
         """From a 4x4 homogeneous matrix."""
         m = as_finite(m, (4, 4), "pose matrix")
         return cls(m[:3, 3], matrix_to_quat(m[:3, :3]))
@@ -275,11 +277,11 @@ class Pose:
         """Transform ``points: (..., 3)``."""
         return as_finite(points, (3,), "points") @ self.rotation.T + self.position
 
-    def compose(self, other: "Pose") -> "Pose":
+    def compose(self, other: Pose) -> Pose:
         """``self * other``: apply ``other`` first, then ``self``."""
         return Pose(self.apply(other.position), quat_multiply(self.quaternion, other.quaternion))
 
-    def inverse(self) -> "Pose":
+    def inverse(self) -> Pose:
         qi = quat_conjugate(self.quaternion)
         return Pose(-(quat_to_matrix(qi) @ self.position), qi)
 

@@ -61,8 +61,11 @@ class LineProgress:
     def _print(self, now: float) -> None:
         pct = f" ({100 * self.n / self.total:.0f}%)" if self.total else ""
         extra = f", {self.postfix}" if self.postfix else ""
-        print(f"{self.desc}: {self.n}/{self.total} {self.unit}{pct}, {now - self._start:.0f} s{extra}",
-              file=self.file, flush=True)
+        print(
+            f"{self.desc}: {self.n}/{self.total} {self.unit}{pct}, {now - self._start:.0f} s{extra}",
+            file=self.file,
+            flush=True,
+        )
 
     def __enter__(self) -> LineProgress:
         return self
@@ -71,8 +74,16 @@ class LineProgress:
         self.close()
 
 
-def progress(total: int, desc: str, unit: str = "it", *, enabled: bool = True, file: IO[str] | None = None,
-             interval: float = DEFAULT_INTERVAL_S, leave: bool = True) -> Any:
+def progress(
+    total: int,
+    desc: str,
+    unit: str = "it",
+    *,
+    enabled: bool = True,
+    file: IO[str] | None = None,
+    interval: float = DEFAULT_INTERVAL_S,
+    leave: bool = True,
+) -> Any:
     """A progress display of ``total`` steps on ``file`` (default stderr): tqdm when ``file`` is a
     terminal, :class:`LineProgress` when not, a silent tqdm when ``enabled`` is false."""
     from tqdm import tqdm

@@ -85,7 +85,12 @@ def _greedy_palette() -> np.ndarray:
     """The fixed palette, then candidates (an HSV grid, minus colours near the background or the
     ground) added one at a time, each the farthest in CIELAB from all chosen so far."""
     cands = np.array(
-        [colorsys.hsv_to_rgb(h / 36, s, v) for h in range(36) for s in (0.5, 0.75, 1.0) for v in (0.45, 0.65, 0.85, 1.0)]
+        [
+            colorsys.hsv_to_rgb(h / 36, s, v)
+            for h in range(36)
+            for s in (0.5, 0.75, 1.0)
+            for v in (0.45, 0.65, 0.85, 1.0)
+        ]
     )
     lab = _lab(cands)
     light = _lab(np.array([BACKGROUND_COLOR, _GROUND_COLOR]))
@@ -252,7 +257,7 @@ class OffscreenRenderer:
     def closed(self) -> bool:
         return self._closed
 
-    def __enter__(self) -> "OffscreenRenderer":
+    def __enter__(self) -> OffscreenRenderer:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -427,8 +432,14 @@ class OffscreenRenderer:
             scene.set_pose(node, m)
         # Clip planes that enclose the parts and the ground from this viewpoint.
         half = _GRID_HALF_LINES * step
-        corners = np.array([[x, y, zz] for x in (lo[0], hi[0], centre[0] - half, centre[0] + half)
-                            for y in (lo[1], hi[1], centre[1] - half, centre[1] + half) for zz in (lo[2], hi[2], z)])
+        corners = np.array(
+            [
+                [x, y, zz]
+                for x in (lo[0], hi[0], centre[0] - half, centre[0] + half)
+                for y in (lo[1], hi[1], centre[1] - half, centre[1] + half)
+                for zz in (lo[2], hi[2], z)
+            ]
+        )
         far = float(np.linalg.norm(corners - camera.position, axis=1).max()) * 1.05 + 1e-3
         g["camera"].zfar = far
         g["camera"].znear = far / 2000.0
@@ -486,7 +497,7 @@ def _seg_code(i: int) -> np.ndarray:
 # before concurrent.futures stops accepting work at interpreter shutdown, which plain atexit
 # handlers come after; threading's shutdown hooks run in reverse order of registration, and
 # concurrent.futures registered its own when it was imported above.
-_live: "weakref.WeakSet[OffscreenRenderer]" = weakref.WeakSet()
+_live: weakref.WeakSet[OffscreenRenderer] = weakref.WeakSet()
 
 
 def _close_all() -> None:

@@ -142,8 +142,13 @@ def box_frame(cloud: np.ndarray) -> BoxFrame:
     step = max(float(lowered.max()), 1e-300) / 65535.0
     table = np.floor(np.maximum(lowered, 0.0) / step)
     table -= table * step > lowered  # (the decoding's own rounding)
-    return BoxFrame(local, np.sqrt(np.einsum("ij,ij->i", local, local)), np.abs(local).max(axis=0),
-                    np.maximum(table, 0).astype(np.uint16), step)
+    return BoxFrame(
+        local,
+        np.sqrt(np.einsum("ij,ij->i", local, local)),
+        np.abs(local).max(axis=0),
+        np.maximum(table, 0).astype(np.uint16),
+        step,
+    )
 
 
 def rules_out(a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits = SearchLimits()) -> bool:
@@ -153,8 +158,9 @@ def rules_out(a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits =
     return search(a, b, threshold, limits)[0]
 
 
-def search(a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits = SearchLimits(),
-           stats: np.ndarray | None = None) -> tuple[bool, int]:
+def search(
+    a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits = SearchLimits(), stats: np.ndarray | None = None
+) -> tuple[bool, int]:
     """:func:`rules_out`, and the cubes the search looked at. ``stats (_MAX_DEPTH + 2, 3)`` int64,
     if given, gets added per depth the cubes looked at, ruled out by the tables, and ruled out
     directly."""
@@ -164,10 +170,30 @@ def search(a: BoxFrame, b: BoxFrame, threshold: float, limits: SearchLimits = Se
     elif stats.shape != shape or stats.dtype != np.int64:
         raise ValueError(f"stats must be an int64 array of shape {shape}, got {stats.dtype} {stats.shape}")
     limit = threshold * (1 + SAFETY[0]) + SAFETY[1]
-    looked = _search(a.points, a.radii, a.half, a.table, a.step, b.points, b.radii, b.half, b.table, b.step,
-                     float(limit), np.array(TABLE_LEVELS, np.int64), np.array(LAZY_LEVELS, np.int64), START_CUBES, *_fixed(),
-                     float(limits.min_half), int(limits.max_cubes), int(limits.max_direct), int(limits.direct_from),
-                     _ALIGNED if limits.aligned_first else _ALIGNED[:0], SUBSET, stats)
+    looked = _search(
+        a.points,
+        a.radii,
+        a.half,
+        a.table,
+        a.step,
+        b.points,
+        b.radii,
+        b.half,
+        b.table,
+        b.step,
+        float(limit),
+        np.array(TABLE_LEVELS, np.int64),
+        np.array(LAZY_LEVELS, np.int64),
+        START_CUBES,
+        *_fixed(),
+        float(limits.min_half),
+        int(limits.max_cubes),
+        int(limits.max_direct),
+        int(limits.direct_from),
+        _ALIGNED if limits.aligned_first else _ALIGNED[:0],
+        SUBSET,
+        stats,
+    )
     return looked > 0, abs(int(looked))
 
 
@@ -230,8 +256,7 @@ def _start_centre(i, j, k, h0):
 @njit(cache=True, nogil=True)
 def _child_centre(cx, cy, cz, h, d):
     """Centre of sub-cube ``d`` (0-7) of the cube of centre ``c`` and half-side ``h``."""
-    return (cx + (0.5 if d & 1 else -0.5) * h, cy + (0.5 if d & 2 else -0.5) * h,
-            cz + (0.5 if d & 4 else -0.5) * h)
+    return (cx + (0.5 if d & 1 else -0.5) * h, cy + (0.5 if d & 2 else -0.5) * h, cz + (0.5 if d & 4 else -0.5) * h)
 
 
 @njit(cache=True, nogil=True)
@@ -242,7 +267,7 @@ def _grid_rows(levels, start_cubes):
     (counted from its level's first row) of each side's and axis's direction at its centre,
     column ``3 side + k``. The same for every pair: the cubes of those depths read it instead of
     turning their centres into directions."""
-    first = start_cubes ** 3
+    first = start_cubes**3
     total, count = 0, first
     for q in range(len(levels)):
         total += count
@@ -284,7 +309,9 @@ def _cell_table(levels):
     first = 0
     for level in levels:
         for row in range(3 << (2 * level)):
-            out[first + row, 0], out[first + row, 1], out[first + row, 2], out[first + row, 3] = _cell_geometry(row, level)
+            out[first + row, 0], out[first + row, 1], out[first + row, 2], out[first + row, 3] = _cell_geometry(
+                row, level
+            )
         first += 3 << (2 * level)
     return out
 
@@ -294,8 +321,7 @@ def _fixed() -> tuple[np.ndarray, np.ndarray]:
     """The grid's rows (:func:`_grid_rows`) and the lazy levels' cells (:func:`_cell_table`): the
     same for every pair, computed once per process (milliseconds; threads that ask at once may
     each compute them, and each gets both)."""
-    return (_grid_rows(np.array(TABLE_LEVELS, np.int64), START_CUBES),
-            _cell_table(np.array(LAZY_LEVELS, np.int64)))
+    return (_grid_rows(np.array(TABLE_LEVELS, np.int64), START_CUBES), _cell_table(np.array(LAZY_LEVELS, np.int64)))
 
 
 @njit(cache=True, nogil=True)
@@ -415,8 +441,15 @@ def _table_row(points, cell, delta, work, out):
 
 @njit(cache=True, nogil=True)
 def _workspace(n):
-    return (np.empty(n), np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64), np.empty(n, np.int64),
-            np.zeros(256, np.int64), np.empty(_SORT_BINS + 1, np.int64))
+    return (
+        np.empty(n),
+        np.empty(n, np.int64),
+        np.empty(n, np.int64),
+        np.empty(n, np.int64),
+        np.empty(n, np.int64),
+        np.zeros(256, np.int64),
+        np.empty(_SORT_BINS + 1, np.int64),
+    )
 
 
 @njit(cache=True, nogil=True)
@@ -508,8 +541,9 @@ def _table_term(table, step, row, width, n, budget):
 
 
 @njit(cache=True, nogil=True)
-def _direct_term(points, radii, active, n_active, u0, u1, u2, width, cos_d, sin_d, delta, proj, low, high,
-                 next_active, spare, start):
+def _direct_term(
+    points, radii, active, n_active, u0, u1, u2, width, cos_d, sin_d, delta, proj, low, high, next_active, spare, start
+):
     """One (side, axis) term evaluated directly: ``(bound over the cube, bound at its centre,
     points kept)``.
 
@@ -586,9 +620,25 @@ def _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, 
         side, k = c // 3, c % 3
         points, radii = (ap, ar) if side == 0 else (bp, br)
         u0, u1, u2 = _axis_direction(rot, side, k)
-        f, f0, kept = _direct_term(points, radii, act[depth, side, k], n_act[depth, side, k], u0, u1, u2,
-                                   widths[side, k], cos_d, sin_d, delta * (1.0 + 1e-9) + 1e-12, proj, low, high,
-                                   act[depth + 1, side, k], spare, start)
+        f, f0, kept = _direct_term(
+            points,
+            radii,
+            act[depth, side, k],
+            n_act[depth, side, k],
+            u0,
+            u1,
+            u2,
+            widths[side, k],
+            cos_d,
+            sin_d,
+            delta * (1.0 + 1e-9) + 1e-12,
+            proj,
+            low,
+            high,
+            act[depth + 1, side, k],
+            spare,
+            start,
+        )
         n_act[depth + 1, side, k] = kept
         bound += f
         at_centre += f0
@@ -624,13 +674,53 @@ def _at_rotation(ap, ar, ah, bp, br, bh, rot):
     _read_first(act, n_act, 0, (ap.shape[0], bp.shape[0]), n_max)
     proj, spare = np.empty(n_max), np.empty(n_max, np.int64)
     low, high = np.empty(n_max, np.int64), np.empty(n_max, np.int64)
-    return _direct_bound(ap, ar, bp, br, _widths(ah, bh), rot, 0.0, np.inf, act, n_act, 0, proj, low, high, spare,
-                         np.empty(_SORT_BINS + 1, np.int64), np.arange(6))[1]
+    return _direct_bound(
+        ap,
+        ar,
+        bp,
+        br,
+        _widths(ah, bh),
+        rot,
+        0.0,
+        np.inf,
+        act,
+        n_act,
+        0,
+        proj,
+        low,
+        high,
+        spare,
+        np.empty(_SORT_BINS + 1, np.int64),
+        np.arange(6),
+    )[1]
 
 
 @njit(cache=True, nogil=True)
-def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, levels, lazy_levels, start_cubes,
-            grid, lazy_cells, min_half, max_cubes, max_direct, direct_from, aligned, subset, stats):
+def _search(
+    ap,
+    ar,
+    ah,
+    a_table,
+    a_step,
+    bp,
+    br,
+    bh,
+    b_table,
+    b_step,
+    limit,
+    levels,
+    lazy_levels,
+    start_cubes,
+    grid,
+    lazy_cells,
+    min_half,
+    max_cubes,
+    max_direct,
+    direct_from,
+    aligned,
+    subset,
+    stats,
+):
     """The number of cubes looked at, positive when every cube of the ball ``|r| <= pi`` is
     ruled out (see the module docstring), negative when the search gave up. ``grid``:
     :func:`_grid_rows` (none, ``(0, 6)``: the cells are found from the cubes' centres instead);
@@ -642,7 +732,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
     grid_firsts = np.zeros(len(levels) + 1, np.int64)  # each depth's first row in `grid`
     for q in range(len(levels)):
         firsts[q + 1] = firsts[q] + (3 << (2 * levels[q]))
-        grid_firsts[q + 1] = grid_firsts[q] + start_cubes ** 3 * 8 ** q
+        grid_firsts[q + 1] = grid_firsts[q] + start_cubes**3 * 8**q
     lazy_firsts = np.zeros(len(lazy_levels), np.int64)  # each lazy level's first row in `lazy_cells`
     for q in range(1, len(lazy_levels)):
         lazy_firsts[q] = lazy_firsts[q - 1] + (3 << (2 * lazy_levels[q - 1]))
@@ -658,8 +748,9 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
     for r in range(aligned.shape[0]):
         for most in (subset, n_max):
             _read_first(act, n_act, 0, counts, most)
-            bound, at_rotation = _direct_bound(ap, ar, bp, br, widths, aligned[r], 0.0, limit, act, n_act, 0, proj,
-                                               low, high, spare, start, in_turn)
+            bound, at_rotation = _direct_bound(
+                ap, ar, bp, br, widths, aligned[r], 0.0, limit, act, n_act, 0, proj, low, high, spare, start, in_turn
+            )
             if bound > limit:
                 break
         if bound <= limit and at_rotation <= limit:
@@ -675,7 +766,7 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
     lazy_memo = np.empty((256, 3))
     work = (_workspace(ap.shape[0]), _workspace(bp.shape[0]))
 
-    cap = start_cubes ** 3 + 8 * (_MAX_DEPTH + 1)
+    cap = start_cubes**3 + 8 * (_MAX_DEPTH + 1)
     centres = np.empty((cap, 3))
     halves = np.empty(cap)
     depths = np.empty(cap, np.int64)
@@ -696,7 +787,14 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
     looked, direct = 0, 0
     while top > 0:
         top -= 1
-        cx, cy, cz, h, depth, cube = centres[top, 0], centres[top, 1], centres[top, 2], halves[top], depths[top], ids[top]
+        cx, cy, cz, h, depth, cube = (
+            centres[top, 0],
+            centres[top, 1],
+            centres[top, 2],
+            halves[top],
+            depths[top],
+            ids[top],
+        )
         if math.sqrt(cx * cx + cy * cy + cz * cz) - root3 * h > math.pi:
             continue  # no rotation needs it: the ball |r| <= pi holds them all
         looked += 1
@@ -746,8 +844,13 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
                             grown_memo = np.empty((2 * slot, 3))
                             grown_memo[:slot] = lazy_memo
                             lazy_memo = grown_memo
-                        _table_row(ap if side == 0 else bp, lazy_cells[lazy_firsts[q] + row],
-                                   _level_delta(len(levels) + q, start_cubes), work[side], lazy[slot])
+                        _table_row(
+                            ap if side == 0 else bp,
+                            lazy_cells[lazy_firsts[q] + row],
+                            _level_delta(len(levels) + q, start_cubes),
+                            work[side],
+                            lazy[slot],
+                        )
                         lazy_memo[slot] = -1.0
                         slots[key] = slot
                     term = lazy_memo[slot, k]
@@ -773,8 +876,25 @@ def _search(ap, ar, ah, a_table, a_step, bp, br, bh, b_table, b_step, limit, lev
             for p in range(passes):
                 if depth == direct_from:
                     _read_first(act, n_act, depth, counts, subset if p + 1 < passes else n_max)
-                bound, at_centre = _direct_bound(ap, ar, bp, br, widths, rot, delta, limit, act, n_act, depth, proj,
-                                                 low, high, spare, start, np.argsort(-terms))
+                bound, at_centre = _direct_bound(
+                    ap,
+                    ar,
+                    bp,
+                    br,
+                    widths,
+                    rot,
+                    delta,
+                    limit,
+                    act,
+                    n_act,
+                    depth,
+                    proj,
+                    low,
+                    high,
+                    spare,
+                    start,
+                    np.argsort(-terms),
+                )
                 if bound > limit:
                     break
             if bound > limit:

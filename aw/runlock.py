@@ -69,8 +69,10 @@ class RunDirLock:
         except BlockingIOError:
             holder = _read_holder(fd)
             os.close(fd)
-            raise RunDirBusy(f"{self.run_dir} is being recorded by {_describe(holder)}; wait for it to end, "
-                             "or stop it, before reusing this run directory") from None
+            raise RunDirBusy(
+                f"{self.run_dir} is being recorded by {_describe(holder)}; wait for it to end, "
+                "or stop it, before reusing this run directory"
+            ) from None
         record = {"pid": os.getpid(), "host": socket.gethostname(), "command": self.command}
         os.ftruncate(fd, 0)
         os.pwrite(fd, json.dumps(record).encode("utf-8"), 0)

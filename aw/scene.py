@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aw.camera import PITCH_LIMIT_DEG, Camera, wrap_degrees
-from aw.pose import IDENTITY_POSE, matrix_to_quat, quat_to_matrix, quat_multiply
+from aw.pose import IDENTITY_POSE, matrix_to_quat, quat_multiply, quat_to_matrix
 
 # Normalized scene units: assembled objects are about one unit across. Anything beyond this is
 # refused as absurd rather than silently accepted.
@@ -76,7 +76,9 @@ def _finite_vector(value, length: int, what: str, limit: float) -> np.ndarray:
         if not math.isfinite(f):
             raise SceneError(f"{what} contains a non-finite number (NaN or infinity)")
         if abs(f) > limit:
-            raise SceneError(f"{what} has a value of magnitude {abs(f):.3g}; the allowed range is [-{limit:g}, {limit:g}]")
+            raise SceneError(
+                f"{what} has a value of magnitude {abs(f):.3g}; the allowed range is [-{limit:g}, {limit:g}]"
+            )
         out.append(f)
     return np.array(out)
 
@@ -175,9 +177,7 @@ class Scene:
     def _check_positions(self, new: Mapping[str, np.ndarray]) -> None:
         for pid, pose in new.items():
             if np.any(np.abs(pose[:3]) > MAX_COORDINATE):
-                raise SceneError(
-                    f"the edit would move {pid} to a position beyond +-{MAX_COORDINATE:g} units; refused"
-                )
+                raise SceneError(f"the edit would move {pid} to a position beyond +-{MAX_COORDINATE:g} units; refused")
 
     def _commit(self, new: Mapping[str, np.ndarray]) -> list[str]:
         self._check_positions(new)
@@ -326,9 +326,12 @@ class Scene:
     # ---------------------------------------------------------------- undo
     def snapshot(self) -> SceneSnapshot:
         """Everything a call can change: to undo a call whose success could not be recorded."""
-        return SceneSnapshot({pid: p.copy() for pid, p in self.poses.items()},
-                             {gid: Group(g.id, g.name, list(g.members)) for gid, g in self.groups.items()},
-                             self._next_group, self.camera.copy())
+        return SceneSnapshot(
+            {pid: p.copy() for pid, p in self.poses.items()},
+            {gid: Group(g.id, g.name, list(g.members)) for gid, g in self.groups.items()},
+            self._next_group,
+            self.camera.copy(),
+        )
 
     def restore(self, snap: SceneSnapshot) -> None:
         """Put the scene back to ``snap`` (taken by :meth:`snapshot` on this scene)."""
@@ -362,7 +365,12 @@ class Scene:
         """World-space axis-aligned box of a part's local bounding box under its current pose."""
         info = self.parts[pid]
         corners = np.array(
-            [[x, y, z] for x in (info.bounds_min[0], info.bounds_max[0]) for y in (info.bounds_min[1], info.bounds_max[1]) for z in (info.bounds_min[2], info.bounds_max[2])]
+            [
+                [x, y, z]
+                for x in (info.bounds_min[0], info.bounds_max[0])
+                for y in (info.bounds_min[1], info.bounds_max[1])
+                for z in (info.bounds_min[2], info.bounds_max[2])
+            ]
         )
         p = self.poses[pid]
         w = corners @ quat_to_matrix(p[3:]).T + p[:3]
@@ -377,5 +385,8 @@ def scene_from_meshes(part_ids: Iterable[str], meshes: Iterable, names: Iterable
     part_ids = list(part_ids)
     meshes = list(meshes)
     names = list(names) if names is not None else part_ids
-    infos = [PartInfo(pid, nm, np.asarray(m.bounds[0], float), np.asarray(m.bounds[1], float)) for pid, m, nm in zip(part_ids, meshes, names)]
+    infos = [
+        PartInfo(pid, nm, np.asarray(m.bounds[0], float), np.asarray(m.bounds[1], float))
+        for pid, m, nm in zip(part_ids, meshes, names)
+    ]
     return Scene(infos)

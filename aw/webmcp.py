@@ -54,8 +54,13 @@ _ID = {"type": "string", "minLength": 1}
 
 
 def _closed(properties: dict, required: tuple[str, ...] = (), **extra: Any) -> dict:
-    return {"type": "object", "properties": properties, "required": list(required),
-            "additionalProperties": False, **extra}
+    return {
+        "type": "object",
+        "properties": properties,
+        "required": list(required),
+        "additionalProperties": False,
+        **extra,
+    }
 
 
 @dataclass(frozen=True)
@@ -66,71 +71,145 @@ class PageTool:
     read_only: bool
 
 
-PAGE_TOOLS: dict[str, PageTool] = {t.name: t for t in (
-    PageTool("list_objects", "List the object ids and names of the scene and its current groups.",
-             _closed({}), True),
-    PageTool("get_object", "Read one object: body pose (position, quaternion wxyz), velocity, mass and "
-             "geometry, in episode units.", _closed({"id": _ID}, ("id",)), True),
-    PageTool("get_scene", "Read the scene name, units, axis and quaternion conventions, runtime settings "
-             "and object catalogue.", _closed({}), True),
-    PageTool("get_state", "Read the live state: every object's pose, the groups, the camera and contacts.",
-             _closed({}), True),
-    PageTool("translate_objects", "Move the given object or group ids by delta, in world axes or in the "
-             "camera's right/up/forward axes. One state per call.",
-             _closed({"ids": _IDS, "delta": _VEC3, "space": _SPACE}, ("ids", "delta")), False),
-    PageTool("rotate_objects", "Rotate the given ids by angles in degrees about X, then Y, then Z (world "
-             "axes, or camera right/up/forward). The pivot is the mean body origin unless a world point "
-             "is given.", _closed({"ids": _IDS, "angles": _VEC3, "space": _SPACE, "pivot": _VEC3},
-                                  ("ids", "angles")), False),
-    PageTool("set_object_pose", "Set one object's absolute world position and/or quaternion (wxyz); "
-             "its velocity is cleared.",
-             _closed({"id": _ID, "position": _VEC3, "quaternion": _QUAT}, ("id",),
-                     anyOf=[{"required": ["position"]}, {"required": ["quaternion"]}]), False),
-    PageTool("group_objects", "Group the given ids logically so that later edits can move them together; "
-             "nothing snaps or welds.",
-             _closed({"ids": _IDS, "name": {"type": "string", "maxLength": 200}}, ("ids",)), False),
-    PageTool("ungroup_objects", "Dissolve the given group ids; no object moves.",
-             _closed({"ids": _IDS}, ("ids",)), False),
-    PageTool("capture_scene", "Render the current scene from the agent camera as a PNG image.",
-             _closed({}), True),
-    PageTool("move_camera", "Orbit the camera by relative yaw/pitch degrees, multiply its distance by "
-             "zoom, or pan it along its right/up axes. Physics does not advance.",
-             _closed({"yaw": {"type": "number", "minimum": -180, "maximum": 180},
-                      "pitch": {"type": "number", "minimum": -85, "maximum": 85},
-                      "zoom": {"type": "number", "minimum": 0.25, "maximum": 4},
-                      "right": {"type": "number"}, "up": {"type": "number"}}), False),
-    PageTool("apply_force", "Push one object with a world force (newtons, magnitude at most 20) for the "
-             "configured time, then settle. Needs physics.",
-             _closed({"id": _ID, "force": _VEC3}, ("id", "force")), False),
-    PageTool("start_episode", "Start recording; calling it again changes nothing.",
-             _closed({"task": {"type": "string"}}), False),
-    PageTool("advance_simulation", "Step the enabled physics for the given duration in seconds.",
-             _closed({"duration": {"type": "number", "exclusiveMinimum": 0, "maximum": 60}}, ("duration",)),
-             False),
-)}
+PAGE_TOOLS: dict[str, PageTool] = {
+    t.name: t
+    for t in (
+        PageTool(
+            "list_objects", "List the object ids and names of the scene and its current groups.", _closed({}), True
+        ),
+        PageTool(
+            "get_object",
+            "Read one object: body pose (position, quaternion wxyz), velocity, mass and geometry, in episode units.",
+            _closed({"id": _ID}, ("id",)),
+            True,
+        ),
+        PageTool(
+            "get_scene",
+            "Read the scene name, units, axis and quaternion conventions, runtime settings and object catalogue.",
+            _closed({}),
+            True,
+        ),
+        PageTool(
+            "get_state",
+            "Read the live state: every object's pose, the groups, the camera and contacts.",
+            _closed({}),
+            True,
+        ),
+        PageTool(
+            "translate_objects",
+            "Move the given object or group ids by delta, in world axes or in the "
+            "camera's right/up/forward axes. One state per call.",
+            _closed({"ids": _IDS, "delta": _VEC3, "space": _SPACE}, ("ids", "delta")),
+            False,
+        ),
+        PageTool(
+            "rotate_objects",
+            "Rotate the given ids by angles in degrees about X, then Y, then Z (world "
+            "axes, or camera right/up/forward). The pivot is the mean body origin unless a world point "
+            "is given.",
+            _closed({"ids": _IDS, "angles": _VEC3, "space": _SPACE, "pivot": _VEC3}, ("ids", "angles")),
+            False,
+        ),
+        PageTool(
+            "set_object_pose",
+            "Set one object's absolute world position and/or quaternion (wxyz); its velocity is cleared.",
+            _closed(
+                {"id": _ID, "position": _VEC3, "quaternion": _QUAT},
+                ("id",),
+                anyOf=[{"required": ["position"]}, {"required": ["quaternion"]}],
+            ),
+            False,
+        ),
+        PageTool(
+            "group_objects",
+            "Group the given ids logically so that later edits can move them together; nothing snaps or welds.",
+            _closed({"ids": _IDS, "name": {"type": "string", "maxLength": 200}}, ("ids",)),
+            False,
+        ),
+        PageTool(
+            "ungroup_objects", "Dissolve the given group ids; no object moves.", _closed({"ids": _IDS}, ("ids",)), False
+        ),
+        PageTool("capture_scene", "Render the current scene from the agent camera as a PNG image.", _closed({}), True),
+        PageTool(
+            "move_camera",
+            "Orbit the camera by relative yaw/pitch degrees, multiply its distance by "
+            "zoom, or pan it along its right/up axes. Physics does not advance.",
+            _closed(
+                {
+                    "yaw": {"type": "number", "minimum": -180, "maximum": 180},
+                    "pitch": {"type": "number", "minimum": -85, "maximum": 85},
+                    "zoom": {"type": "number", "minimum": 0.25, "maximum": 4},
+                    "right": {"type": "number"},
+                    "up": {"type": "number"},
+                }
+            ),
+            False,
+        ),
+        PageTool(
+            "apply_force",
+            "Push one object with a world force (newtons, magnitude at most 20) for the "
+            "configured time, then settle. Needs physics.",
+            _closed({"id": _ID, "force": _VEC3}, ("id", "force")),
+            False,
+        ),
+        PageTool(
+            "start_episode",
+            "Start recording; calling it again changes nothing.",
+            _closed({"task": {"type": "string"}}),
+            False,
+        ),
+        PageTool(
+            "advance_simulation",
+            "Step the enabled physics for the given duration in seconds.",
+            _closed({"duration": {"type": "number", "exclusiveMinimum": 0, "maximum": 60}}, ("duration",)),
+            False,
+        ),
+    )
+}
 
 # runtime.enabledTools of a benchmark episode (assembly-world-agent episodes.py), in its order.
 # end_episode is retired: the page does not register it.
 ENABLED_TOOLS: tuple[str, ...] = (
-    "list_objects", "get_object", "get_scene", "get_state", "translate_objects", "rotate_objects",
-    "set_object_pose", "group_objects", "ungroup_objects", "capture_scene", "move_camera",
-    "start_episode", "end_episode",
+    "list_objects",
+    "get_object",
+    "get_scene",
+    "get_state",
+    "translate_objects",
+    "rotate_objects",
+    "set_object_pose",
+    "group_objects",
+    "ungroup_objects",
+    "capture_scene",
+    "move_camera",
+    "start_episode",
+    "end_episode",
 )
 # runtime.physics of a benchmark episode: disabled, no contacts.
 PHYSICS: dict[str, Any] = {
-    "enabled": False, "gravity": [0, 0, -9.81], "detection": False, "response": False, "strategy": "fixed",
-    "duration": 0.25, "maxDuration": 5.0, "quietDuration": 0.1, "linearThreshold": 0.01,
+    "enabled": False,
+    "gravity": [0, 0, -9.81],
+    "detection": False,
+    "response": False,
+    "strategy": "fixed",
+    "duration": 0.25,
+    "maxDuration": 5.0,
+    "quietDuration": 0.1,
+    "linearThreshold": 0.01,
     "angularThreshold": 0.01,
 }
 # capture_scene's render block (3DWebAgent schema/results.schema.json).
-RENDER = {"width": IMAGE_WIDTH, "height": IMAGE_HEIGHT, "pixelRatio": 1,
-          "fovy": int(VERTICAL_FOV_DEG) if float(VERTICAL_FOV_DEG).is_integer() else VERTICAL_FOV_DEG,
-          "near": 0.01, "far": 1000}
+RENDER = {
+    "width": IMAGE_WIDTH,
+    "height": IMAGE_HEIGHT,
+    "pixelRatio": 1,
+    "fovy": int(VERTICAL_FOV_DEG) if float(VERTICAL_FOV_DEG).is_integer() else VERTICAL_FOV_DEG,
+    "near": 0.01,
+    "far": 1000,
+}
 # What get_object reports of each body: the constants of a benchmark episode's MJCF
 # (assembly-world-agent episodes.py: unit mass, diagonal inertia 0.1, no collision) and MuJoCo's
 # default geom friction and contact dimension. Geometry type 7 is MuJoCo's mesh.
 _MASS, _INERTIA, _FRICTION, _CONDIM, _MESH = 1.0, [0.1, 0.1, 0.1], [1.0, 0.005, 0.0001], 3, 7
-
 
 
 def mesh_geom_sizes(meshes) -> list[list[float]]:
@@ -159,8 +238,9 @@ def mesh_geom_sizes(meshes) -> list[list[float]]:
     return out
 
 
-_MUTATIONS = frozenset({"translate_objects", "rotate_objects", "set_object_pose", "group_objects",
-                        "ungroup_objects", "move_camera"})
+_MUTATIONS = frozenset(
+    {"translate_objects", "rotate_objects", "set_object_pose", "group_objects", "ungroup_objects", "move_camera"}
+)
 _PHYSICAL = frozenset({"translate_objects", "rotate_objects", "set_object_pose"})
 
 
@@ -171,6 +251,7 @@ def registered_tools(enabled: tuple[str, ...] = ENABLED_TOOLS) -> list[str]:
 
 # ---------------------------------------------------------------------------------------------------
 # Argument checking against the schemas above (the keywords they use), naming the argument.
+
 
 def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
@@ -223,8 +304,11 @@ def _check(schema: dict, v: Any, path: str, out: list[str]) -> None:
     if isinstance(v, Mapping):
         props = schema.get("properties", {})
         if schema.get("additionalProperties") is False:
-            out.extend(f"unexpected argument {short_repr(k)} (allowed: {', '.join(props) or 'none'})"
-                       for k in v if k not in props)
+            out.extend(
+                f"unexpected argument {short_repr(k)} (allowed: {', '.join(props) or 'none'})"
+                for k in v
+                if k not in props
+            )
         out.extend(f"{k} is required" for k in schema.get("required", ()) if k not in v)
         for k, x in v.items():
             if k in props:
@@ -318,7 +402,7 @@ def _check_text(s: str) -> None:
     try:
         s.encode("utf-8")
     except UnicodeEncodeError as exc:
-        bad = s[exc.start:exc.end].encode("utf-8", "backslashreplace").decode("ascii")
+        bad = s[exc.start : exc.end].encode("utf-8", "backslashreplace").decode("ascii")
         raise BadInput(f"input holds a lone UTF-16 surrogate ({bad}); strings must be valid Unicode text") from None
 
 
@@ -332,6 +416,7 @@ def _json_kind(v: Any) -> str:
 
 # ---------------------------------------------------------------------------------------------------
 # The page.
+
 
 class NotRegistered(Exception):
     """The tool name is not registered on the page (never reaches the scene)."""
@@ -372,8 +457,10 @@ class WebMcpPage:
         pids = sorted(episode.part_ids)
         self._to_official = {pid: f"part-{k:04d}" for k, pid in enumerate(pids, start=1)}
         self._to_project = {oid: pid for pid, oid in self._to_official.items()}
-        self.catalogue = [{"id": self._to_official[pid], "name": f"Part {pid}", "type": "rigid",
-                           "collisionEnabled": False} for pid in pids]
+        self.catalogue = [
+            {"id": self._to_official[pid], "name": f"Part {pid}", "type": "rigid", "collisionEnabled": False}
+            for pid in pids
+        ]
         self._states = 0  # states committed since the start: the official "index"
         self._sizes: dict[str, list[float]] | None = None  # mesh geom sizes, computed on first use
         self._lock = threading.Lock()
@@ -381,8 +468,15 @@ class WebMcpPage:
     # -------------------------------------------------------------------- definitions
     def definitions(self) -> list[dict]:
         """``{name, description, inputSchema, annotations}`` of each registered tool, in order."""
-        return [{"name": t.name, "description": t.description, "inputSchema": t.input_schema,
-                 "annotations": {"readOnlyHint": t.read_only}} for t in (PAGE_TOOLS[n] for n in self.tools)]
+        return [
+            {
+                "name": t.name,
+                "description": t.description,
+                "inputSchema": t.input_schema,
+                "annotations": {"readOnlyHint": t.read_only},
+            }
+            for t in (PAGE_TOOLS[n] for n in self.tools)
+        ]
 
     def not_registered_message(self, name: Any) -> str:
         why = ""
@@ -390,8 +484,10 @@ class WebMcpPage:
             why = " (it needs physics, which is disabled in this episode)"
         elif name in PAGE_TOOLS:
             why = " (it is not enabled in this episode)"
-        return (f"toolName {short_repr(name)} is not registered on the episode page{why}; "
-                f"registered tools: {', '.join(self.tools)}")
+        return (
+            f"toolName {short_repr(name)} is not registered on the episode page{why}; "
+            f"registered tools: {', '.join(self.tools)}"
+        )
 
     # -------------------------------------------------------------------- ids
     def _group_to_official(self, gid: str) -> str:
@@ -408,8 +504,11 @@ class WebMcpPage:
         raise _Refused(f"unknown {kinds} id {short_repr(oid)}; use list_objects for the ids")
 
     def _official_group(self, rec: dict) -> dict:
-        return {"id": self._group_to_official(rec["id"]), "name": rec["name"],
-                "members": [self._to_official[m] for m in rec["members"]]}
+        return {
+            "id": self._group_to_official(rec["id"]),
+            "name": rec["name"],
+            "members": [self._to_official[m] for m in rec["members"]],
+        }
 
     def _groups(self) -> list[dict]:
         return [self._official_group(g) for g in self.episode.scene.groups_list()]
@@ -426,11 +525,25 @@ class WebMcpPage:
     def _object(self, pid: str, position: list[float], quaternion: list[float]) -> dict:
         k = sorted(self.episode.part_ids).index(pid)
         return {
-            **self.catalogue[k], "position": position, "quaternion": quaternion, "velocity": [0.0] * 6,
-            "mass": _MASS, "movable": True, "inertia": list(_INERTIA), "centerOfMass": [0.0, 0.0, 0.0],
+            **self.catalogue[k],
+            "position": position,
+            "quaternion": quaternion,
+            "velocity": [0.0] * 6,
+            "mass": _MASS,
+            "movable": True,
+            "inertia": list(_INERTIA),
+            "centerOfMass": [0.0, 0.0, 0.0],
             "inertiaQuaternion": [1.0, 0.0, 0.0, 0.0],
-            "geometries": [{"index": k, "type": _MESH, "size": self._size(pid),
-                            "friction": list(_FRICTION), "condim": _CONDIM, "collidable": False}],
+            "geometries": [
+                {
+                    "index": k,
+                    "type": _MESH,
+                    "size": self._size(pid),
+                    "friction": list(_FRICTION),
+                    "condim": _CONDIM,
+                    "collidable": False,
+                }
+            ],
         }
 
     def _to_official_text(self, message: str) -> str:
@@ -453,8 +566,9 @@ class WebMcpPage:
                     raise _Refused(f"Invalid {name} arguments: " + "; ".join(problems) + ".")
                 tool, args = self._project_call(name, arguments)
             except _Refused as exc:
-                msg = self.episode.reject(name, arguments if isinstance(arguments, Mapping) else {"_raw": arguments},
-                                          str(exc))
+                msg = self.episode.reject(
+                    name, arguments if isinstance(arguments, Mapping) else {"_raw": arguments}, str(exc)
+                )
                 return PageReply({"error": msg, "code": _error_code(msg) if msg != str(exc) else "invalid_argument"})
             try:
                 result = self.episode.call(tool, args)
@@ -494,20 +608,43 @@ class WebMcpPage:
         if name == "get_object":
             return PageReply(self._object(result["id"], result["position"], result["quaternion"]))
         if name == "get_scene":
-            return PageReply({"name": self.episode_id, "units": "normalized", "up": "Z", "quaternion": "wxyz",
-                              "runtime": {"physics": dict(PHYSICS), "enabledTools": list(self.enabled)},
-                              "objects": [dict(o) for o in self.catalogue]})
+            return PageReply(
+                {
+                    "name": self.episode_id,
+                    "units": "normalized",
+                    "up": "Z",
+                    "quaternion": "wxyz",
+                    "runtime": {"physics": dict(PHYSICS), "enabledTools": list(self.enabled)},
+                    "objects": [dict(o) for o in self.catalogue],
+                }
+            )
         if name == "get_state":
             poses = result["poses"]
-            objects = [self._object(pid, poses[pid]["position"], poses[pid]["quaternion"])
-                       for pid in sorted(self.episode.part_ids)]
-            return PageReply({"index": self._states, "units": "normalized", "objects": objects,
-                              "groups": self._groups(), "camera": self._camera(), "contacts": []})
+            objects = [
+                self._object(pid, poses[pid]["position"], poses[pid]["quaternion"])
+                for pid in sorted(self.episode.part_ids)
+            ]
+            return PageReply(
+                {
+                    "index": self._states,
+                    "units": "normalized",
+                    "objects": objects,
+                    "groups": self._groups(),
+                    "camera": self._camera(),
+                    "contacts": [],
+                }
+            )
         if name == "capture_scene":
             assert isinstance(result, Capture)
             data = base64.b64encode(result.png).decode("ascii")
-            return PageReply({"content": [{"type": "image", "mimeType": "image/png", "data": data}],
-                              "camera": self._camera(), "render": dict(RENDER)}, png=result.png)
+            return PageReply(
+                {
+                    "content": [{"type": "image", "mimeType": "image/png", "data": data}],
+                    "camera": self._camera(),
+                    "render": dict(RENDER),
+                },
+                png=result.png,
+            )
         if name == "start_episode":
             return PageReply({"status": "active"})
         raise AssertionError(f"no reply shape for {name}")  # every registered tool is handled above

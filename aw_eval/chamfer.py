@@ -8,7 +8,7 @@ padded to a power of two, so memory stays bounded and few shapes are compiled.
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -20,7 +20,7 @@ __all__ = ["chamfer", "chamfer_pairs", "CHUNK"]
 CHUNK = 8
 
 
-@lru_cache(maxsize=None)
+@cache
 def _pairs_fn():
     jax, jnp = jax_modules()
 

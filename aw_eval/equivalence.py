@@ -33,8 +33,16 @@ def part_frames(clouds: np.ndarray, divisor: float) -> list[np.ndarray]:
     return out
 
 
-def pair_cd(q_i: np.ndarray, q_j: np.ndarray, settings: ProtocolSettings, tree_i=None, tree_j=None,
-            decide: bool = False, graph_i=None, graph_j=None) -> float:
+def pair_cd(
+    q_i: np.ndarray,
+    q_j: np.ndarray,
+    settings: ProtocolSettings,
+    tree_i=None,
+    tree_j=None,
+    decide: bool = False,
+    graph_i=None,
+    graph_j=None,
+) -> float:
     """Best CD of ``q_i -> q_j`` (both in their PCA frames) over the 24 starts ``(S, 0)``.
 
     ``decide=True`` answers only "is it <= equiv_cd?": it returns the first objective at or
@@ -54,8 +62,14 @@ def pair_cd(q_i: np.ndarray, q_j: np.ndarray, settings: ProtocolSettings, tree_i
     return float(best)
 
 
-def equivalence_groups(clouds: np.ndarray, divisor: float, settings: ProtocolSettings | None = None, *,
-                       show_progress: bool = True, workers: int | None = None) -> list[list[int]]:
+def equivalence_groups(
+    clouds: np.ndarray,
+    divisor: float,
+    settings: ProtocolSettings | None = None,
+    *,
+    show_progress: bool = True,
+    workers: int | None = None,
+) -> list[list[int]]:
     """Groups (sorted index lists, ordered by first member) of ``clouds (P, n, 3)`` (baked frame).
 
     ``show_progress``: a progress display when many pairs need registering (and, either way, a
@@ -74,14 +88,24 @@ def equivalence_groups(clouds: np.ndarray, divisor: float, settings: ProtocolSet
 
     def is_edge(i: int, j: int) -> bool:
         (tree_i, graph_i), (tree_j, graph_j) = search(i), search(j)
-        return pair_cd(qs[i], qs[j], settings, tree_i, tree_j, decide=True, graph_i=graph_i,
-                       graph_j=graph_j) <= settings.equiv_cd
+        return (
+            pair_cd(qs[i], qs[j], settings, tree_i, tree_j, decide=True, graph_i=graph_i, graph_j=graph_j)
+            <= settings.equiv_cd
+        )
 
-    return registration_groups(qs, settings.equiv_cd, is_edge, what=f"equivalence groups of {len(qs)} parts",
-                               show_progress=show_progress, workers=workers)
+    return registration_groups(
+        qs,
+        settings.equiv_cd,
+        is_edge,
+        what=f"equivalence groups of {len(qs)} parts",
+        show_progress=show_progress,
+        workers=workers,
+    )
 
 
-def equivalence_groups_all_pairs(clouds: np.ndarray, divisor: float, settings: ProtocolSettings | None = None) -> list[list[int]]:
+def equivalence_groups_all_pairs(
+    clouds: np.ndarray, divisor: float, settings: ProtocolSettings | None = None
+) -> list[list[int]]:
     """The groups by registering every pair ``i < j`` in full (no bound, no skipped pair): the
     plain statement :func:`equivalence_groups` is tested against, with the same kernels."""
     settings = settings or ProtocolSettings()

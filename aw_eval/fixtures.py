@@ -17,8 +17,15 @@ import trimesh
 
 from aw.pose import IDENTITY_POSE, apply_pose, compose_poses, invert_pose, quat_from_axis_angle, quat_to_matrix
 
-__all__ = ["SyntheticObject", "make_object", "random_rotation_quat", "perturb", "random_checkpoints", "trajectory_checkpoints",
-           "PERTURBATION_KINDS"]
+__all__ = [
+    "SyntheticObject",
+    "make_object",
+    "random_rotation_quat",
+    "perturb",
+    "random_checkpoints",
+    "trajectory_checkpoints",
+    "PERTURBATION_KINDS",
+]
 
 
 @dataclass
@@ -91,7 +98,9 @@ def make_object(n_parts: int, seed: int = 0, identical_legs: bool = True) -> Syn
         baked.append(_moved(m, layout))
         targets.append(invert_pose(layout))
     legs = [i for i, k in enumerate(kinds) if k == "leg"]
-    return SyntheticObject(baked, np.stack(targets), [f"p{i + 1:02d}" for i in range(n_parts)], [legs] if len(legs) > 1 else [])
+    return SyntheticObject(
+        baked, np.stack(targets), [f"p{i + 1:02d}" for i in range(n_parts)], [legs] if len(legs) > 1 else []
+    )
 
 
 def _rot(q):
@@ -101,7 +110,9 @@ def _rot(q):
 PERTURBATION_KINDS = ("exact", "tiny", "near", "small", "medium", "far", "never")
 
 
-def perturb(target_pose: np.ndarray, kind: str, rng: np.random.Generator, centre: np.ndarray | None = None) -> np.ndarray:
+def perturb(
+    target_pose: np.ndarray, kind: str, rng: np.random.Generator, centre: np.ndarray | None = None
+) -> np.ndarray:
     """A part pose near ``target_pose`` (baked frame -> assembled frame).
 
     ``kind``: ``exact`` (the target), ``tiny`` (~1e-3 units and 0.1 deg), ``near`` (~0.01 and 1 deg),
@@ -129,7 +140,9 @@ def perturb(target_pose: np.ndarray, kind: str, rng: np.random.Generator, centre
     return compose_poses(delta, target_pose)
 
 
-def random_checkpoints(obj: SyntheticObject, n: int, seed: int = 0, kinds=PERTURBATION_KINDS, global_motion: bool = True) -> np.ndarray:
+def random_checkpoints(
+    obj: SyntheticObject, n: int, seed: int = 0, kinds=PERTURBATION_KINDS, global_motion: bool = True
+) -> np.ndarray:
     """``(n, P, 7)`` checkpoints: each draws one dominant perturbation kind, applies it to a random
     subset of parts (others exact or tiny), and optionally moves the whole prediction rigidly."""
     rng = np.random.default_rng(seed)

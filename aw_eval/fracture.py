@@ -40,13 +40,24 @@ from scipy.spatial.transform import Rotation
 
 from aw.official.episode import free_body_rotations
 from aw.prepare.official_protocol import (
-    FRACTURE_MINIMUM as MINIMUM, FRACTURE_SEED as SEED, FRACTURE_TOTAL as TOTAL, fracture_divisor, fracture_samples,
-    rotation_of,
+    FRACTURE_SEED as SEED,
 )
 from aw.prepare.official_protocol import allocate_fracture_samples as allocate_samples
+from aw.prepare.official_protocol import (
+    fracture_divisor,
+    fracture_samples,
+    rotation_of,
+)
 
-__all__ = ["FractureMetrics", "SEED", "allocate_samples", "fracture_divisor", "fracture_metrics",
-           "fracture_metrics_from_samples", "wrapped_euler_error"]
+__all__ = [
+    "FractureMetrics",
+    "SEED",
+    "allocate_samples",
+    "fracture_divisor",
+    "fracture_metrics",
+    "fracture_metrics_from_samples",
+    "wrapped_euler_error",
+]
 
 PA_THRESHOLD = 0.01
 
@@ -70,9 +81,12 @@ def wrapped_euler_error(r_pred: np.ndarray, r_target: np.ndarray) -> np.ndarray:
     """Per-part RMS of the wrapped intrinsic-XYZ Euler differences (degrees), rotations ``(P, 3, 3)``."""
     out = []
     for rp, rt in zip(np.reshape(r_pred, (-1, 3, 3)), np.reshape(r_target, (-1, 3, 3))):
-        d = np.abs(Rotation.from_matrix(rp).as_euler("XYZ", degrees=True) - Rotation.from_matrix(rt).as_euler("XYZ", degrees=True))
+        d = np.abs(
+            Rotation.from_matrix(rp).as_euler("XYZ", degrees=True)
+            - Rotation.from_matrix(rt).as_euler("XYZ", degrees=True)
+        )
         d = np.minimum(d, 360 - d)
-        out.append(np.sqrt(np.mean(d ** 2)))
+        out.append(np.sqrt(np.mean(d**2)))
     return np.array(out)
 
 
@@ -82,8 +96,9 @@ def _chamfer(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.mean(ab * ab) + np.mean(ba * ba))
 
 
-def fracture_metrics_from_samples(samples, pred_poses, target_poses, scale: float = 1.0,
-                                  pa_threshold: float = PA_THRESHOLD) -> FractureMetrics:
+def fracture_metrics_from_samples(
+    samples, pred_poses, target_poses, scale: float = 1.0, pa_threshold: float = PA_THRESHOLD
+) -> FractureMetrics:
     """Fracture metrics from per-part samples (``(n_i, 3)`` each, in the frame the poses act on),
     ``pred_poses (P, 7)`` (the free joints' coordinates of the state, as stored) and
     ``target_poses (P, 7)``, both ``[tx, ty, tz, qw, qx, qy, qz]``; coordinates are divided by
@@ -92,7 +107,12 @@ def fracture_metrics_from_samples(samples, pred_poses, target_poses, scale: floa
     pred_poses = np.asarray(pred_poses, dtype=np.float64).reshape(-1, 7)
     target_poses = np.asarray(target_poses, dtype=np.float64).reshape(-1, 7)
     p = len(samples)
-    if p < 1 or len(pred_poses) != p or len(target_poses) != p or any(s.ndim != 2 or s.shape[1:] != (3,) or len(s) < 1 for s in samples):
+    if (
+        p < 1
+        or len(pred_poses) != p
+        or len(target_poses) != p
+        or any(s.ndim != 2 or s.shape[1:] != (3,) or len(s) < 1 for s in samples)
+    ):
         raise ValueError("need one non-empty (n, 3) sample set and one pred/target pose per part")
     if not all(np.isfinite(x).all() for x in (*samples, pred_poses, target_poses)):
         raise ValueError("samples and poses must be finite")
@@ -117,17 +137,35 @@ def fracture_metrics_from_samples(samples, pred_poses, target_poses, scale: floa
     part_re = wrapped_euler_error(np.stack([r for r, _ in aligned]), np.stack([r for r, _ in target]))
     part_te = np.array([np.sqrt(np.mean((a[1] - b[1]) ** 2)) for a, b in zip(aligned, target)])
     part_cd = np.array([_chamfer(a, b) for a, b in zip(pred, gt)])
-    shape_cd = np.array([np.mean(gt_tree.query(a)[0] ** 2) + np.mean(pred_tree.query(b)[0] ** 2) for a, b in zip(pred, gt)])
+    shape_cd = np.array(
+        [np.mean(gt_tree.query(a)[0] ** 2) + np.mean(pred_tree.query(b)[0] ** 2) for a, b in zip(pred, gt)]
+    )
     return FractureMetrics(
-        re=float(np.mean(part_re)), te=float(np.mean(part_te)), pa=float(np.mean((part_cd < pa_threshold).astype(float))),
-        cd=float(np.mean(shape_cd)), part_re=part_re, part_te=part_te, part_cd=part_cd, shape_cd=shape_cd,
-        anchor=anchor, scale=float(scale), counts=counts,
+        re=float(np.mean(part_re)),
+        te=float(np.mean(part_te)),
+        pa=float(np.mean((part_cd < pa_threshold).astype(float))),
+        cd=float(np.mean(shape_cd)),
+        part_re=part_re,
+        part_te=part_te,
+        part_cd=part_cd,
+        shape_cd=shape_cd,
+        anchor=anchor,
+        scale=float(scale),
+        counts=counts,
     )
 
 
-def fracture_metrics(meshes: Sequence[tuple[np.ndarray, Sequence[Sequence[int]]]], part_ids: Sequence[str], pred_poses,
-                     target_poses, dataset: str, sample_id: str, divisor: float, seed: int = SEED,
-                     pa_threshold: float = PA_THRESHOLD) -> FractureMetrics:
+def fracture_metrics(
+    meshes: Sequence[tuple[np.ndarray, Sequence[Sequence[int]]]],
+    part_ids: Sequence[str],
+    pred_poses,
+    target_poses,
+    dataset: str,
+    sample_id: str,
+    divisor: float,
+    seed: int = SEED,
+    pa_threshold: float = PA_THRESHOLD,
+) -> FractureMetrics:
     """The fracture protocol for the task's part meshes ``(vertices (n_i, 3), faces)`` (the frame the
     poses act on), in ``part_ids`` order (sorted, as the official orders them); ``divisor`` from
     :func:`fracture_divisor`."""

@@ -14,9 +14,10 @@ import hashlib
 import json
 import os
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 import trimesh
@@ -170,11 +171,12 @@ class TaskGeometry:
         if "index" not in self._derived:
             from aw_eval.kernels import TaskIndex
 
-            self._derived["index"] = TaskIndex(self.target_parts(), self.clouds, self.target_poses, self.divisor,
-                                               self.target_rotations())
+            self._derived["index"] = TaskIndex(
+                self.target_parts(), self.clouds, self.target_poses, self.divisor, self.target_rotations()
+            )
         return self._derived["index"]
 
-    def checkpoint(self, poses) -> "Checkpoint":
+    def checkpoint(self, poses) -> Checkpoint:
         """One checkpoint ``poses (P, 7)`` checked, with its rotations and clouds computed once."""
         poses = self.check_poses(poses)
         if poses.ndim != 2:
@@ -217,7 +219,7 @@ class TaskGeometry:
         groups=None,
         settings: ProtocolSettings | None = None,
         all_part_ids: Sequence[str] | None = None,
-    ) -> "TaskGeometry":
+    ) -> TaskGeometry:
         """Geometry from given clouds ``(P, n, 3)`` (baked frame), e.g. an official benchmark's own
         point clouds, divisor and groups. ``groups=None`` computes them (fast path)."""
         settings = settings or ProtocolSettings()
@@ -254,8 +256,14 @@ class TaskGeometry:
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
         try:
             with os.fdopen(fd, "wb") as fh:
-                np.savez(fh, clouds=self.clouds, target_poses=self.target_poses, divisor=np.array(self.divisor),
-                         group_labels=labels, meta=np.array(json.dumps(meta)))
+                np.savez(
+                    fh,
+                    clouds=self.clouds,
+                    target_poses=self.target_poses,
+                    divisor=np.array(self.divisor),
+                    group_labels=labels,
+                    meta=np.array(json.dumps(meta)),
+                )
             os.replace(tmp, path)
         except OSError as exc:  # a full disk: the error names the cache entry
             Path(tmp).unlink(missing_ok=True)
@@ -265,13 +273,21 @@ class TaskGeometry:
             raise
 
     @classmethod
-    def load(cls, path: Path, **extra) -> "TaskGeometry":
+    def load(cls, path: Path, **extra) -> TaskGeometry:
         with np.load(Path(path), allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
             labels = z["group_labels"]
             groups = [tuple(np.flatnonzero(labels == g).tolist()) for g in np.unique(labels)]
-            return cls(tuple(meta["part_ids"]), z["clouds"], z["target_poses"], float(z["divisor"]), groups,
-                       ProtocolSettings(**meta["settings"]), key=meta["key"], **extra)
+            return cls(
+                tuple(meta["part_ids"]),
+                z["clouds"],
+                z["target_poses"],
+                float(z["divisor"]),
+                groups,
+                ProtocolSettings(**meta["settings"]),
+                key=meta["key"],
+                **extra,
+            )
 
 
 @dataclass(frozen=True)

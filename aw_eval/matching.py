@@ -56,7 +56,9 @@ def match_parts(index, moved_parts: np.ndarray, groups, to_baked: tuple) -> tupl
         if pm is None:  # only groups of equivalent parts need the bounds
             tm, (tlo, thi) = index.part_bounds()
             pm, plo, phi = moved_parts.mean(axis=1), moved_parts.min(axis=1), moved_parts.max(axis=1)
-        cost = np.array([[_box_gap_sq(pm[i], tlo[j], thi[j]) + _box_gap_sq(tm[j], plo[i], phi[i]) for j in g] for i in g])
+        cost = np.array(
+            [[_box_gap_sq(pm[i], tlo[j], thi[j]) + _box_gap_sq(tm[j], plo[i], phi[i]) for j in g] for i in g]
+        )
         exact = np.zeros((k, k), dtype=bool)
         while True:
             cols = match_within_groups(cost, [list(range(k))])[0]

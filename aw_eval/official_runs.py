@@ -30,16 +30,31 @@ import numpy as np
 
 from aw.cli.common import plural
 from aw.formats import FormatError
-from aw.official.evaluation_output import error_row, row_base, scored_row, sort_rows, summarize, write_evaluation
 from aw.official.evaluation_cache import EvaluationInputs
+from aw.official.evaluation_output import error_row, row_base, scored_row, sort_rows, summarize, write_evaluation
 from aw.official.package import OfficialPackage, file_sha256
-from aw.official.runlog import (RunLog, SampleAttempt, archive_system, is_run_dir, read_attempts, read_run,
-                                select_attempts, systems)
+from aw.official.runlog import (
+    RunLog,
+    SampleAttempt,
+    archive_system,
+    is_run_dir,
+    read_attempts,
+    read_run,
+    select_attempts,
+    systems,
+)
 from aw_eval.study.runner import ScoringFailed
 from aw_eval.workers import stop_pool, watch_parent
 
-__all__ = ["is_official_package", "archive_attempts",
-           "score_state", "score_attempt", "evaluate_system", "evaluate", "main"]
+__all__ = [
+    "is_official_package",
+    "archive_attempts",
+    "score_state",
+    "score_attempt",
+    "evaluate_system",
+    "evaluate",
+    "main",
+]
 
 SCD_SCALE = 1000.0  # the official SCD is 1000 x the aligned squared Chamfer (geometry.py)
 
@@ -93,17 +108,42 @@ def score_state(inputs: EvaluationInputs, poses: np.ndarray) -> dict[str, Any]:
     from aw_eval import TaskGeometry, score
     from aw_eval.results import start_label
 
-    geom = TaskGeometry.from_points(inputs.part_ids, np.asarray(inputs.points, dtype=np.float64),
-                                    np.asarray(inputs.target_poses, dtype=np.float64), float(inputs.divisor), inputs.groups)
+    geom = TaskGeometry.from_points(
+        inputs.part_ids,
+        np.asarray(inputs.points, dtype=np.float64),
+        np.asarray(inputs.target_poses, dtype=np.float64),
+        float(inputs.divisor),
+        inputs.groups,
+    )
     res = score(geom, np.asarray(poses, dtype=np.float64), mode="exact")
     ids = list(geom.part_ids)
     threshold = geom.settings.threshold
-    parts = sorted(({"part_id": p, "target_part_id": ids[int(res.assignment[k])], "chamfer": float(res.part_errors[k]),
-                     "correct": bool(res.part_errors[k] <= threshold)} for k, p in enumerate(ids)), key=lambda r: r["part_id"])
+    parts = sorted(
+        (
+            {
+                "part_id": p,
+                "target_part_id": ids[int(res.assignment[k])],
+                "chamfer": float(res.part_errors[k]),
+                "correct": bool(res.part_errors[k] <= threshold),
+            }
+            for k, p in enumerate(ids)
+        ),
+        key=lambda r: r["part_id"],
+    )
     kind, index = start_label(res.start_index)
-    alignment = {"rotation": res.reg_rotation.tolist(), "translation": res.reg_translation.tolist(), "chamfer": float(res.scd),
-                 "seed": f"{kind}-{index}"}
-    return {"SCD": SCD_SCALE * float(res.scd), "PA": float(res.pa), "SR": bool(res.sr), "parts": parts, "alignment": alignment}
+    alignment = {
+        "rotation": res.reg_rotation.tolist(),
+        "translation": res.reg_translation.tolist(),
+        "chamfer": float(res.scd),
+        "seed": f"{kind}-{index}",
+    }
+    return {
+        "SCD": SCD_SCALE * float(res.scd),
+        "PA": float(res.pa),
+        "SR": bool(res.sr),
+        "parts": parts,
+        "alignment": alignment,
+    }
 
 
 def score_attempt(attempt: SampleAttempt, sources: OfficialPackage) -> dict[str, Any]:
@@ -122,8 +162,17 @@ def score_attempt(attempt: SampleAttempt, sources: OfficialPackage) -> dict[str,
         inputs = sources.evaluation_inputs(attempt.block, attempt.sample_id)
         poses, state_index = sources.final_state(attempt.block, attempt.sample_id, attempt.final_archive)
         m = score_state(inputs, poses)
-        return scored_row(base, scd=m["SCD"], pa=m["PA"], sr=m["SR"], episode_sha256=checksum, state_index=state_index,
-                          parts=m["parts"], alignment=m["alignment"], scale_divisor=float(inputs.divisor))
+        return scored_row(
+            base,
+            scd=m["SCD"],
+            pa=m["PA"],
+            sr=m["SR"],
+            episode_sha256=checksum,
+            state_index=state_index,
+            parts=m["parts"],
+            alignment=m["alignment"],
+            scale_divisor=float(inputs.divisor),
+        )
     except Exception as exc:  # every failure of one sample is that sample's error row
         return error_row(base, exc)
 
@@ -132,8 +181,9 @@ def _score_job(job: tuple[SampleAttempt, OfficialPackage]) -> dict[str, Any]:
     return score_attempt(*job)
 
 
-def evaluate_system(attempts: Mapping[tuple[str, str], SampleAttempt], sources: OfficialPackage, out_dir: str | Path,
-                    jobs: int = 1) -> dict[str, Any]:
+def evaluate_system(
+    attempts: Mapping[tuple[str, str], SampleAttempt], sources: OfficialPackage, out_dir: str | Path, jobs: int = 1
+) -> dict[str, Any]:
     """Score every attempt, write ``metrics.jsonl`` and ``summary.json`` into the new folder
     ``out_dir``; returns the summary."""
     if not attempts:
@@ -141,14 +191,19 @@ def evaluate_system(attempts: Mapping[tuple[str, str], SampleAttempt], sources: 
     items = [attempts[k] for k in sorted(attempts)]
     if jobs > 1 and len(items) > 1:
         # spawn, as the study's pool: forking a process that has started JAX's threads can deadlock
-        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=watch_parent, initargs=(os.getpid(),))  # a killed aw-score takes its workers with it
+        pool = ProcessPoolExecutor(
+            max_workers=jobs,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=watch_parent,
+            initargs=(os.getpid(),),
+        )  # a killed aw-score takes its workers with it
         try:
             rows = list(pool.map(_score_job, [(a, sources) for a in items]))
         except BrokenProcessPool as exc:  # a worker died: the tool failed, not the runs
             stop_pool(pool)
-            raise ScoringFailed(f"scoring failed: a scoring worker process died ({exc}); "
-                                "no evaluation was written") from None
+            raise ScoringFailed(
+                f"scoring failed: a scoring worker process died ({exc}); no evaluation was written"
+            ) from None
         except BaseException:  # Ctrl-C, SIGTERM: end the workers now, not after their tasks
             stop_pool(pool)
             raise
@@ -161,8 +216,13 @@ def evaluate_system(attempts: Mapping[tuple[str, str], SampleAttempt], sources: 
     return summary
 
 
-def evaluate(sources: OfficialPackage, runs_dir: str | Path, out_dir: str | Path, jobs: int = 1,
-             log: Callable[[str], None] = lambda m: None) -> dict[str, dict[str, Any]]:
+def evaluate(
+    sources: OfficialPackage,
+    runs_dir: str | Path,
+    out_dir: str | Path,
+    jobs: int = 1,
+    log: Callable[[str], None] = lambda m: None,
+) -> dict[str, dict[str, Any]]:
     """Every system found in ``runs_dir`` (module doc) -> its summary, written under
     ``OUT/official/<system>/``."""
     root = Path(runs_dir)

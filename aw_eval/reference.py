@@ -83,8 +83,16 @@ def _objective(p: np.ndarray, t_pts: np.ndarray, tree_t: cKDTree, tree_p: cKDTre
     return float(dfwd.mean() + dbwd.mean()), fwd, bwd
 
 
-def icp(p, t_pts, r0, t0, max_iters: int = 100, tol: float = 1e-9, tree_t: cKDTree | None = None,
-        tree_p: cKDTree | None = None):
+def icp(
+    p,
+    t_pts,
+    r0,
+    t0,
+    max_iters: int = 100,
+    tol: float = 1e-9,
+    tree_t: cKDTree | None = None,
+    tree_p: cKDTree | None = None,
+):
     """Symmetric ICP of ``p (n, 3)`` onto ``t_pts (m, 3)`` from ``(r0, t0)``.
 
     Each iteration fits ONE proper Kabsch transform of the original ``p`` to ``t_pts`` on the

@@ -24,14 +24,36 @@ import numpy as np
 
 from aw.pose import as_finite
 from aw_eval.geometry import Checkpoint, TaskGeometry
-from aw_eval.kernels import (ICPProblem, accelerator_present, build_tree, coarse_to_fine, fast_settings, graph_for,
-                             icp_batch, same_basin)
+from aw_eval.kernels import (
+    ICPProblem,
+    accelerator_present,
+    build_tree,
+    coarse_to_fine,
+    fast_settings,
+    graph_for,
+    icp_batch,
+    same_basin,
+)
 from aw_eval.results import Registration
 from aw_eval.settings import ProtocolSettings
 from aw_eval.starts import pca_starts, same_id_starts, start_frame
 
-__all__ = ["MODES", "BACKENDS", "resolve_backend", "register_exact_many", "jax_part_maps", "checkpoint_starts", "register_points", "register_exact", "register_fast", "escalate", "near_threshold",
-           "register", "register_checkpoint", "CONTACT_WALKS"]
+__all__ = [
+    "MODES",
+    "BACKENDS",
+    "resolve_backend",
+    "register_exact_many",
+    "jax_part_maps",
+    "checkpoint_starts",
+    "register_points",
+    "register_exact",
+    "register_fast",
+    "escalate",
+    "near_threshold",
+    "register",
+    "register_checkpoint",
+    "CONTACT_WALKS",
+]
 
 MODES = ("exact", "fast")
 # numba: compiled walks on the CPU, one start at a time; jax: batched leaf-box certified lookups on
@@ -47,8 +69,9 @@ def checkpoint_starts(geom: TaskGeometry, ck: Checkpoint) -> tuple[np.ndarray, n
     return np.concatenate([r_pca, r_part]), np.concatenate([t_pca, t_part])
 
 
-def register_points(prob: ICPProblem, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float,
-                    after_first=None) -> Registration:
+def register_points(
+    prob: ICPProblem, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float, after_first=None
+) -> Registration:
     """Every start refined by the protocol's ICP; the lowest objective wins, ties to the earlier.
     ``after_first``: optional ``(problem, first start's ICPResult) -> problem`` for the remaining
     starts (the same registration problem with another search structure: same answers)."""
@@ -111,9 +134,18 @@ def register_exact_many(geom: TaskGeometry, cks: list[Checkpoint], stats: dict |
     starts = [checkpoint_starts(geom, ck) for ck in cks]
     preds = np.stack([ck.points for ck in cks])
     target_leaves, baked_leaves = geom.index().part_leaves(geom.divisor)
-    obj, rot, trans = icp_batch(preds, geom.index().target, np.stack([s[0] for s in starts]),
-                                np.stack([s[1] for s in starts]), st.max_iters, st.tol, target_leaves=target_leaves,
-                                pred_leaves=baked_leaves, pred_maps=jax_part_maps(geom, cks), stats=stats)
+    obj, rot, trans = icp_batch(
+        preds,
+        geom.index().target,
+        np.stack([s[0] for s in starts]),
+        np.stack([s[1] for s in starts]),
+        st.max_iters,
+        st.tol,
+        target_leaves=target_leaves,
+        pred_leaves=baked_leaves,
+        pred_maps=jax_part_maps(geom, cks),
+        stats=stats,
+    )
     best = np.argmin(obj, axis=1)
     return [Registration(float(obj[c, k]), rot[c, k], trans[c, k], int(k), obj[c]) for c, k in enumerate(best)]
 
@@ -121,16 +153,23 @@ def register_exact_many(geom: TaskGeometry, cks: list[Checkpoint], stats: dict |
 def register_exact(geom: TaskGeometry, ck: Checkpoint) -> Registration:
     """The protocol's registration of ``ck``: every start at full resolution."""
     r0, t0 = checkpoint_starts(geom, ck)
-    return register_points(_full_problem(geom, ck), r0, t0, geom.settings.max_iters, geom.settings.tol,
-                           _own_graph_where_parts_touch(geom.index(), ck.parts))
+    return register_points(
+        _full_problem(geom, ck),
+        r0,
+        t0,
+        geom.settings.max_iters,
+        geom.settings.tol,
+        _own_graph_where_parts_touch(geom.index(), ck.parts),
+    )
 
 
 def register_fast(geom: TaskGeometry, ck: Checkpoint) -> Registration:
     """``fast``'s coarse-to-fine registration of ``ck`` (no escalation; see :mod:`aw_eval.kernels.fast`)."""
     st = geom.settings
     r0, t0 = checkpoint_starts(geom, ck)
-    res, start = coarse_to_fine(geom.index(), ck.parts, _full_problem(geom, ck), r0, t0, st.max_iters, st.tol,
-                                fast_settings())
+    res, start = coarse_to_fine(
+        geom.index(), ck.parts, _full_problem(geom, ck), r0, t0, st.max_iters, st.tol, fast_settings()
+    )
     return Registration(res.objective, res.rotation, res.translation, start, None)
 
 
@@ -154,8 +193,9 @@ def escalate(geom: TaskGeometry, ck: Checkpoint, reg: Registration, warm: Regist
     ``warm`` is ignored and the refinement starts at ``reg``.
     """
     st, fast = geom.settings, fast_settings()
-    near = warm is not None and same_basin(warm.rotation, warm.translation, reg.rotation, reg.translation,
-                                           fast.warm_deg, fast.warm_t)
+    near = warm is not None and same_basin(
+        warm.rotation, warm.translation, reg.rotation, reg.translation, fast.warm_deg, fast.warm_t
+    )
     start = warm if near else reg
     res = _full_problem(geom, ck).run(start.rotation, start.translation, st.max_iters, st.tol)
     if res.objective < reg.scd:

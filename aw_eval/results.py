@@ -106,7 +106,7 @@ class BatchScores:
         )
 
     @classmethod
-    def stack(cls, rows: list[ScoreResult], mode: str, n_unique: int, stats: dict | None = None) -> "BatchScores":
+    def stack(cls, rows: list[ScoreResult], mode: str, n_unique: int, stats: dict | None = None) -> BatchScores:
         p = len(rows[0].part_errors) if rows else 0
         return cls(
             part_errors=np.array([r.part_errors for r in rows]).reshape(len(rows), p),

@@ -8,7 +8,7 @@ than XLA's): start at index 0; each step takes the candidate with the largest sq
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import trimesh
@@ -52,7 +52,7 @@ def fps_numpy(points: np.ndarray, k: int) -> np.ndarray:
     return out
 
 
-@lru_cache(maxsize=None)
+@cache
 def _fps_jax_fn(k: int):
     jax, jnp = jax_modules()
 
@@ -95,7 +95,9 @@ def part_clouds(meshes: list[trimesh.Trimesh], settings: ProtocolSettings, use_j
     ``i`` with :func:`part_seed` ``(settings.seed, i)``, then FPS (the compiled CPU kernel
     :func:`aw_eval.kernels.fps_batch`, on this process's share of the cores, or :func:`fps_jax`:
     the same indices)."""
-    cands = np.stack([surface_samples(m, settings.n_surface, part_seed(settings.seed, i)) for i, m in enumerate(meshes)])
+    cands = np.stack(
+        [surface_samples(m, settings.n_surface, part_seed(settings.seed, i)) for i, m in enumerate(meshes)]
+    )
     if use_jax:
         idx = fps_jax(cands, settings.n_fps)
     else:

@@ -28,8 +28,17 @@ from aw_eval.chamfer import chamfer_pairs
 from aw_eval.geometry import Checkpoint, TaskGeometry
 from aw_eval.kernels import fast_settings, part_cd_batch
 from aw_eval.metrics import finalize, finalize_costs
-from aw_eval.registration import (BACKENDS, MODES, check_mode, escalate, near_threshold, register_exact, register_exact_many,
-                                  register_fast, resolve_backend)
+from aw_eval.registration import (
+    BACKENDS,
+    MODES,
+    check_mode,
+    escalate,
+    near_threshold,
+    register_exact,
+    register_exact_many,
+    register_fast,
+    resolve_backend,
+)
 from aw_eval.results import BatchScores, Registration, ScoreResult
 
 __all__ = ["MODES", "BACKENDS", "JAX_CHUNK", "score", "score_batch", "part_diagnostics", "PartDiagnostics"]
@@ -52,7 +61,9 @@ def score(geom: TaskGeometry, poses, mode: str = "exact", backend: str = "auto")
     return _score_one(geom, geom.checkpoint(poses), mode, None)[0]
 
 
-def _score_many_jax(geom: TaskGeometry, cks: list[Checkpoint], mode: str, stats: dict | None = None) -> list[ScoreResult]:
+def _score_many_jax(
+    geom: TaskGeometry, cks: list[Checkpoint], mode: str, stats: dict | None = None
+) -> list[ScoreResult]:
     """``exact`` scores of ``cks`` on the jax backend: registration and the part CDs within
     equivalence groups batched over the checkpoints; the Hungarian step and the metrics on the
     host. ``stats``: adds seconds per stage (``structures``, ``icp``, ``part_cd``, ``host``) and
@@ -71,12 +82,20 @@ def _score_many_jax(geom: TaskGeometry, cks: list[Checkpoint], mode: str, stats:
     out = [finalize_costs(geom, r, c, mode) for r, c in zip(regs[: len(cks)], costs)]
     if stats is not None:
         t4 = time.perf_counter()
-        for key, v in (("structures", t1 - t0), ("icp", t2 - t1), ("part_cd", t3 - t2), ("host", t4 - t3), *icp_stats.items()):
+        for key, v in (
+            ("structures", t1 - t0),
+            ("icp", t2 - t1),
+            ("part_cd", t3 - t2),
+            ("host", t4 - t3),
+            *icp_stats.items(),
+        ):
             stats[key] = stats.get(key, 0) + v
     return out
 
 
-def _score_one(geom: TaskGeometry, ck: Checkpoint, mode: str, warm: Registration | None) -> tuple[ScoreResult, Registration | None]:
+def _score_one(
+    geom: TaskGeometry, ck: Checkpoint, mode: str, warm: Registration | None
+) -> tuple[ScoreResult, Registration | None]:
     """Score checkpoint ``ck``; returns the result and, in ``fast`` mode, the refined registration
     when the checkpoint was near a threshold (else ``None``): the next checkpoint of a
     trajectory passes it back as ``warm`` (see :func:`aw_eval.registration.escalate`)."""
@@ -117,7 +136,9 @@ def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None, b
         raise ValueError(f"score_batch takes (N, P, 7) poses, got {poses.shape}")
     n = poses.shape[0]
     if n == 0:
-        empty = ScoreResult(0.0, False, 0.0, False, np.zeros(geom.n_parts), np.arange(geom.n_parts), np.eye(3), np.zeros(3), 0)
+        empty = ScoreResult(
+            0.0, False, 0.0, False, np.zeros(geom.n_parts), np.arange(geom.n_parts), np.eye(3), np.zeros(3), 0
+        )
         out = BatchScores.stack([empty], mode, 0)
         return BatchScores(**{k: (v[:0] if isinstance(v, np.ndarray) else v) for k, v in out.__dict__.items()})
     flat = np.ascontiguousarray(poses.reshape(n, -1))
@@ -127,12 +148,16 @@ def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None, b
     warm = None
     order = sorted(first)
     stats = {"seconds": 0.0}
-    long_work = _LongWork(len(first), f"scoring {len(first)} states of a {geom.n_parts}-part task ({mode}, {backend})", t0)
+    long_work = _LongWork(
+        len(first), f"scoring {len(first)} states of a {geom.n_parts}-part task ({mode}, {backend})", t0
+    )
     if backend == "jax":
         stats["jax"] = {}
         for lo in range(0, len(order), JAX_CHUNK):
-            keys = order[lo: lo + JAX_CHUNK]
-            results.update(zip(keys, _score_many_jax(geom, [geom.checkpoint(poses[k]) for k in keys], mode, stats["jax"])))
+            keys = order[lo : lo + JAX_CHUNK]
+            results.update(
+                zip(keys, _score_many_jax(geom, [geom.checkpoint(poses[k]) for k in keys], mode, stats["jax"]))
+            )
             long_work.done(lo + len(keys))
             if progress is not None:
                 progress(lo + len(keys), len(first))
@@ -162,8 +187,12 @@ class _LongWork:
         left = pace * (self.total - count)
         if left > _progress.WARN_AFTER_S:
             self.warned = True
-            warnings.warn(f"{self.what}: {self.total - count} left, about {left / 60:.0f} min on this machine "
-                          f"({pace:.1f} s a state)", _progress.LongWorkWarning, stacklevel=3)
+            warnings.warn(
+                f"{self.what}: {self.total - count} left, about {left / 60:.0f} min on this machine "
+                f"({pace:.1f} s a state)",
+                _progress.LongWorkWarning,
+                stacklevel=3,
+            )
 
 
 @dataclass
@@ -213,4 +242,3 @@ def part_diagnostics(geom: TaskGeometry, poses, result, row: int | None = None, 
     q = poses[:, 3:] / np.linalg.norm(poses[:, 3:], axis=1, keepdims=True)
     never = (np.abs(poses[:, :3]).max(axis=1) <= atol) & (np.abs(np.abs(q[:, 0]) - 1.0) <= atol)
     return PartDiagnostics(offset, centred, never, np.asarray(res.part_errors), np.asarray(res.assignment))
-

@@ -72,8 +72,9 @@ def pca_starts(pred_frame: tuple[np.ndarray, np.ndarray], target_frame: tuple[np
     return r, mu_t - r @ mu_p
 
 
-def same_id_starts(rotations: np.ndarray, poses: np.ndarray, target_rotations: np.ndarray, target_poses: np.ndarray,
-                   divisor: float):
+def same_id_starts(
+    rotations: np.ndarray, poses: np.ndarray, target_rotations: np.ndarray, target_poses: np.ndarray, divisor: float
+):
     """One start per part ``(R0 (P, 3, 3), t0 (P, 3))`` from a checkpoint's ``poses (P, 7)`` and
     their ``rotations (P, 3, 3)``, and the target's (same shapes)."""
     r = target_rotations @ np.swapaxes(rotations, 1, 2)

@@ -10,8 +10,6 @@ from __future__ import annotations
 from typing import Any
 
 import anyio.to_thread
-from pydantic import ValidationError
-
 from mcp.server.mcpserver import Image, MCPServer
 from mcp.server.mcpserver.exceptions import ResourceError, ToolError
 from mcp.server.mcpserver.prompts.base import Prompt, UserMessage
@@ -19,6 +17,7 @@ from mcp.server.mcpserver.resources import FunctionResource
 from mcp.server.mcpserver.tools import Tool
 from mcp.server.mcpserver.utilities.func_metadata import FuncMetadata
 from mcp_types import TextContent, ToolAnnotations
+from pydantic import ValidationError
 
 from aw.episode import Capture, Episode, EpisodeError
 from aw.formats import Task
@@ -153,8 +152,12 @@ def build_server(episode: Episode, *, log_level: str = "WARNING") -> MCPServer:
     tools = [_make_tool(spec, episode) for spec in TOOL_SPECS]
     resources = _reference_resources(task)
     prompt_text = FunctionResource(
-        uri=PROMPT_URI, name="task-prompt", title="AssemblyWorld task text",
-        description="The task text given to the agent.", mime_type="text/plain", fn=lambda: task.prompt,
+        uri=PROMPT_URI,
+        name="task-prompt",
+        title="AssemblyWorld task text",
+        description="The task text given to the agent.",
+        mime_type="text/plain",
+        fn=lambda: task.prompt,
     )
     server = MCPServer(
         SERVER_NAME,

@@ -37,8 +37,9 @@ def _positive_minutes(text: str) -> float:
     from aw.formats.task import MAX_BUDGET_MINUTES
 
     if not (math.isfinite(v) and 0 < v <= MAX_BUDGET_MINUTES):
-        raise argparse.ArgumentTypeError(f"must be a positive number of minutes, at most {MAX_BUDGET_MINUTES:g}, "
-                                         f"got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"must be a positive number of minutes, at most {MAX_BUDGET_MINUTES:g}, got {text!r}"
+        )
     return v
 
 
@@ -53,36 +54,72 @@ def _port(text: str) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = new_parser("aw-serve", "Serve an AssemblyWorld task over MCP (stdio by default) and record the episode.",
-                   epilog="One MCP config for many sessions: --record-under DIR records session k of a task in "
-                   "DIR/attempt-k/<task_id>/ (the first attempt number free for that task), a layout aw-score "
-                   "reads with one system per attempt. See docs/harnesses.md.")
-    p.add_argument("task_dir", type=Path, metavar="TASK_DIR", help="public task directory (task.json, parts/, references/)")
+    p = new_parser(
+        "aw-serve",
+        "Serve an AssemblyWorld task over MCP (stdio by default) and record the episode.",
+        epilog="One MCP config for many sessions: --record-under DIR records session k of a task in "
+        "DIR/attempt-k/<task_id>/ (the first attempt number free for that task), a layout aw-score "
+        "reads with one system per attempt. See docs/harnesses.md.",
+    )
+    p.add_argument(
+        "task_dir", type=Path, metavar="TASK_DIR", help="public task directory (task.json, parts/, references/)"
+    )
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--record", type=Path, metavar="RUN_DIR",
-                       help="run directory for trajectory.jsonl, final.json and captures/")
-    where.add_argument("--record-under", type=Path, metavar="DIR",
-                       help="record in a new DIR/attempt-N/<task_id>/ (N: the first free for this task), so that "
-                       "one MCP config serves many sessions")
+    where.add_argument(
+        "--record", type=Path, metavar="RUN_DIR", help="run directory for trajectory.jsonl, final.json and captures/"
+    )
+    where.add_argument(
+        "--record-under",
+        type=Path,
+        metavar="DIR",
+        help="record in a new DIR/attempt-N/<task_id>/ (N: the first free for this task), so that "
+        "one MCP config serves many sessions",
+    )
     p.add_argument("--system", default="", metavar="LABEL", help="system label stored in the trajectory header")
-    p.add_argument("--budget-minutes", type=_positive_minutes, default=None, metavar="M",
-                   help="execution budget from start_episode, in minutes (default: the task's, normally 60)")
-    p.add_argument("--transport", choices=("stdio", "http"), default="stdio",
-                   help="stdio (default; the harness launches the server) or streamable HTTP at /mcp")
-    p.add_argument("--host", default="127.0.0.1", metavar="ADDR", help="HTTP bind address (default 127.0.0.1, loopback only)")
+    p.add_argument(
+        "--budget-minutes",
+        type=_positive_minutes,
+        default=None,
+        metavar="M",
+        help="execution budget from start_episode, in minutes (default: the task's, normally 60)",
+    )
+    p.add_argument(
+        "--transport",
+        choices=("stdio", "http"),
+        default="stdio",
+        help="stdio (default; the harness launches the server) or streamable HTTP at /mcp",
+    )
+    p.add_argument(
+        "--host", default="127.0.0.1", metavar="ADDR", help="HTTP bind address (default 127.0.0.1, loopback only)"
+    )
     p.add_argument("--port", type=_port, default=8765, help="HTTP port (default 8765)")
     add_overwrite(p, "an earlier recording in RUN_DIR")
-    p.add_argument("--initial-poses", type=Path, metavar="FILE",
-                   help="start from these poses instead of the task's layout: an assemblyworld.poses file or a "
-                   "run's final.json (recorded in the trajectory header as initial_poses_from)")
-    p.add_argument("--surface", choices=("default", "official"), default="default",
-                   help="tools the agent sees: the project's scene tools (default), or the official benchmark's "
-                        "list_pages / list_webmcp_tools / execute_webmcp_tool / read_manual_page")
+    p.add_argument(
+        "--initial-poses",
+        type=Path,
+        metavar="FILE",
+        help="start from these poses instead of the task's layout: an assemblyworld.poses file or a "
+        "run's final.json (recorded in the trajectory header as initial_poses_from)",
+    )
+    p.add_argument(
+        "--surface",
+        choices=("default", "official"),
+        default="default",
+        help="tools the agent sees: the project's scene tools (default), or the official benchmark's "
+        "list_pages / list_webmcp_tools / execute_webmcp_tool / read_manual_page",
+    )
     p.add_argument("--print-prompt", action="store_true", help="print the task text and exit")
-    p.add_argument("--print-references", action="store_true",
-                   help="print the reference image paths (absolute, in order, one per line) and exit")
-    p.add_argument("--log-level", default="WARNING", choices=("DEBUG", "INFO", "WARNING", "ERROR"),
-                   help="server log level on stderr (default WARNING)")
+    p.add_argument(
+        "--print-references",
+        action="store_true",
+        help="print the reference image paths (absolute, in order, one per line) and exit",
+    )
+    p.add_argument(
+        "--log-level",
+        default="WARNING",
+        choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+        help="server log level on stderr (default WARNING)",
+    )
     return p
 
 
@@ -165,8 +202,10 @@ def main(argv: list[str] | None = None) -> int:
             os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     if args.record is None and args.record_under is None:
-        return _fail("--record RUN_DIR or --record-under DIR is required to serve "
-                     "(or use --print-prompt / --print-references)", tell_client=stdio)
+        return _fail(
+            "--record RUN_DIR or --record-under DIR is required to serve (or use --print-prompt / --print-references)",
+            tell_client=stdio,
+        )
     run_dir = args.record
     if args.record_under is not None:
         try:
@@ -186,9 +225,16 @@ def main(argv: list[str] | None = None) -> int:
 
             initial = read_initial_poses(args.initial_poses, task.task_id, task.part_ids)
         meshes = load_task_meshes(task)
-        episode = Episode(task, meshes, run_dir, system=args.system, budget_minutes=args.budget_minutes,
-                          overwrite=args.overwrite, initial_poses=initial,
-                          initial_poses_from=str(args.initial_poses.resolve()) if initial is not None else None)
+        episode = Episode(
+            task,
+            meshes,
+            run_dir,
+            system=args.system,
+            budget_minutes=args.budget_minutes,
+            overwrite=args.overwrite,
+            initial_poses=initial,
+            initial_poses_from=str(args.initial_poses.resolve()) if initial is not None else None,
+        )
     except (FormatError, RunDirError, ValueError) as exc:
         if args.record_under is not None:
             _remove_empty(run_dir)
@@ -241,7 +287,9 @@ def _is_disconnect(exc: BaseException) -> bool:
 
     if isinstance(exc, BaseExceptionGroup):
         return all(_is_disconnect(e) for e in exc.exceptions)
-    return isinstance(exc, (BrokenPipeError, ConnectionResetError, anyio.BrokenResourceError, anyio.ClosedResourceError))
+    return isinstance(
+        exc, (BrokenPipeError, ConnectionResetError, anyio.BrokenResourceError, anyio.ClosedResourceError)
+    )
 
 
 if __name__ == "__main__":

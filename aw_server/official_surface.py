@@ -29,12 +29,11 @@ from collections.abc import Callable
 from typing import Any
 
 import anyio.to_thread
-from PIL import Image as PILImage
-
 from mcp.server.mcpserver import MCPServer
 from mcp.server.mcpserver.tools import Tool
 from mcp.server.mcpserver.utilities.func_metadata import ArgModelBase, FuncMetadata
 from mcp_types import CallToolResult, ImageContent, TextContent, ToolAnnotations
+from PIL import Image as PILImage
 
 from aw.episode import Episode
 from aw.webmcp import BadInput, NotRegistered, WebMcpPage, check_arguments, parse_tool_input, short_repr
@@ -50,27 +49,37 @@ IMAGE_NOTE = "Image attached as MCP image content."
 _PAGE_ID = {"type": "number", "description": "The page's id, as list_pages shows it."}
 META_SCHEMAS: dict[str, dict] = {
     "list_pages": {"type": "object", "properties": {}, "additionalProperties": False},
-    "list_webmcp_tools": {"type": "object", "properties": {"pageId": _PAGE_ID}, "required": ["pageId"],
-                          "additionalProperties": False},
+    "list_webmcp_tools": {
+        "type": "object",
+        "properties": {"pageId": _PAGE_ID},
+        "required": ["pageId"],
+        "additionalProperties": False,
+    },
     "execute_webmcp_tool": {
         "type": "object",
         "properties": {
             "pageId": _PAGE_ID,
             "toolName": {"type": "string", "description": "Name of the page tool to run."},
-            "input": {"type": "string", "description": "The tool's arguments: a JSON object encoded as a string "
-                                                       "(default \"{}\")."},
+            "input": {
+                "type": "string",
+                "description": 'The tool\'s arguments: a JSON object encoded as a string (default "{}").',
+            },
         },
         "required": ["pageId", "toolName"],
         "additionalProperties": False,
     },
-    "read_manual_page": {"type": "object", "properties": {"page": {"type": "integer", "minimum": 1}},
-                         "required": ["page"], "additionalProperties": False},
+    "read_manual_page": {
+        "type": "object",
+        "properties": {"page": {"type": "integer", "minimum": 1}},
+        "required": ["page"],
+        "additionalProperties": False,
+    },
 }
 DESCRIPTIONS = {
     "list_pages": "List the browser pages: the loaded episode page and its id.",
     "list_webmcp_tools": "List the WebMCP tools of a page: name, description, input schema, annotations.",
     "execute_webmcp_tool": "Run one WebMCP tool of a page. input is the JSON-encoded argument object; the "
-                           "reply is JSON {status, output, errorText} with the tool's JSON result in output.",
+    "reply is JSON {status, output, errorText} with the tool's JSON result in output.",
     "read_manual_page": "Read one supplied reference page (1-based) as an image.",
 }
 
@@ -109,9 +118,15 @@ class _MetaTool(Tool):
 
 def _tool(name: str, handler: Callable[[dict], CallToolResult], read_only: bool, episode: Episode) -> _MetaTool:
     return _MetaTool(
-        fn=handler, name=name, title=name.replace("_", " "), description=DESCRIPTIONS[name],
-        parameters=META_SCHEMAS[name], fn_metadata=FuncMetadata(arg_model=_RawArgs), is_async=False,
-        annotations=ToolAnnotations(read_only_hint=read_only, open_world_hint=False), handler=handler,
+        fn=handler,
+        name=name,
+        title=name.replace("_", " "),
+        description=DESCRIPTIONS[name],
+        parameters=META_SCHEMAS[name],
+        fn_metadata=FuncMetadata(arg_model=_RawArgs),
+        is_async=False,
+        annotations=ToolAnnotations(read_only_hint=read_only, open_world_hint=False),
+        handler=handler,
         episode=episode,
     )
 
@@ -128,7 +143,9 @@ class OfficialSurface:
     def _problems(self, name: str, args: dict) -> str | None:
         problems = check_arguments(META_SCHEMAS[name], args)
         if not problems and "pageId" in META_SCHEMAS[name]["properties"] and args["pageId"] != PAGE_ID:
-            problems = [f"pageId {short_repr(args['pageId'])} is not the episode page; list_pages shows it as {PAGE_ID}"]
+            problems = [
+                f"pageId {short_repr(args['pageId'])} is not the episode page; list_pages shows it as {PAGE_ID}"
+            ]
         return f"Invalid {name} arguments: " + "; ".join(problems) + "." if problems else None
 
     def list_pages(self, args: dict) -> CallToolResult:
@@ -165,8 +182,9 @@ class OfficialSurface:
         n, page = len(self.references), args["page"]
         if page > n:
             have = f"{n} reference page{'s' if n != 1 else ''} (1..{n})" if n else "no reference pages"
-            return _text(f"Invalid read_manual_page arguments: page {page} is out of range; this task has {have}.",
-                         error=True)
+            return _text(
+                f"Invalid read_manual_page arguments: page {page} is out of range; this task has {have}.", error=True
+            )
         path = self.references[page - 1]
         try:
             data = path.read_bytes()
@@ -174,18 +192,26 @@ class OfficialSurface:
                 mime = PILImage.MIME[picture.format]
         except (OSError, KeyError):
             return _text(f"reference page {page} cannot be read", error=True)
-        return CallToolResult(content=[ImageContent(type="image", data=base64.b64encode(data).decode("ascii"),
-                                                    mime_type=mime)])
+        return CallToolResult(
+            content=[ImageContent(type="image", data=base64.b64encode(data).decode("ascii"), mime_type=mime)]
+        )
 
     def tools(self) -> list[_MetaTool]:
-        return [_tool("list_pages", self.list_pages, True, self.episode),
-                _tool("list_webmcp_tools", self.list_webmcp_tools, True, self.episode),
-                _tool("execute_webmcp_tool", self.execute_webmcp_tool, False, self.episode),
-                _tool("read_manual_page", self.read_manual_page, True, self.episode)]
+        return [
+            _tool("list_pages", self.list_pages, True, self.episode),
+            _tool("list_webmcp_tools", self.list_webmcp_tools, True, self.episode),
+            _tool("execute_webmcp_tool", self.execute_webmcp_tool, False, self.episode),
+            _tool("read_manual_page", self.read_manual_page, True, self.episode),
+        ]
 
 
 def build_official_server(episode: Episode, *, log_level: str = "WARNING") -> MCPServer:
     """An ``MCPServer`` with the official agent-facing tools over ``episode``."""
     surface = OfficialSurface(episode)
-    return MCPServer(SERVER_NAME, title="AssemblyWorld (official surface)", instructions=INSTRUCTIONS,
-                     tools=surface.tools(), log_level=log_level)
+    return MCPServer(
+        SERVER_NAME,
+        title="AssemblyWorld (official surface)",
+        instructions=INSTRUCTIONS,
+        tools=surface.tools(),
+        log_level=log_level,
+    )

@@ -13,12 +13,11 @@ import json
 from typing import Any
 
 import anyio
-from pydantic import ValidationError
-
 from mcp.server.mcpserver import MCPServer
 from mcp.server.stdio import stdio_server
 from mcp.shared.message import SessionMessage
 from mcp_types import INVALID_REQUEST, PARSE_ERROR, ErrorData, JSONRPCError
+from pydantic import ValidationError
 
 __all__ = ["error_reply", "request_id", "serve_stdio"]
 
@@ -77,11 +76,11 @@ def _id_value(text: str, i: int) -> int | str | None:
         i += 1
     if i < len(text) and text[i] == '"':
         try:
-            value = json.loads(text[i:_scan_string(text, i)])
+            value = json.loads(text[i : _scan_string(text, i)])
         except ValueError:
             return None
         return value if isinstance(value, str) else None
-    j = i + (1 if text[i:i + 1] == "-" else 0)
+    j = i + (1 if text[i : i + 1] == "-" else 0)
     k = j
     while k < len(text) and text[k].isdigit():
         k += 1
@@ -105,8 +104,13 @@ def error_reply(exc: Exception) -> JSONRPCError | None:
     rid = raw.get("id") if isinstance(raw, dict) else None
     if not (isinstance(rid, str) or (isinstance(rid, int) and not isinstance(rid, bool))):
         rid = None
-    return JSONRPCError(jsonrpc="2.0", id=rid, error=ErrorData(
-        code=INVALID_REQUEST, message="Invalid Request: not a JSON-RPC 2.0 request, notification or response"))
+    return JSONRPCError(
+        jsonrpc="2.0",
+        id=rid,
+        error=ErrorData(
+            code=INVALID_REQUEST, message="Invalid Request: not a JSON-RPC 2.0 request, notification or response"
+        ),
+    )
 
 
 class _AnsweringReader:
@@ -157,8 +161,9 @@ class _AnsweringReader:
 async def _serve(server: MCPServer) -> None:
     lowlevel = server._lowlevel_server  # what MCPServer.run_stdio_async serves; mcp is pinned <3
     async with stdio_server() as (read_stream, write_stream):
-        await lowlevel.run(_AnsweringReader(read_stream, write_stream), write_stream,
-                           lowlevel.create_initialization_options())
+        await lowlevel.run(
+            _AnsweringReader(read_stream, write_stream), write_stream, lowlevel.create_initialization_options()
+        )
 
 
 def serve_stdio(server: MCPServer) -> None:

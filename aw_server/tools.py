@@ -12,9 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
-from pydantic import ConfigDict, Field, ValidationError
-
 from mcp.server.mcpserver.utilities.func_metadata import ArgModelBase
+from pydantic import ConfigDict, Field, ValidationError
 
 from aw.camera import IMAGE_HEIGHT, IMAGE_WIDTH, VERTICAL_FOV_DEG
 from aw.scene import MAX_ANGLE_DEG, MAX_COORDINATE, MAX_GROUP_NAME, PITCH_RANGE, YAW_RANGE, ZOOM_RANGE
@@ -24,9 +23,7 @@ MAX_QUAT_COMPONENT = 1e6
 
 Coord = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE)]
 Angle = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=-MAX_ANGLE_DEG, le=MAX_ANGLE_DEG)]
-QuatComponent = Annotated[
-    float, Field(strict=True, allow_inf_nan=False, ge=-MAX_QUAT_COMPONENT, le=MAX_QUAT_COMPONENT)
-]
+QuatComponent = Annotated[float, Field(strict=True, allow_inf_nan=False, ge=-MAX_QUAT_COMPONENT, le=MAX_QUAT_COMPONENT)]
 Id = Annotated[str, Field(min_length=1, max_length=MAX_ID_CHARS)]
 Space = Literal["world", "camera"]
 
@@ -114,31 +111,53 @@ class UngroupArgs(_Closed):
 
 class MoveCameraArgs(_Closed):
     yaw: float | None = Field(
-        default=None, strict=True, allow_inf_nan=False, ge=YAW_RANGE[0], le=YAW_RANGE[1],
+        default=None,
+        strict=True,
+        allow_inf_nan=False,
+        ge=YAW_RANGE[0],
+        le=YAW_RANGE[1],
         description="Orbit about the world Z axis through the look-at point, in degrees relative to the "
         "current view (positive moves the camera counterclockwise around the scene, seen from above). Default 0.",
     )
     pitch: float | None = Field(
-        default=None, strict=True, allow_inf_nan=False, ge=PITCH_RANGE[0], le=PITCH_RANGE[1],
+        default=None,
+        strict=True,
+        allow_inf_nan=False,
+        ge=PITCH_RANGE[0],
+        le=PITCH_RANGE[1],
         description="Change of elevation in degrees relative to the current view (positive looks more from "
         "above); the resulting elevation is kept within +-85 degrees. Default 0.",
     )
     zoom: float | None = Field(
-        default=None, strict=True, allow_inf_nan=False, ge=ZOOM_RANGE[0], le=ZOOM_RANGE[1],
+        default=None,
+        strict=True,
+        allow_inf_nan=False,
+        ge=ZOOM_RANGE[0],
+        le=ZOOM_RANGE[1],
         description="Multiplier of the camera distance: < 1 moves closer, > 1 moves away. Default 1.",
     )
     right: float | None = Field(
-        default=None, strict=True, allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE,
+        default=None,
+        strict=True,
+        allow_inf_nan=False,
+        ge=-MAX_COORDINATE,
+        le=MAX_COORDINATE,
         description="Pan the look-at point along the camera's right axis, in scene units. Default 0.",
     )
     up: float | None = Field(
-        default=None, strict=True, allow_inf_nan=False, ge=-MAX_COORDINATE, le=MAX_COORDINATE,
+        default=None,
+        strict=True,
+        allow_inf_nan=False,
+        ge=-MAX_COORDINATE,
+        le=MAX_COORDINATE,
         description="Pan the look-at point along the camera's up axis, in scene units. Default 0.",
     )
 
 
 class StartEpisodeArgs(_Closed):
-    task: str | None = Field(default=None, max_length=MAX_GROUP_NAME, description="Optional task label (recorded only).")
+    task: str | None = Field(
+        default=None, max_length=MAX_GROUP_NAME, description="Optional task label (recorded only)."
+    )
 
 
 CONVENTIONS_TEXT = (
@@ -164,13 +183,15 @@ class ToolSpec:
 
 TOOL_SPECS: tuple[ToolSpec, ...] = (
     ToolSpec(
-        "list_objects", NoArgs,
+        "list_objects",
+        NoArgs,
         "List the stable object ids and display names, and the current groups (id, name, member ids). "
         "Object ids are anonymized part identifiers; group ids can be used wherever ids are accepted.",
         "query",
     ),
     ToolSpec(
-        "get_object", GetObjectArgs,
+        "get_object",
+        GetObjectArgs,
         "Report one object's body pose (position [x, y, z] and quaternion [w, x, y, z], world frame), its "
         "mesh-local bounding extents and local bounding box (min/max, in the mesh's own frame, scene "
         "units), display name and groups. For a group id, report the group's name and member ids. Mesh "
@@ -178,28 +199,32 @@ TOOL_SPECS: tuple[ToolSpec, ...] = (
         "query",
     ),
     ToolSpec(
-        "get_scene", NoArgs,
+        "get_scene",
+        NoArgs,
         "Report the scene units and conventions, settings (image size, field of view, argument ranges, "
         "default pivot), the reference condition, every object's pose and local bounding box, groups, the "
         "camera state and the execution budget.",
         "query",
     ),
     ToolSpec(
-        "get_state", NoArgs,
+        "get_state",
+        NoArgs,
         "Report the latest body poses of all objects (position [x, y, z], quaternion [w, x, y, z]), the "
         "groups, the camera state (look-at target, yaw, pitch, distance, position and right/up/forward axes) "
         "and the execution budget.",
         "query",
     ),
     ToolSpec(
-        "translate_objects", TranslateArgs,
+        "translate_objects",
+        TranslateArgs,
         "Move the selected objects (group ids select their members) by one translation vector, in world "
         "coordinates or in camera coordinates (right, up, forward). Relative poses inside the selection "
         "are kept; nothing snaps or collides." + _EDIT_NOTE,
         "edit",
     ),
     ToolSpec(
-        "rotate_objects", RotateArgs,
+        "rotate_objects",
+        RotateArgs,
         "Rotate the selected objects (group ids select their members) as one rigid body: angles in degrees "
         "applied about the X axis, then Y, then Z (right-hand rule), of the world frame or of the camera "
         "frame (X = right, Y = up, Z = forward), about a pivot point. In the camera frame a positive angle "
@@ -210,34 +235,39 @@ TOOL_SPECS: tuple[ToolSpec, ...] = (
         "edit",
     ),
     ToolSpec(
-        "set_object_pose", SetPoseArgs,
+        "set_object_pose",
+        SetPoseArgs,
         "Set one object's absolute world pose: position [x, y, z] and/or quaternion [w, x, y, z] (give at "
         "least one; the other is kept). The quaternion is normalized. Body origins need not coincide with "
         "visual part centers." + _EDIT_NOTE,
         "edit",
     ),
     ToolSpec(
-        "group_objects", GroupArgs,
+        "group_objects",
+        GroupArgs,
         "Create a logical transformation group of the given objects so that later translate/rotate calls "
         "can move them together by the group id. Nothing moves or snaps. Returns the new group id (g1, g2, "
         "...) and its members. Edits are refused once the execution budget is exhausted.",
         "edit",
     ),
     ToolSpec(
-        "ungroup_objects", UngroupArgs,
+        "ungroup_objects",
+        UngroupArgs,
         "Dissolve the given groups. Nothing moves; the member objects keep their poses. Edits are refused "
         "once the execution budget is exhausted.",
         "edit",
     ),
     ToolSpec(
-        "capture_scene", NoArgs,
+        "capture_scene",
+        NoArgs,
         f"Render the current view as a {IMAGE_WIDTH}x{IMAGE_HEIGHT} PNG image with a {VERTICAL_FOV_DEG:g} degree "
         "vertical field of view, from the orbit camera (see move_camera). This is the only way to see the "
         "parts and the effect of edits.",
         "capture",
     ),
     ToolSpec(
-        "move_camera", MoveCameraArgs,
+        "move_camera",
+        MoveCameraArgs,
         f"Move the orbit camera (the view only; objects never move): yaw and pitch orbit around the look-at "
         f"point by relative degrees (yaw in [{YAW_RANGE[0]:g}, {YAW_RANGE[1]:g}], pitch in "
         f"[{PITCH_RANGE[0]:g}, {PITCH_RANGE[1]:g}]), zoom multiplies the distance (in [{ZOOM_RANGE[0]:g}, "
@@ -246,7 +276,8 @@ TOOL_SPECS: tuple[ToolSpec, ...] = (
         "camera",
     ),
     ToolSpec(
-        "start_episode", StartEpisodeArgs,
+        "start_episode",
+        StartEpisodeArgs,
         "Mark the interaction as active: starts the episode clock and the execution budget. Call it once "
         "before working on the assembly; repeated calls change nothing.",
         "control",

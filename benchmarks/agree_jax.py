@@ -44,13 +44,17 @@ def compare(geom, cks) -> dict:
     thr = geom.settings.threshold
     return {
         "checkpoints": int(len(cks)),
-        "identical_pa": int(np.sum(n.pa == j.pa)), "identical_sr": int(np.sum(n.sr == j.sr)),
+        "identical_pa": int(np.sum(n.pa == j.pa)),
+        "identical_sr": int(np.sum(n.sr == j.sr)),
         "identical_sra": int(np.sum(n.sra == j.sra)),
-        "max_rel_scd": _rel(n.scd, j.scd), "max_rel_part_error": _rel(n.part_errors, j.part_errors),
+        "max_rel_scd": _rel(n.scd, j.scd),
+        "max_rel_part_error": _rel(n.part_errors, j.part_errors),
         "part_errors_within_1e-6_of_threshold": int(np.sum(np.abs(n.part_errors / thr - 1) <= 1e-6)),
         # the jax lookups that the leaves certified (the rest took the brute-force path)
-        "jax_queries": int(j.stats["jax"].get("queries", 0)), "jax_brute_queries": int(j.stats["jax"].get("brute_queries", 0)),
-        "numba": n, "jax": j,
+        "jax_queries": int(j.stats["jax"].get("queries", 0)),
+        "jax_brute_queries": int(j.stats["jax"].get("brute_queries", 0)),
+        "numba": n,
+        "jax": j,
     }
 
 
@@ -61,9 +65,14 @@ def main() -> None:
     ap.add_argument("--checkpoints", type=int, default=250, help="distinct checkpoints per part count")
     ap.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder to write the JSON to (a new file)")
     ap.add_argument("--name", default="agree_jax", help="the JSON file's name in --out, without .json")
-    ap.add_argument("--candidates", type=int, default=None, metavar="C",
-                    help="leaves a jax query reads (default the backend's); fewer than the clouds' leaves at small "
-                         "--n-fps makes the lookups take the certified path (and its fallback) instead of reading every leaf")
+    ap.add_argument(
+        "--candidates",
+        type=int,
+        default=None,
+        metavar="C",
+        help="leaves a jax query reads (default the backend's); fewer than the clouds' leaves at small "
+        "--n-fps makes the lookups take the certified path (and its fallback) instead of reading every leaf",
+    )
     ap.add_argument("--no-knife-edges", action="store_true", help="score the protocol's thresholds only")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -85,7 +94,9 @@ def main() -> None:
     for parts in args.parts:
         settings = aw_eval.ProtocolSettings(n_fps=args.n_fps, n_surface=max(64, 4 * args.n_fps))
         geom, obj = make_points_geometry(parts, args.n_fps, seed=parts, settings=settings)
-        cks = np.unique(trajectory_checkpoints(obj, 4 * args.checkpoints, seed=2000 + parts), axis=0)[: args.checkpoints]
+        cks = np.unique(trajectory_checkpoints(obj, 4 * args.checkpoints, seed=2000 + parts), axis=0)[
+            : args.checkpoints
+        ]
         base = compare(geom, cks)
         rows = [("protocol", base)]
         errors = base["numba"].part_errors[base["numba"].part_errors > 1e-12]
@@ -93,8 +104,11 @@ def main() -> None:
         for sign in () if args.no_knife_edges else (-1.0, 1.0):
             if not (len(errors) and len(scds)):
                 break
-            st = dataclasses.replace(settings, threshold=float(np.sort(errors)[len(errors) // 2]) * (1 + sign * 1e-7),
-                                     sra_threshold=float(np.sort(scds)[len(scds) // 2]) * (1 + sign * 1e-7))
+            st = dataclasses.replace(
+                settings,
+                threshold=float(np.sort(errors)[len(errors) // 2]) * (1 + sign * 1e-7),
+                sra_threshold=float(np.sort(scds)[len(scds) // 2]) * (1 + sign * 1e-7),
+            )
             knife, _ = make_points_geometry(parts, args.n_fps, seed=parts, settings=st)
             rows.append((f"knife_edge_{'below' if sign < 0 else 'above'}", compare(knife, cks)))
         for label, r in rows:

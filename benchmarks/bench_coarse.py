@@ -49,8 +49,11 @@ def main(argv=None) -> int:
             t = time.perf_counter()
             coarse_icp(pred, target, r0, t0, args.samples, 8, 1e-9)
             times.append(time.perf_counter() - t)
-        print(f"parts={p}: {1000 * np.median(times):.2f} ms per checkpoint ({n_starts} starts), "
-              f"objectives sum {objs.sum():.12f}", flush=True)
+        print(
+            f"parts={p}: {1000 * np.median(times):.2f} ms per checkpoint ({n_starts} starts), "
+            f"objectives sum {objs.sum():.12f}",
+            flush=True,
+        )
     return 0
 
 

@@ -57,14 +57,39 @@ def main() -> None:
         for si in range(args.systems):
             for k, e in enumerate(tasks):
                 ids = [f"p{i + 1:02d}" for i in range(e.n_parts)]
-                r = write_scripted_run(tmp / "runs" / f"sys{si}" / e.task_id, suite, e.task_id, system=f"sys{si}",
-                                       correct=ids if (k + si) % 3 else ids[:-1], jitter_edits=args.jitter, seed=k,
-                                       inspect_moves=False)
+                r = write_scripted_run(
+                    tmp / "runs" / f"sys{si}" / e.task_id,
+                    suite,
+                    e.task_id,
+                    system=f"sys{si}",
+                    correct=ids if (k + si) % 3 else ids[:-1],
+                    jitter_edits=args.jitter,
+                    seed=k,
+                    inspect_moves=False,
+                )
                 n_ck += r.n_checkpoints
-        with LocalCluster(n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
-            argv = [str(suite), str(tmp / "runs"), "--out", str(tmp / "out"), "--checkpoint-mode", "exact", "--final-mode", "exact",
-                    "--scheduler", cluster.scheduler_address, "--no-plots", "--no-html", "--no-progress",
-                    "--bootstrap", "100", "--permutations", "100"]
+        with LocalCluster(
+            n_workers=args.workers, threads_per_worker=1, processes=True, dashboard_address=None
+        ) as cluster:
+            argv = [
+                str(suite),
+                str(tmp / "runs"),
+                "--out",
+                str(tmp / "out"),
+                "--checkpoint-mode",
+                "exact",
+                "--final-mode",
+                "exact",
+                "--scheduler",
+                cluster.scheduler_address,
+                "--no-plots",
+                "--no-html",
+                "--no-progress",
+                "--bootstrap",
+                "100",
+                "--permutations",
+                "100",
+            ]
             t0 = time.perf_counter()
             rc = aw_score(argv)
             wall = time.perf_counter() - t0
@@ -78,15 +103,27 @@ def main() -> None:
     worker_hours = (STUDY_CHECKPOINTS * per_ck + STUDY_FINALS * per_final + STUDY_TASKS * per_task_geometry) / 3600
     out = {
         "command": " ".join(["benchmarks/bench_dask_exact.py"] + sys.argv[1:]),
-        "measured": {"workers": args.workers, "systems": args.systems, "tasks": n_tasks, "parts_per_task": args.parts,
-                     "checkpoints": n_ck, "wall_seconds": round(wall, 1), "scoring": scoring,
-                     "worker_seconds_per_checkpoint": round(per_ck, 3),
-                     "worker_seconds_per_final_state": round(per_final, 3),
-                     "load_average_after": os.getloadavg(), "cpus": os.cpu_count()},
-        "extrapolated (not measured)": {"checkpoints": STUDY_CHECKPOINTS, "final_states": STUDY_FINALS,
-                                        "tasks": STUDY_TASKS, "workers": CLUSTER_WORKERS,
-                                        "worker_hours": round(worker_hours, 2),
-                                        "wall_hours_on_16_workers": round(worker_hours / CLUSTER_WORKERS, 2)},
+        "measured": {
+            "workers": args.workers,
+            "systems": args.systems,
+            "tasks": n_tasks,
+            "parts_per_task": args.parts,
+            "checkpoints": n_ck,
+            "wall_seconds": round(wall, 1),
+            "scoring": scoring,
+            "worker_seconds_per_checkpoint": round(per_ck, 3),
+            "worker_seconds_per_final_state": round(per_final, 3),
+            "load_average_after": os.getloadavg(),
+            "cpus": os.cpu_count(),
+        },
+        "extrapolated (not measured)": {
+            "checkpoints": STUDY_CHECKPOINTS,
+            "final_states": STUDY_FINALS,
+            "tasks": STUDY_TASKS,
+            "workers": CLUSTER_WORKERS,
+            "worker_hours": round(worker_hours, 2),
+            "wall_hours_on_16_workers": round(worker_hours / CLUSTER_WORKERS, 2),
+        },
     }
     path.write_text(json.dumps(out, indent=2) + "\n")
     print(json.dumps(out, indent=2))

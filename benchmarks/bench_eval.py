@@ -49,7 +49,9 @@ def time_calls(fn, items):
 
 def bench_parts(p: int, args, rows: list, agree: list) -> None:
     t0 = time.perf_counter()
-    geom, obj = make_points_geometry(p, args.n_fps, seed=p, settings=aw_eval.ProtocolSettings(n_fps=args.n_fps, n_surface=max(4096, 4 * args.n_fps)))
+    geom, obj = make_points_geometry(
+        p, args.n_fps, seed=p, settings=aw_eval.ProtocolSettings(n_fps=args.n_fps, n_surface=max(4096, 4 * args.n_fps))
+    )
     t_geom = time.perf_counter() - t0
     n_need = max(args.ref, args.exact, max(args.fast_batches or [0]), 1)
     cks = trajectory_checkpoints(obj, n_need + 1, seed=1000 + p)
@@ -60,8 +62,14 @@ def bench_parts(p: int, args, rows: list, agree: list) -> None:
     t0 = time.perf_counter()
     aw_eval.score(geom, cks[-1], mode="fast")
     warm_fast = time.perf_counter() - t0
-    row = {"parts": p, "points_per_part": args.n_fps, "geometry_s": t_geom, "fast_first_call_s": first_fast,
-           "fast_warm_call_s": warm_fast, "compile_s": max(0.0, first_fast - warm_fast)}
+    row = {
+        "parts": p,
+        "points_per_part": args.n_fps,
+        "geometry_s": t_geom,
+        "fast_first_call_s": first_fast,
+        "fast_warm_call_s": warm_fast,
+        "compile_s": max(0.0, first_fast - warm_fast),
+    }
     same = cks[: max(args.ref, args.exact)]
     ref_score = lambda c: ref.score(geom.clouds, geom.target_poses, geom.divisor, geom.groups, c, geom.settings)  # noqa: E731
     exact_score = lambda c: aw_eval.score(geom, c, mode="exact")  # noqa: E731
@@ -72,7 +80,7 @@ def bench_parts(p: int, args, rows: list, agree: list) -> None:
     for i in range(max(args.ref, args.exact)):
         for on, fn, out in ((i < args.ref, ref_score, rres), (i < args.exact, exact_score, eres)):
             if on:
-                t, res = time_calls(fn, same[i: i + 1])
+                t, res = time_calls(fn, same[i : i + 1])
                 out += res
                 if fn is ref_score:
                     t_ref += t
@@ -85,8 +93,12 @@ def bench_parts(p: int, args, rows: list, agree: list) -> None:
         row["peak_mib_after_exact"] = peak_mib()
         if args.ref:
             k = min(args.ref, args.exact)
-            row["exact_vs_reference_identical_pa_sr"] = sum((e.pa, e.sr) == (r.pa, r.sr) for e, r in zip(eres[:k], rres[:k]))
-            row["exact_vs_reference_max_rel_scd"] = max(abs(e.scd - r.scd) / max(r.scd, 1e-300) for e, r in zip(eres[:k], rres[:k]))
+            row["exact_vs_reference_identical_pa_sr"] = sum(
+                (e.pa, e.sr) == (r.pa, r.sr) for e, r in zip(eres[:k], rres[:k])
+            )
+            row["exact_vs_reference_max_rel_scd"] = max(
+                abs(e.scd - r.scd) / max(r.scd, 1e-300) for e, r in zip(eres[:k], rres[:k])
+            )
             row["exact_vs_reference_compared"] = k
     t, fres = time_calls(lambda c: aw_eval.score(geom, c, mode="fast"), same if len(same) else cks[:1])
     row["fast_s_per_ck_same"] = t / max(1, len(same) or 1)
@@ -155,21 +167,41 @@ def _log_chunk(log: Path | None, out) -> None:
     if log is None:
         return
     p, epa, esr, escd, fpa, fsr, fscd, n_unique, te, tf = out
-    row = {"parts": p, "pa_exact": epa.tolist(), "sr_exact": esr.tolist(), "scd_exact": escd.tolist(),
-           "pa_fast": fpa.tolist(), "sr_fast": fsr.tolist(), "scd_fast": fscd.tolist(), "unique": n_unique,
-           "exact_s": te, "fast_s": tf}
+    row = {
+        "parts": p,
+        "pa_exact": epa.tolist(),
+        "sr_exact": esr.tolist(),
+        "scd_exact": escd.tolist(),
+        "pa_fast": fpa.tolist(),
+        "sr_fast": fsr.tolist(),
+        "scd_fast": fscd.tolist(),
+        "unique": n_unique,
+        "exact_s": te,
+        "fast_s": tf,
+    }
     with open(log, "a") as fh:
         fh.write(json.dumps(row) + "\n")
 
 
-def bench_agreement(parts: list[int], n: int, fps: int, seed: int = 0, workers: int = 1, chunk: int = 6,
-                    log: Path | None = None, fast_kw: dict | None = None) -> dict:
+def bench_agreement(
+    parts: list[int],
+    n: int,
+    fps: int,
+    seed: int = 0,
+    workers: int = 1,
+    chunk: int = 6,
+    log: Path | None = None,
+    fast_kw: dict | None = None,
+) -> dict:
     """Fast vs exact (exact == reference by the tests) on ``n`` trajectory checkpoints, split
     evenly over ``parts``; ``workers`` processes share the chunks (largest tasks first). Agreement
     does not depend on the worker count; the seconds are summed over workers."""
     per = {p: n // len(parts) + (1 if i < n % len(parts) else 0) for i, p in enumerate(parts)}
-    jobs = [(p, fps, seed, k, lo, min(k, lo + chunk), fast_kw or {}) for p, k in sorted(per.items(), reverse=True)
-            for lo in range(0, k, chunk)]
+    jobs = [
+        (p, fps, seed, k, lo, min(k, lo + chunk), fast_kw or {})
+        for p, k in sorted(per.items(), reverse=True)
+        for lo in range(0, k, chunk)
+    ]
     if workers > 1:
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor
@@ -205,16 +237,38 @@ def bench_agreement(parts: list[int], n: int, fps: int, seed: int = 0, workers: 
         row["checkpoints"] += len(epa)
         row["identical_pa_and_sr"] += int(np.sum((epa == fpa) & (esr == fsr)))
         for i in np.flatnonzero((epa != fpa) | (esr != fsr)):
-            flips.append({"parts": p, "pa_exact": float(epa[i]), "pa_fast": float(fpa[i]), "scd_exact": float(escd[i]),
-                          "scd_fast": float(fscd[i])})
-    print(f"agreement: {total} checkpoints ({unique} unique), exact {t_exact:.1f}s fast {t_fast:.1f}s (worker seconds)", flush=True)
+            flips.append(
+                {
+                    "parts": p,
+                    "pa_exact": float(epa[i]),
+                    "pa_fast": float(fpa[i]),
+                    "scd_exact": float(escd[i]),
+                    "scd_fast": float(fscd[i]),
+                }
+            )
+    print(
+        f"agreement: {total} checkpoints ({unique} unique), exact {t_exact:.1f}s fast {t_fast:.1f}s (worker seconds)",
+        flush=True,
+    )
     rel = np.asarray(rel)
-    return {"checkpoints": total, "unique_checkpoints": unique, "points_per_part": fps, "parts": parts,
-            "workers": workers, "by_parts": by_parts, "identical_pa": same_pa / total,
-            "identical_sr": same_sr / total, "identical_pa_and_sr_count": total - len(flips),
-            "scd_rel_err_median": float(np.median(rel)), "scd_rel_err_p99": float(np.quantile(rel, 0.99)),
-            "scd_rel_err_max": float(rel.max()), "exact_worker_s": t_exact, "fast_worker_s": t_fast,
-            "exact_over_fast_time": t_exact / max(t_fast, 1e-9), "disagreements": flips[:50]}
+    return {
+        "checkpoints": total,
+        "unique_checkpoints": unique,
+        "points_per_part": fps,
+        "parts": parts,
+        "workers": workers,
+        "by_parts": by_parts,
+        "identical_pa": same_pa / total,
+        "identical_sr": same_sr / total,
+        "identical_pa_and_sr_count": total - len(flips),
+        "scd_rel_err_median": float(np.median(rel)),
+        "scd_rel_err_p99": float(np.quantile(rel, 0.99)),
+        "scd_rel_err_max": float(rel.max()),
+        "exact_worker_s": t_exact,
+        "fast_worker_s": t_fast,
+        "exact_over_fast_time": t_exact / max(t_fast, 1e-9),
+        "disagreements": flips[:50],
+    }
 
 
 def agreement_from_logs(logs: list[Path], fps: int, seed: int = 0, check_exact: bool = False) -> dict:
@@ -250,19 +304,42 @@ def agreement_from_logs(logs: list[Path], fps: int, seed: int = 0, check_exact: 
             t0 = time.perf_counter()
             e = aw_eval.score_batch(geom, cks, mode="exact")
             same_exact = (epa == e.pa) & (esr == e.sr)
-            by_parts[p]["exact_rerun"] = {"identical_pa_and_sr": int(same_exact.sum()), "seconds": time.perf_counter() - t0,
-                                          "scd_rel_diff_max": float(np.max(np.abs(e.scd - escd) / np.maximum(escd, 1e-300)))}
+            by_parts[p]["exact_rerun"] = {
+                "identical_pa_and_sr": int(same_exact.sum()),
+                "seconds": time.perf_counter() - t0,
+                "scd_rel_diff_max": float(np.max(np.abs(e.scd - escd) / np.maximum(escd, 1e-300))),
+            }
             print(f"exact re-run vs logged exact, parts={p}: {int(same_exact.sum())}/{n} identical", flush=True)
         for i in np.flatnonzero(~ok):
-            flips.append({"parts": p, "index": int(i), "pa_exact": float(epa[i]), "pa_fast": float(f.pa[i]),
-                          "scd_exact": float(escd[i]), "scd_fast": float(f.scd[i]),
-                          "part_errors_fast": [float(x) for x in f.part_errors[i]]})
-        print(f"agreement vs logged exact, parts={p}: {int(ok.sum())}/{n} identical, fast {t_fast:.1f}s so far", flush=True)
+            flips.append(
+                {
+                    "parts": p,
+                    "index": int(i),
+                    "pa_exact": float(epa[i]),
+                    "pa_fast": float(f.pa[i]),
+                    "scd_exact": float(escd[i]),
+                    "scd_fast": float(f.scd[i]),
+                    "part_errors_fast": [float(x) for x in f.part_errors[i]],
+                }
+            )
+        print(
+            f"agreement vs logged exact, parts={p}: {int(ok.sum())}/{n} identical, fast {t_fast:.1f}s so far",
+            flush=True,
+        )
     rel = np.asarray(rel)
-    return {"checkpoints": total, "identical_pa_and_sr_count": same, "identical_rate": same / total, "by_parts": by_parts,
-            "points_per_part": fps, "exact_logs": [str(x) for x in logs], "scd_rel_err_median": float(np.median(rel)),
-            "scd_rel_err_p99": float(np.quantile(rel, 0.99)), "scd_rel_err_max": float(rel.max()), "fast_s": t_fast,
-            "disagreements": flips}
+    return {
+        "checkpoints": total,
+        "identical_pa_and_sr_count": same,
+        "identical_rate": same / total,
+        "by_parts": by_parts,
+        "points_per_part": fps,
+        "exact_logs": [str(x) for x in logs],
+        "scd_rel_err_median": float(np.median(rel)),
+        "scd_rel_err_p99": float(np.quantile(rel, 0.99)),
+        "scd_rel_err_max": float(rel.max()),
+        "fast_s": t_fast,
+        "disagreements": flips,
+    }
 
 
 def main(argv=None) -> int:
@@ -270,25 +347,52 @@ def main(argv=None) -> int:
     ap.add_argument("--parts", type=int, nargs="*", default=[2, 5, 10, 20])
     ap.add_argument("--n-fps", type=int, default=1000, help="points per part (paper: 1000)")
     ap.add_argument("--ref", type=int, default=1, help="checkpoints scored by the reference per part count")
-    ap.add_argument("--exact", type=int, default=1, help="checkpoints scored by exact (the first --ref of them are shared)")
+    ap.add_argument(
+        "--exact", type=int, default=1, help="checkpoints scored by exact (the first --ref of them are shared)"
+    )
     ap.add_argument("--fast-batches", type=int, nargs="*", default=[1, 100])
     ap.add_argument("--agreement", type=int, default=0, help="checkpoints for the fast-vs-exact agreement")
     ap.add_argument("--agree-fps", type=int, default=64)
     ap.add_argument("--agree-parts", type=int, nargs="+", default=[2, 5, 10])
-    ap.add_argument("--agree-exact-log", type=Path, nargs="*", default=[],
-                    help="score fast against the exact results of these --agree-log files (exact is not re-run)")
+    ap.add_argument(
+        "--agree-exact-log",
+        type=Path,
+        nargs="*",
+        default=[],
+        help="score fast against the exact results of these --agree-log files (exact is not re-run)",
+    )
     ap.add_argument("--agree-log", type=Path, default=None, help="JSON lines of every chunk's results, as they finish")
-    ap.add_argument("--agree-workers", type=int, default=1,
-                    help="processes for the agreement run (agreement does not depend on it; timings are worker seconds)")
-    ap.add_argument("--exact-margin", type=float, default=None,
-                    help="run fast with FastSettings(exact_margin=M), the opt-in exact fallback near thresholds")
-    ap.add_argument("--fast-set", nargs="*", default=[], metavar="KEY=VALUE",
-                    help="run fast with these FastSettings fields (e.g. coarse=16), in this process and the workers")
-    ap.add_argument("--agree-seed", type=int, default=0, help="seed of the agreement trajectories (0: the recorded set)")
+    ap.add_argument(
+        "--agree-workers",
+        type=int,
+        default=1,
+        help="processes for the agreement run (agreement does not depend on it; timings are worker seconds)",
+    )
+    ap.add_argument(
+        "--exact-margin",
+        type=float,
+        default=None,
+        help="run fast with FastSettings(exact_margin=M), the opt-in exact fallback near thresholds",
+    )
+    ap.add_argument(
+        "--fast-set",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="run fast with these FastSettings fields (e.g. coarse=16), in this process and the workers",
+    )
+    ap.add_argument(
+        "--agree-seed", type=int, default=0, help="seed of the agreement trajectories (0: the recorded set)"
+    )
     ap.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder to write the JSON to (a new file)")
-    ap.add_argument("--name", default="bench_eval", help="the JSON file's name in --out, without .json (default bench_eval)")
-    ap.add_argument("--agree-check-exact", action="store_true",
-                    help="with --agree-exact-log: also re-run exact on the logged checkpoints and compare it with the log")
+    ap.add_argument(
+        "--name", default="bench_eval", help="the JSON file's name in --out, without .json (default bench_eval)"
+    )
+    ap.add_argument(
+        "--agree-check-exact",
+        action="store_true",
+        help="with --agree-exact-log: also re-run exact on the logged checkpoints and compare it with the log",
+    )
     args = ap.parse_args(argv)
     from _output import output_file
 
@@ -296,18 +400,33 @@ def main(argv=None) -> int:
     fast_kw = _fast_settings(args.fast_set, args.exact_margin)
     _apply_fast_settings(fast_kw)
     rows: list = []
-    result = {"command": " ".join(["benchmarks/bench_eval.py"] + (argv if argv is not None else sys.argv[1:])),
-              "machine": {"cpus": os.cpu_count(), "platform": platform.platform(), "python": platform.python_version(),
-                          "load_avg_start": os.getloadavg()}, "rows": rows}
+    result = {
+        "command": " ".join(["benchmarks/bench_eval.py"] + (argv if argv is not None else sys.argv[1:])),
+        "machine": {
+            "cpus": os.cpu_count(),
+            "platform": platform.platform(),
+            "python": platform.python_version(),
+            "load_avg_start": os.getloadavg(),
+        },
+        "rows": rows,
+    }
     for p in args.parts:
         bench_parts(p, args, rows, [])
     if args.agreement:
-        result["agreement"] = bench_agreement(args.agree_parts, args.agreement, args.agree_fps, seed=args.agree_seed,
-                                              workers=args.agree_workers, log=args.agree_log, fast_kw=fast_kw)
+        result["agreement"] = bench_agreement(
+            args.agree_parts,
+            args.agreement,
+            args.agree_fps,
+            seed=args.agree_seed,
+            workers=args.agree_workers,
+            log=args.agree_log,
+            fast_kw=fast_kw,
+        )
         print(json.dumps({k: v for k, v in result["agreement"].items() if k != "disagreements"}), flush=True)
     if args.agree_exact_log:
-        result["agreement_vs_logged_exact"] = agreement_from_logs(args.agree_exact_log, args.agree_fps, seed=args.agree_seed,
-                                                                 check_exact=args.agree_check_exact)
+        result["agreement_vs_logged_exact"] = agreement_from_logs(
+            args.agree_exact_log, args.agree_fps, seed=args.agree_seed, check_exact=args.agree_check_exact
+        )
         result["agreement_vs_logged_exact"]["fast_settings"] = fast_kw
         a = result["agreement_vs_logged_exact"]
         print(json.dumps({k: v for k, v in a.items() if k != "disagreements"}), flush=True)
@@ -320,18 +439,26 @@ def main(argv=None) -> int:
     print("\n| parts | reference s/ck | exact s/ck | fast s/ck | exact x | fast x | compile s | peak MiB |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
+
         def f(k, fmt="{:.3g}"):
             v = r.get(k)
             return fmt.format(v) if isinstance(v, (int, float)) else "-"
-        print(f"| {r['parts']} | {f('reference_s_per_ck')} | {f('exact_s_per_ck')} | {f('fast_s_per_ck_same')} | "
-              f"{f('exact_speedup', '{:.1f}')} | {f('fast_speedup', '{:.0f}')} | {f('compile_s', '{:.2f}')} | {f('peak_mib', '{:.0f}')} |")
+
+        print(
+            f"| {r['parts']} | {f('reference_s_per_ck')} | {f('exact_s_per_ck')} | {f('fast_s_per_ck_same')} | "
+            f"{f('exact_speedup', '{:.1f}')} | {f('fast_speedup', '{:.0f}')} | {f('compile_s', '{:.2f}')} | {f('peak_mib', '{:.0f}')} |"
+        )
     for r in rows:
         for b in args.fast_batches:
-            print(f"parts={r['parts']} fast batch {b}: {r[f'fast_batch{b}_ck_per_s']:.2f} ck/s ({r[f'fast_batch{b}_unique']} unique)")
+            print(
+                f"parts={r['parts']} fast batch {b}: {r[f'fast_batch{b}_ck_per_s']:.2f} ck/s ({r[f'fast_batch{b}_unique']} unique)"
+            )
     if "agreement" in result:
         a = result["agreement"]
-        print(f"agreement fast vs exact: {a['checkpoints']} checkpoints at {a['points_per_part']} pts/part: "
-              f"PA identical {a['identical_pa']:.4f}, SR identical {a['identical_sr']:.4f}, SCD rel err p99 {a['scd_rel_err_p99']:.2e}")
+        print(
+            f"agreement fast vs exact: {a['checkpoints']} checkpoints at {a['points_per_part']} pts/part: "
+            f"PA identical {a['identical_pa']:.4f}, SR identical {a['identical_sr']:.4f}, SCD rel err p99 {a['scd_rel_err_p99']:.2e}"
+        )
     return 0
 
 

@@ -68,22 +68,32 @@ def one_part_count(parts: int, args) -> dict:
     rel = np.abs(j.scd[:k] - n.scd) / np.maximum(np.maximum(j.scd[:k], n.scd), 1e-300)
     tiny = np.maximum(j.scd[:k], n.scd) < 1e-20  # exact registrations: both are rounding noise
     return {
-        "parts": parts, "points_per_part": args.n_fps, "checkpoints": int(len(cks)), "chunk": args.chunk,
+        "parts": parts,
+        "points_per_part": args.n_fps,
+        "checkpoints": int(len(cks)),
+        "chunk": args.chunk,
         "leaf_boxes_once_per_task_s": round(leaf_s, 4),
         "lanes_per_call_at_most": max_lanes(len(geom.index().target), len(geom.index().target)),
-        "leaves_target_parts": [int(a.index.shape[1]) for a in leaves], "leaf_size": int(leaves[0].index.shape[2]),
+        "leaves_target_parts": [int(a.index.shape[1]) for a in leaves],
+        "leaf_size": int(leaves[0].index.shape[2]),
         "leaves_read_per_query": DEFAULT_CANDIDATES,
         "jax_first_chunk_s_incl_compile": round(cold, 2),
         "jax_first_chunk_s_per_ck_incl_compile": cold / min(args.chunk, len(cks)),
         "jax_warm_s_per_ck": jax_per_ck,
         "warm_stage_s_per_ck": {s: st[s] / len(cks) for s in ("structures", "icp", "part_cd", "host")},
-        "lanes_computed": int(st["lanes_iterated"]), "lane_iterations_needed": int(st["lane_iterations"]),
-        "rounds": int(st["rounds"]), "brute_force_queries": int(st["brute_queries"]),
+        "lanes_computed": int(st["lanes_iterated"]),
+        "lane_iterations_needed": int(st["lane_iterations"]),
+        "rounds": int(st["rounds"]),
+        "brute_force_queries": int(st["brute_queries"]),
         "brute_force_share_of_queries": st["brute_queries"] / max(st["queries"], 1),
-        "numba_checkpoints": k, "numba_s_per_ck": numba_per_ck, "jax_over_numba_speed": numba_per_ck / jax_per_ck,
+        "numba_checkpoints": k,
+        "numba_s_per_ck": numba_per_ck,
+        "jax_over_numba_speed": numba_per_ck / jax_per_ck,
         "identical_pa_sr": int(np.sum((j.pa[:k] == n.pa) & (j.sr[:k] == n.sr))),
         "max_rel_scd": float(np.max(np.where(tiny, 0.0, rel))) if k else None,
-        "projected_minutes_for_60000_checkpoints (warm rate x 60,000: a projection)": jax_per_ck * STUDY_CHECKPOINTS / 60,
+        "projected_minutes_for_60000_checkpoints (warm rate x 60,000: a projection)": jax_per_ck
+        * STUDY_CHECKPOINTS
+        / 60,
     }
 
 
@@ -96,8 +106,12 @@ def main() -> None:
     ap.add_argument("--numba", type=int, default=4, help="of those, how many numba scores too (agreement, ratio)")
     ap.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder to write the JSON to (a new file)")
     ap.add_argument("--name", default="bench_jax", help="the JSON file's name in --out, without .json")
-    ap.add_argument("--leaf-elements", type=int, metavar="N",
-                    help="the leaf lookups' budget of box distances held at once (default: jax_icp.leaf_elements())")
+    ap.add_argument(
+        "--leaf-elements",
+        type=int,
+        metavar="N",
+        help="the leaf lookups' budget of box distances held at once (default: jax_icp.leaf_elements())",
+    )
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from _output import output_file
@@ -105,10 +119,9 @@ def main() -> None:
     path = output_file(args.out, f"{args.name}.json")  # refused before the run, not after it
 
     import aw_eval.scoring
+    from aw_eval.kernels import jax_icp
     from aw_eval.kernels.jaxcfg import jax_modules
     from aw_eval.registration import resolve_backend
-
-    from aw_eval.kernels import jax_icp
 
     jax, _ = jax_modules()
     aw_eval.scoring.JAX_CHUNK = args.chunk
@@ -116,7 +129,9 @@ def main() -> None:
         jax_icp.LEAF_ELEMENTS = jax_icp.ACCELERATOR_LEAF_ELEMENTS = args.leaf_elements
     out = {
         "command": " ".join(["benchmarks/bench_jax.py"] + sys.argv[1:]),
-        "device": str(jax.devices()[0]), "platform": jax.devices()[0].platform, "jax": jax.__version__,
+        "device": str(jax.devices()[0]),
+        "platform": jax.devices()[0].platform,
+        "jax": jax.__version__,
         "auto_backend_for_exact": resolve_backend("auto", "exact"),
         "leaf_elements": jax_icp.leaf_elements(),
         "per_part_count": [],

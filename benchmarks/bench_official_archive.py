@@ -51,8 +51,10 @@ def main() -> None:
         read_part_episode(arc, setup, ids)
         reads.append(t1 - t0)
         restores.append(time.perf_counter() - t1)
-    print(f"{path.stat().st_size / 1e6:.2f} MB, {len(arc.states)} states, {len(arc.traces)} traces: "
-          f"read_archive {np.median(reads):.3f} s, restore every state {np.median(restores):.3f} s (median of {args.repeat})")
+    print(
+        f"{path.stat().st_size / 1e6:.2f} MB, {len(arc.states)} states, {len(arc.traces)} traces: "
+        f"read_archive {np.median(reads):.3f} s, restore every state {np.median(restores):.3f} s (median of {args.repeat})"
+    )
 
 
 if __name__ == "__main__":

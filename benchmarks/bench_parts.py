@@ -82,9 +82,9 @@ def _task(suite: Path) -> tuple[Path, Path]:
 def step_geometry(suite: Path) -> dict:
     from aw.formats import read_targets, read_task
     from aw.meshes import load_mesh
+    from aw.pair_search import local_workers
     from aw_eval.equivalence import equivalence_groups
     from aw_eval.geometry import TaskGeometry, part_divisor
-    from aw.pair_search import local_workers
     from aw_eval.kernels.fps import fps_batch
     from aw_eval.sampling import part_seed, surface_samples
     from aw_eval.settings import ProtocolSettings
@@ -193,7 +193,9 @@ def _cell(step: dict, key: str) -> str:
     if not step:
         return "-"
     if "error" in step:
-        return "stopped" if step["error"].startswith("stopped") else ("not run" if "not run" in step["error"] else "error")
+        return (
+            "stopped" if step["error"].startswith("stopped") else ("not run" if "not run" in step["error"] else "error")
+        )
     value = step.get(key)
     return "-" if value is None else (f"{value:.1f}" if value < 100 else f"{value:.0f}")
 
@@ -201,16 +203,39 @@ def _cell(step: dict, key: str) -> str:
 def table(path: Path) -> str:
     """A Markdown table of a ``parts_sweep.json``: seconds per step and the geometry's peak memory."""
     rows = json.loads(Path(path).read_text())["rows"]
-    head = ["kind", "parts", "prepare s", "sampling s", "FPS s", "groups s", "search structures s", "geometry peak MB",
-            "render start + picture s", "score s", "official prepare s", "groups (largest)"]
+    head = [
+        "kind",
+        "parts",
+        "prepare s",
+        "sampling s",
+        "FPS s",
+        "groups s",
+        "search structures s",
+        "geometry peak MB",
+        "render start + picture s",
+        "score s",
+        "official prepare s",
+        "groups (largest)",
+    ]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         g, rd, sc, of, pr = (r.get(k, {}) for k in ("geometry", "render", "score", "official", "prepare"))
         render = _cell(rd, "start_s") if not rd or "error" in rd else f"{rd['start_s']:.1f} + {rd['picture_s']:.1f}"
         groups = "-" if not g or "error" in g else f"{g['n_groups']} ({g['group_sizes'][0]})"
-        cells = [r["kind"], str(r["parts"]), _cell(pr, "prepare_s"), _cell(g, "sampling_s"), _cell(g, "fps_s"),
-                 _cell(g, "groups_s"), _cell(g, "index_s"), _cell(g, "peak_rss_mb"), render, _cell(sc, "score_s"),
-                 _cell(of, "prepare_s"), groups]
+        cells = [
+            r["kind"],
+            str(r["parts"]),
+            _cell(pr, "prepare_s"),
+            _cell(g, "sampling_s"),
+            _cell(g, "fps_s"),
+            _cell(g, "groups_s"),
+            _cell(g, "index_s"),
+            _cell(g, "peak_rss_mb"),
+            render,
+            _cell(sc, "score_s"),
+            _cell(of, "prepare_s"),
+            groups,
+        ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -239,8 +264,12 @@ def candidates(kind: str, n: int) -> dict:
     start = time.perf_counter()
     frames = {int(i): box_frame(clouds[i]) for i in np.unique(rigid)}
     left = sum(not rules_out(frames[i], frames[j], settings.equiv_cd) for i, j in rigid.tolist())
-    return {"pairs": n * (n - 1) // 2, "rigid_candidates": len(rigid), "rotation_candidates": int(left),
-            "rotation_s": time.perf_counter() - start}
+    return {
+        "pairs": n * (n - 1) // 2,
+        "rigid_candidates": len(rigid),
+        "rotation_candidates": int(left),
+        "rotation_s": time.perf_counter() - start,
+    }
 
 
 def time_groups(path: Path) -> dict:
@@ -254,8 +283,12 @@ def time_groups(path: Path) -> dict:
     eq.equivalence_groups(clouds[:2], divisor, **quiet)  # compiled kernels loaded before the clock starts
     cpu, wall = time.process_time(), time.perf_counter()
     groups = eq.equivalence_groups(clouds, divisor, **quiet)
-    return {"module": eq.__file__, "cpu_s": time.process_time() - cpu, "wall_s": time.perf_counter() - wall,
-            "groups": groups}
+    return {
+        "module": eq.__file__,
+        "cpu_s": time.process_time() - cpu,
+        "wall_s": time.perf_counter() - wall,
+        "groups": groups,
+    }
 
 
 def time_icp(path: Path) -> dict:
@@ -274,8 +307,13 @@ def time_icp(path: Path) -> dict:
     prob.run(r0[0], t0[0], 2, 1e-9)  # compiled kernels loaded before the clock starts
     cpu = time.process_time()
     runs = [prob.run(r0[k], t0[k], 100, 1e-9) for k in range(0, len(r0), max(1, len(r0) // 6))]
-    return {"module": aw_eval.__file__, "structures_cpu_s": structures, "icp_cpu_s": time.process_time() - cpu,
-            "objectives": [r.objective for r in runs], "iterations": [r.iterations for r in runs]}
+    return {
+        "module": aw_eval.__file__,
+        "structures_cpu_s": structures,
+        "icp_cpu_s": time.process_time() - cpu,
+        "objectives": [r.objective for r in runs],
+        "iterations": [r.iterations for r in runs],
+    }
 
 
 def main() -> None:
@@ -291,8 +329,10 @@ def main() -> None:
     if len(sys.argv) == 4 and sys.argv[1] == "--candidates":
         for n in (int(v) for v in sys.argv[3].split(",")):
             c = candidates(sys.argv[2], n)
-            print(f"{sys.argv[2]} {n} parts: {c['pairs']} pairs; {c['rigid_candidates']} left by the rigid bound, "
-                  f"{c['rotation_candidates']} by the rotation bound ({c['rotation_s']:.1f} s, one thread)")
+            print(
+                f"{sys.argv[2]} {n} parts: {c['pairs']} pairs; {c['rigid_candidates']} left by the rigid bound, "
+                f"{c['rotation_candidates']} by the rotation bound ({c['rotation_s']:.1f} s, one thread)"
+            )
         return
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True, help="folder for the generated objects, suites and parts_sweep.json")
@@ -326,14 +366,21 @@ def main() -> None:
                 if "official" in stopped:
                     row["official"] = {"error": "not run (stopped at fewer parts)"}
                 else:
-                    row["official"] = _prepare(src, out_dir / "suites" / f"{kind}{n:03d}-official", "official", args.limit_s)
+                    row["official"] = _prepare(
+                        src, out_dir / "suites" / f"{kind}{n:03d}-official", "official", args.limit_s
+                    )
             row = {k: v for k, v in row.items() if v is not None}
-            stopped |= {k for k, v in row.items() if isinstance(v, dict) and str(v.get("error", "")).startswith("stopped")}
+            stopped |= {
+                k for k, v in row.items() if isinstance(v, dict) and str(v.get("error", "")).startswith("stopped")
+            }
             row["load_average"] = os.getloadavg()[0]
             rows.append(row)
             print(json.dumps(row), flush=True)
-    meta = {"command": " ".join([Path(sys.executable).name, *sys.argv]), "cpus": os.cpu_count(),
-            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}
+    meta = {
+        "command": " ".join([Path(sys.executable).name, *sys.argv]),
+        "cpus": os.cpu_count(),
+        "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+    }
     result_path.write_text(json.dumps({"meta": meta, "rows": rows}, indent=1) + "\n")
     print(f"wrote {result_path}")
 

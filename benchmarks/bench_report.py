@@ -32,16 +32,43 @@ def _synthetic_score(system: str, task_id: str, run_dir: Path, part_ids: list[st
     ok = errors <= 0.01
     pa = ok.mean(axis=1)
     scd = errors.mean(axis=1)
-    return RunScore(system=system, task_id=task_id, status="scored", final_from="final.json", end_reason="finished",
-                    has_trajectory=True, end_t=ep.end_t, pa=float(pa[-1]), sr=float(ok[-1].all()), sra=float(scd[-1] < 0.02),
-                    scd=float(scd[-1]), part_errors=errors[-1], assignment=np.arange(p), centred_cd=errors[-1] / 2,
-                    offset=np.zeros(p), moved=ep.moved, reg_rotation=np.eye(3), reg_translation=np.zeros(3),
-                    ck_seq=ep.ck_seq, ck_t=ep.ck_t, ck_pa=pa, ck_sr=ok.all(axis=1).astype(float),
-                    ck_sra=(scd < 0.02).astype(float), ck_scd=scd, ck_part_errors=errors,
-                    ck_assignment=np.tile(np.arange(p), (n, 1)), ck_reg_rotation=np.tile(np.eye(3), (n, 1, 1)),
-                    ck_reg_translation=np.zeros((n, 3)), call_t=ep.call_t, call_kind=ep.call_kind, call_ok=ep.call_ok,
-                    edit_call=ep.edit_call, edit_translation=ep.edit_translation,
-                    edit_rotation_deg=ep.edit_rotation_deg, edit_revisit=ep.edit_revisit)
+    return RunScore(
+        system=system,
+        task_id=task_id,
+        status="scored",
+        final_from="final.json",
+        end_reason="finished",
+        has_trajectory=True,
+        end_t=ep.end_t,
+        pa=float(pa[-1]),
+        sr=float(ok[-1].all()),
+        sra=float(scd[-1] < 0.02),
+        scd=float(scd[-1]),
+        part_errors=errors[-1],
+        assignment=np.arange(p),
+        centred_cd=errors[-1] / 2,
+        offset=np.zeros(p),
+        moved=ep.moved,
+        reg_rotation=np.eye(3),
+        reg_translation=np.zeros(3),
+        ck_seq=ep.ck_seq,
+        ck_t=ep.ck_t,
+        ck_pa=pa,
+        ck_sr=ok.all(axis=1).astype(float),
+        ck_sra=(scd < 0.02).astype(float),
+        ck_scd=scd,
+        ck_part_errors=errors,
+        ck_assignment=np.tile(np.arange(p), (n, 1)),
+        ck_reg_rotation=np.tile(np.eye(3), (n, 1, 1)),
+        ck_reg_translation=np.zeros((n, 3)),
+        call_t=ep.call_t,
+        call_kind=ep.call_kind,
+        call_ok=ep.call_ok,
+        edit_call=ep.edit_call,
+        edit_translation=ep.edit_translation,
+        edit_rotation_deg=ep.edit_rotation_deg,
+        edit_revisit=ep.edit_revisit,
+    )
 
 
 def _size(path: Path) -> int:
@@ -81,25 +108,37 @@ def main(argv=None) -> int:
         for k, s in enumerate(systems):
             run_dir = args.out / "runs" / s / e.task_id
             wrong = all_ids[: k % len(all_ids)]
-            write_scripted_run(run_dir, suite, e.task_id, system=s, correct=[p for p in all_ids if p not in wrong],
-                               inspect_moves=False, jitter_edits=jitter, seed=k)
+            write_scripted_run(
+                run_dir,
+                suite,
+                e.task_id,
+                system=s,
+                correct=[p for p in all_ids if p not in wrong],
+                inspect_moves=False,
+                jitter_edits=jitter,
+                seed=k,
+            )
             score = _synthetic_score(s, e.task_id, run_dir, all_ids, all_ids, rng)
             n_ck += score.n_checkpoints
             records[(s, e.task_id)] = RunRecord(score, None, None, run_dir)
     study = Study("bench", entries, systems, records, facts)
     doc = build_results(study, AnalysisSettings(n_draws=200, n_permutations=200), suite_dir=str(suite))
     markdown = render_markdown(doc, {})
-    print(f"study: {len(entries)} tasks x {len(systems)} systems, {n_ck:,} checkpoints "
-          f"(built in {time.perf_counter() - t0:.0f} s)")
+    print(
+        f"study: {len(entries)} tasks x {len(systems)} systems, {n_ck:,} checkpoints "
+        f"(built in {time.perf_counter() - t0:.0f} s)"
+    )
     report = args.out / "report"
     for label in ("cold", "warm"):
         stats = write_html(study, doc, markdown, report, suite, jobs=args.jobs)
         files = report / "report_files"
         bundle = sum(p.stat().st_size for p in files.glob("plotly-*.min.js"))
-        print(f"{label}: {stats.seconds:.1f} s; report.html {stats.html_bytes / 1e6:.2f} MB; report_files "
-              f"{_size(files) / 1e6:.1f} MB (plotly bundle {bundle / 1e6:.1f} MB, pictures "
-              f"{_size(files / 'renders') / 1e6:.1f} MB in {stats.renders} files, {stats.renders_new} rendered now, "
-              f"3D-view data {_size(files / 'viewer') / 1e6:.1f} MB)")
+        print(
+            f"{label}: {stats.seconds:.1f} s; report.html {stats.html_bytes / 1e6:.2f} MB; report_files "
+            f"{_size(files) / 1e6:.1f} MB (plotly bundle {bundle / 1e6:.1f} MB, pictures "
+            f"{_size(files / 'renders') / 1e6:.1f} MB in {stats.renders} files, {stats.renders_new} rendered now, "
+            f"3D-view data {_size(files / 'viewer') / 1e6:.1f} MB)"
+        )
     return 0
 
 

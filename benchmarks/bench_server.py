@@ -42,8 +42,14 @@ def make_task(root: Path, n_parts: int, faces: int) -> Path:
         m.apply_scale(rng.uniform(0.05, 0.25, 3))
         m.apply_translation([0.6 * (i % 5), 0.6 * (i // 5), 0.0])
         m.export(task_dir / "parts" / f"p{i + 1:02d}.obj")
-    task = Task(task_id="bench", source="custom", dataset="bench", object_id="bench", prompt=task_prompt("none"),
-                parts=[TaskPart(id=f"p{i + 1:02d}", mesh=f"parts/p{i + 1:02d}.obj") for i in range(n_parts)])
+    task = Task(
+        task_id="bench",
+        source="custom",
+        dataset="bench",
+        object_id="bench",
+        prompt=task_prompt("none"),
+        parts=[TaskPart(id=f"p{i + 1:02d}", mesh=f"parts/p{i + 1:02d}.obj") for i in range(n_parts)],
+    )
     write_task(task_dir, task)
     return task_dir
 
@@ -64,8 +70,9 @@ async def run(task_dir: Path, run_dir: Path, args) -> dict:
 
     env = dict(os.environ)
     env.setdefault("PYOPENGL_PLATFORM", "egl")
-    params = StdioServerParameters(command=sys.executable, args=["-m", "aw_server.cli", str(task_dir), "--record",
-                                                                 str(run_dir)], env=env)
+    params = StdioServerParameters(
+        command=sys.executable, args=["-m", "aw_server.cli", str(task_dir), "--record", str(run_dir)], env=env
+    )
     out: dict = {}
     t0 = time.perf_counter()
     async with Client(params, mode="legacy") as c:
@@ -112,8 +119,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--trivial", type=int, default=200)
     p.add_argument("--edits", type=int, default=100)
     p.add_argument("--captures", type=int, default=20)
-    p.add_argument("--out", type=Path, required=True, metavar="DIR",
-                   help="folder to write bench_server.json to (a new file; never overwritten)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="DIR",
+        help="folder to write bench_server.json to (a new file; never overwritten)",
+    )
     args = p.parse_args(argv)
     from _output import output_file
 
@@ -125,8 +137,12 @@ def main(argv: list[str] | None = None) -> int:
         total_faces = sum(len(load_mesh(f).faces) for f in (task_dir / "parts").glob("*.obj"))
         res = anyio.run(run, task_dir, Path(tmp) / "run", args)
     res.update(
-        parts=args.parts, total_faces=total_faces, python=platform.python_version(), machine=platform.machine(),
-        cpus=os.cpu_count(), pyopengl_platform=os.environ.get("PYOPENGL_PLATFORM", "egl"),
+        parts=args.parts,
+        total_faces=total_faces,
+        python=platform.python_version(),
+        machine=platform.machine(),
+        cpus=os.cpu_count(),
+        pyopengl_platform=os.environ.get("PYOPENGL_PLATFORM", "egl"),
         command=" ".join([Path(sys.executable).name, *sys.argv]),
     )
     print(f"aw-serve over stdio: {args.parts} parts, {total_faces} faces, {os.cpu_count()} CPUs")

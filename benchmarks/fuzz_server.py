@@ -62,8 +62,9 @@ class Hidden:
 
     def __init__(self, task_dir: Path, targets_path: Path):
         self.needles = [str(task_dir), str(task_dir.parent.parent), ".obj", "parts/", "targets"]
-        self.vertices = np.concatenate([trimesh.load(p, force="mesh", process=False).vertices
-                                        for p in sorted((task_dir / "parts").glob("*.obj"))])
+        self.vertices = np.concatenate(
+            [trimesh.load(p, force="mesh", process=False).vertices for p in sorted((task_dir / "parts").glob("*.obj"))]
+        )
         t = np.array([p.pose for p in read_targets(targets_path).parts.values()]).ravel()
         self.targets = t[~(np.isclose(np.abs(t), 0) | np.isclose(np.abs(t), 1))]
 
@@ -79,7 +80,7 @@ class Hidden:
         if len(nums) >= 3:
             triples = np.lib.stride_tricks.sliding_window_view(nums, 3)
             for chunk in range(0, len(triples), 2000):
-                d = np.abs(triples[chunk:chunk + 2000, None, :] - self.vertices[None, :, :]).max(axis=2)
+                d = np.abs(triples[chunk : chunk + 2000, None, :] - self.vertices[None, :, :]).max(axis=2)
                 if (d < 1e-7).any():
                     return "contains a mesh vertex"
         return None
@@ -94,7 +95,11 @@ class ArgGen:
         self.groups: list[str] = []
 
     def _id(self):
-        return self.r.choice(self.ids + self.groups + ["g1"]) if self.r.random() < 0.95 else self.r.choice(["p99", "", "x" * 200])
+        return (
+            self.r.choice(self.ids + self.groups + ["g1"])
+            if self.r.random() < 0.95
+            else self.r.choice(["p99", "", "x" * 200])
+        )
 
     def _num(self, lo, hi):
         return self.r.uniform(lo, hi)
@@ -126,9 +131,17 @@ class ArgGen:
         if tool == "ungroup_objects":
             return {"ids": [r.choice(self.groups or ["g1"])]}
         if tool == "move_camera":
-            return {k: v for k, v in {"yaw": self._num(-180, 180), "pitch": self._num(-85, 85),
-                                       "zoom": self._num(0.25, 4), "right": self._num(-1, 1),
-                                       "up": self._num(-1, 1)}.items() if r.random() < 0.5}
+            return {
+                k: v
+                for k, v in {
+                    "yaw": self._num(-180, 180),
+                    "pitch": self._num(-85, 85),
+                    "zoom": self._num(0.25, 4),
+                    "right": self._num(-1, 1),
+                    "up": self._num(-1, 1),
+                }.items()
+                if r.random() < 0.5
+            }
         if tool == "start_episode":
             return {"task": "fuzz"} if r.random() < 0.5 else {}
         return {}
@@ -137,7 +150,7 @@ class ArgGen:
         r = self.r
         kind = r.randrange(16)
         if kind == 0:
-            return r.choice([10**r.randint(19, 400), -(10**r.randint(19, 400))])
+            return r.choice([10 ** r.randint(19, 400), -(10 ** r.randint(19, 400))])
         if kind == 1:
             return r.choice([1e308, -1e308, 5e-324, 1e5, -1e5])
         if kind == 2:
@@ -197,13 +210,27 @@ class ArgGen:
 
 
 OFFICIAL_IDS = ["part-0001", "part-0002", "part-0003"]
-OFFICIAL_MUTATIONS = {"translate_objects", "rotate_objects", "set_object_pose", "group_objects", "ungroup_objects",
-                      "move_camera"}
-OFFICIAL_NAMES = {"translate_objects": "translate_objects", "rotate_objects": "rotate_objects",
-                  "set_object_pose": "set_object_pose", "group_objects": "group_objects",
-                  "ungroup_objects": "ungroup_objects", "move_camera": "move_camera", "get_object": "get_object",
-                  "start_episode": "start_episode", "list_objects": "list_objects", "get_scene": "get_scene",
-                  "get_state": "get_state"}
+OFFICIAL_MUTATIONS = {
+    "translate_objects",
+    "rotate_objects",
+    "set_object_pose",
+    "group_objects",
+    "ungroup_objects",
+    "move_camera",
+}
+OFFICIAL_NAMES = {
+    "translate_objects": "translate_objects",
+    "rotate_objects": "rotate_objects",
+    "set_object_pose": "set_object_pose",
+    "group_objects": "group_objects",
+    "ungroup_objects": "ungroup_objects",
+    "move_camera": "move_camera",
+    "get_object": "get_object",
+    "start_episode": "start_episode",
+    "list_objects": "list_objects",
+    "get_scene": "get_scene",
+    "get_state": "get_state",
+}
 
 
 class OfficialGen(ArgGen):
@@ -234,12 +261,22 @@ class OfficialGen(ArgGen):
             return '{"ids": %s, "delta": [0, 0, 0]}' % ("[" * d + "]" * d)
         if kind == 1:  # lone UTF-16 surrogates, in a value or a key
             sur = "\\u%04x" % r.choice([0xD800, 0xDBFF, 0xDC00, 0xDFFF])
-            return r.choice(['{"ids": %s, "name": "a%sb"}' % (json.dumps(self.r.sample(self.ids, 2)), sur),
-                             '{"%s": 1}' % sur, '{"id": "%s"}' % sur])
+            return r.choice(
+                [
+                    '{"ids": %s, "name": "a%sb"}' % (json.dumps(self.r.sample(self.ids, 2)), sur),
+                    '{"%s": 1}' % sur,
+                    '{"id": "%s"}' % sur,
+                ]
+            )
         if kind == 2:  # integers beyond float range, or beyond Python's 4300-digit text limit
             digits = "9" * r.choice([309, 400, 4300, 4301, 6000])
-            return r.choice(['{"ids": ["part-0001"], "delta": [%s, 0, 0]}' % digits, '{"yaw": -%s}' % digits,
-                             '{"id": "part-0001", "position": [0, 0, %s]}' % digits])
+            return r.choice(
+                [
+                    '{"ids": ["part-0001"], "delta": [%s, 0, 0]}' % digits,
+                    '{"yaw": -%s}' % digits,
+                    '{"id": "part-0001", "position": [0, 0, %s]}' % digits,
+                ]
+            )
         if kind == 3:
             return r.choice(["NaN", '{"yaw": NaN}', '{"zoom": Infinity}', '{"pitch": -Infinity}'])
         if kind == 4:
@@ -358,8 +395,12 @@ def _text(res) -> str:
     return "\n".join(getattr(b, "text", "") for b in res.content)
 
 
-RAW_INIT = {"jsonrpc": "2.0", "id": 0, "method": "initialize", "params": {
-    "protocolVersion": "2025-06-18", "capabilities": {}, "clientInfo": {"name": "fuzz", "version": "0"}}}
+RAW_INIT = {
+    "jsonrpc": "2.0",
+    "id": 0,
+    "method": "initialize",
+    "params": {"protocolVersion": "2025-06-18", "capabilities": {}, "clientInfo": {"name": "fuzz", "version": "0"}},
+}
 
 
 def raw_lines(n: int, seed: int, cmd: list[str]) -> dict:
@@ -421,27 +462,60 @@ def _state(result) -> dict:
     return {k: s.get(k) for k in ("poses", "groups", "camera")}
 
 
-async def fuzz_calls(n: int, seed: int, timeout: float, task_dir: Path, run_root: Path, hidden: Hidden,
-                     log_every: int, max_seconds: float = math.inf, surface: str = "default") -> dict:
+async def fuzz_calls(
+    n: int,
+    seed: int,
+    timeout: float,
+    task_dir: Path,
+    run_root: Path,
+    hidden: Hidden,
+    log_every: int,
+    max_seconds: float = math.inf,
+    surface: str = "default",
+) -> dict:
     driver = (OfficialDriver if surface == "official" else DefaultDriver)(seed)
     gen = driver.gen
-    stats = {"surface": surface, "calls": 0, "ok": 0, "errors": 0, "crashes": 0, "hangs": 0,
-             "state_changes_on_error": 0, "unrecorded_calls": 0, "leaks": 0, "examples": [], "servers": 0,
-             "rss_mb": {}}
+    stats = {
+        "surface": surface,
+        "calls": 0,
+        "ok": 0,
+        "errors": 0,
+        "crashes": 0,
+        "hangs": 0,
+        "state_changes_on_error": 0,
+        "unrecorded_calls": 0,
+        "leaks": 0,
+        "examples": [],
+        "servers": 0,
+        "rss_mb": {},
+    }
     t_start = time.perf_counter()
     deadline = t_start + max_seconds
     while stats["calls"] < n and time.perf_counter() < deadline:
         stats["servers"] += 1
         run = run_root / f"run{stats['servers']}"
-        params = StdioServerParameters(command=sys.executable, args=["-m", "aw_server.cli", str(task_dir), "--record",
-                                                                     str(run), "--budget-minutes", "100000",
-                                                                     *driver.server_args],
-                                       env=dict(os.environ))
+        params = StdioServerParameters(
+            command=sys.executable,
+            args=[
+                "-m",
+                "aw_server.cli",
+                str(task_dir),
+                "--record",
+                str(run),
+                "--budget-minutes",
+                "100000",
+                *driver.server_args,
+            ],
+            env=dict(os.environ),
+        )
         made = 0
         try:
             async with Client(params) as c:
-                server = next(p for p in psutil.Process().children(recursive=True)
-                              if "aw_server.cli" in " ".join(p.cmdline()) and str(run) in " ".join(p.cmdline()))
+                server = next(
+                    p
+                    for p in psutil.Process().children(recursive=True)
+                    if "aw_server.cli" in " ".join(p.cmdline()) and str(run) in " ".join(p.cmdline())
+                )
                 before = await driver.state(c)
                 made += 1
                 while stats["calls"] < n and time.perf_counter() < deadline:
@@ -468,8 +542,9 @@ async def fuzz_calls(n: int, seed: int, timeout: float, task_dir: Path, run_root
                         made += 1
                         if after != before:
                             stats["state_changes_on_error"] += 1
-                            stats["examples"].append({"state_change": tool, "args": repr(args)[:300],
-                                                      "reply": text[:300]})
+                            stats["examples"].append(
+                                {"state_change": tool, "args": repr(args)[:300], "reply": text[:300]}
+                            )
                         before = after
                     else:
                         stats["ok"] += 1
@@ -480,9 +555,13 @@ async def fuzz_calls(n: int, seed: int, timeout: float, task_dir: Path, run_root
                         stats["rss_mb"][f"after_{WARMUP_CALLS}_calls"] = round(server.memory_info().rss / 2**20, 1)
                     if log_every and stats["calls"] % log_every == 0:
                         rate = stats["calls"] / (time.perf_counter() - t_start)
-                        print(f"fuzz: {stats['calls']} calls ({rate:.0f}/s), {stats['errors']} errors, "
-                              f"crashes {stats['crashes']}, hangs {stats['hangs']}, state changes "
-                              f"{stats['state_changes_on_error']}, leaks {stats['leaks']}", file=sys.stderr, flush=True)
+                        print(
+                            f"fuzz: {stats['calls']} calls ({rate:.0f}/s), {stats['errors']} errors, "
+                            f"crashes {stats['crashes']}, hangs {stats['hangs']}, state changes "
+                            f"{stats['state_changes_on_error']}, leaks {stats['leaks']}",
+                            file=sys.stderr,
+                            flush=True,
+                        )
                 stats["rss_mb"]["end"] = round(server.memory_info().rss / 2**20, 1)
         except Exception as exc:  # the session broke: the server died or answered garbage
             stats["crashes"] += 1
@@ -502,16 +581,24 @@ async def fuzz_calls(n: int, seed: int, timeout: float, task_dir: Path, run_root
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--surface", choices=("default", "official"), default="default",
-                   help="the tools fuzzed: aw-serve's own (default) or the official surface's")
+    p.add_argument(
+        "--surface",
+        choices=("default", "official"),
+        default="default",
+        help="the tools fuzzed: aw-serve's own (default) or the official surface's",
+    )
     p.add_argument("--calls", type=int, default=100_000, help="fuzzed tool calls (default 100000)")
     p.add_argument("--raw-lines", type=int, default=2000, help="undecodable transport lines (default 2000)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--timeout", type=float, default=60.0, help="seconds without a reply that count as a hang")
     p.add_argument("--out", type=Path, help="write the summary JSON here")
     p.add_argument("--log-every", type=int, default=5000)
-    p.add_argument("--max-seconds", type=float, default=math.inf,
-                   help="stop the tool calls after this long (the summary says how many were made)")
+    p.add_argument(
+        "--max-seconds",
+        type=float,
+        default=math.inf,
+        help="stop the tool calls after this long (the summary says how many were made)",
+    )
     args = p.parse_args(argv)
     if args.out is not None and args.out.exists():
         p.error(f"--out {args.out} already exists (results are never overwritten)")
@@ -521,11 +608,29 @@ def main(argv: list[str] | None = None) -> int:
         task_id = read_manifest(suite).tasks[0].task_id
         task_dir, targets = suite_paths(suite, task_id)
         hidden = Hidden(Path(task_dir), Path(targets))
-        stats = anyio.run(fuzz_calls, args.calls, args.seed, args.timeout, Path(task_dir), root / "runs", hidden,
-                          args.log_every, args.max_seconds, args.surface)
+        stats = anyio.run(
+            fuzz_calls,
+            args.calls,
+            args.seed,
+            args.timeout,
+            Path(task_dir),
+            root / "runs",
+            hidden,
+            args.log_every,
+            args.max_seconds,
+            args.surface,
+        )
         if args.raw_lines:
-            cmd = [sys.executable, "-m", "aw_server.cli", str(task_dir), "--record", str(root / "raw"),
-                   "--surface", args.surface]
+            cmd = [
+                sys.executable,
+                "-m",
+                "aw_server.cli",
+                str(task_dir),
+                "--record",
+                str(root / "raw"),
+                "--surface",
+                args.surface,
+            ]
             stats["raw"] = raw_lines(args.raw_lines, args.seed, cmd)
     stats["command"] = "python benchmarks/fuzz_server.py " + " ".join(argv if argv is not None else sys.argv[1:])
     stats["examples"] = stats["examples"][:20]
@@ -533,8 +638,14 @@ def main(argv: list[str] | None = None) -> int:
     print(text)
     if args.out:
         args.out.write_text(text + "\n")
-    bad = (stats["crashes"] + stats["hangs"] + stats["state_changes_on_error"] + stats["unrecorded_calls"]
-           + stats["leaks"] + stats.get("raw", {}).get("unanswered", 0))
+    bad = (
+        stats["crashes"]
+        + stats["hangs"]
+        + stats["state_changes_on_error"]
+        + stats["unrecorded_calls"]
+        + stats["leaks"]
+        + stats.get("raw", {}).get("unanswered", 0)
+    )
     return 1 if bad or not stats.get("raw", {"server_alive_after": True})["server_alive_after"] else 0
 
 

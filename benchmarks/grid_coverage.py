@@ -49,8 +49,16 @@ def _grid_answered(cg, grids, queries: np.ndarray, pts: np.ndarray) -> np.ndarra
     ok = np.zeros((n_parts, k), bool)
     lb = np.zeros((n_parts, k))
     for q in range(n_parts):
-        g = cg.CellGrid(grids.lo[q], grids.inv_h[q], grids.dims[q].astype(np.int64), grids.depth, grids.child[q],
-                        grids.cand[q], grids.over[q], None)
+        g = cg.CellGrid(
+            grids.lo[q],
+            grids.inv_h[q],
+            grids.dims[q].astype(np.int64),
+            grids.depth,
+            grids.child[q],
+            grids.cand[q],
+            grids.over[q],
+            None,
+        )
         node, inside = cg.leaf_of(g, queries[q])
         ok[q] = inside & ~grids.over[q][node]
         cand = grids.cand[q][node] - q * pts.shape[1]
@@ -70,10 +78,21 @@ def main() -> None:
     ap.add_argument("--parts", type=int, nargs="+", default=[8], help="part counts, one task each")
     ap.add_argument("--n-fps", type=int, default=1000, help="points per part (paper: 1000)")
     ap.add_argument("--checkpoints", type=int, default=2, help="checkpoints per part count")
-    ap.add_argument("--leaf", type=int, nargs=2, action="append", metavar=("S", "C"),
-                    help="leaf size and leaves read per query (repeatable; default 32 4 and 16 8)")
-    ap.add_argument("--grid-module", type=Path, default=None, metavar="FILE",
-                    help="the removed cellgrid.py to compare with (default: leaves only)")
+    ap.add_argument(
+        "--leaf",
+        type=int,
+        nargs=2,
+        action="append",
+        metavar=("S", "C"),
+        help="leaf size and leaves read per query (repeatable; default 32 4 and 16 8)",
+    )
+    ap.add_argument(
+        "--grid-module",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="the removed cellgrid.py to compare with (default: leaves only)",
+    )
     ap.add_argument("--out", type=Path, required=True, metavar="DIR", help="folder to write the JSON to (a new file)")
     ap.add_argument("--name", default="grid_coverage", help="the JSON file's name in --out, without .json")
     args = ap.parse_args()
@@ -101,10 +120,15 @@ def main() -> None:
             build[f"leaves_S{s_}_C{c_}"] = time.perf_counter() - t0
         if cg is not None:
             t0 = time.perf_counter()
-            structs["grid"] = (cg.build_part_grids(target[None], k=cg.JOINED_K, margin_cells=cg.JOINED_MARGIN_CELLS),
-                               cg.build_part_grids(baked), None)
+            structs["grid"] = (
+                cg.build_part_grids(target[None], k=cg.JOINED_K, margin_cells=cg.JOINED_MARGIN_CELLS),
+                cg.build_part_grids(baked),
+                None,
+            )
             build["grid"] = time.perf_counter() - t0
-        cks = np.unique(trajectory_checkpoints(obj, 8 * args.checkpoints, seed=1000 + parts), axis=0)[: args.checkpoints]
+        cks = np.unique(trajectory_checkpoints(obj, 8 * args.checkpoints, seed=1000 + parts), axis=0)[
+            : args.checkpoints
+        ]
         for c in cks:
             ck = geom.checkpoint(c)
             maps = jax_part_maps(geom, [ck])[0]

@@ -25,10 +25,10 @@ import psutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks._output import output_file  # noqa: E402
 from aw.official.package import OfficialPackage  # noqa: E402
-from tests.aw.official.builders import write_package  # noqa: E402
+from benchmarks._output import output_file  # noqa: E402
 from tests.aw.official import hostile  # noqa: E402
+from tests.aw.official.builders import write_package  # noqa: E402
 from tests.aw.official.hostile import SAMPLE, VARIANTS, Variant, good_run  # noqa: E402
 
 BIN = Path(sys.executable).parent
@@ -46,6 +46,7 @@ def _numbers(n_bytes: int, seed: int = 0) -> bytes:
 
 def _big_arguments(name: str, n_bytes: int, calls: slice, message: str, archive: bool) -> Variant:
     """The arguments of the calls ``calls`` each hold an array of ``n_bytes`` of JSON text."""
+
     def damage(run: Path, scratch: Path) -> None:
         path = hostile._final(run)
         files = hostile._members(path)
@@ -80,8 +81,13 @@ def _run(cmd: list[str]) -> dict:
     watcher.start()
     out, err = proc.communicate()
     watcher.join()
-    return {"code": proc.returncode, "stderr": err, "stdout": out, "seconds": round(time.perf_counter() - t0, 2),
-            "peak_rss_mb": round(peak[0] / 1e6, 1)}
+    return {
+        "code": proc.returncode,
+        "stderr": err,
+        "stdout": out,
+        "seconds": round(time.perf_counter() - t0, 2),
+        "peak_rss_mb": round(peak[0] / 1e6, 1),
+    }
 
 
 def _error_line(err: str, prog: str) -> str | None:
@@ -102,8 +108,11 @@ def trial(variant: Variant, pkg: OfficialPackage, pristine: Path, work: Path) ->
     (work / "scratch").mkdir()
     variant.damage(logs / pristine.name, work / "scratch")
     archive = logs / pristine.name / "blocks" / SAMPLE[0] / "samples" / SAMPLE[1] / "final.episode.zip"
-    rec = {"variant": variant.name, "expected": variant.message,
-           "archive_mb": round(archive.stat().st_size / 1e6, 2) if archive.exists() else None}
+    rec = {
+        "variant": variant.name,
+        "expected": variant.message,
+        "archive_mb": round(archive.stat().st_size / 1e6, 2) if archive.exists() else None,
+    }
     out = work / "out"
     s = _run([str(BIN / "aw-score"), str(pkg.root), str(logs), "--out", str(out), "--jobs", "1"])
     said = _row_error(out) if variant.archive else _error_line(s["stderr"], "aw-score")
@@ -111,16 +120,40 @@ def trial(variant: Variant, pkg: OfficialPackage, pristine: Path, work: Path) ->
         rec["calls_jsonl_mb"] = round(len(hostile._members(archive)["calls.jsonl"]) / 1e6, 1)
     except Exception:  # a damaged archive
         rec["calls_jsonl_mb"] = None
-    rec["aw_score"] = {"code": s["code"], "said": said, "traceback": "Traceback" in s["stderr"],
-                       "named": bool(said) and variant.message in said, "seconds": s["seconds"], "peak_rss_mb": s["peak_rss_mb"],
-                       "left_partial": bool(list(out.glob(".official*")))}
+    rec["aw_score"] = {
+        "code": s["code"],
+        "said": said,
+        "traceback": "Traceback" in s["stderr"],
+        "named": bool(said) and variant.message in said,
+        "seconds": s["seconds"],
+        "peak_rss_mb": s["peak_rss_mb"],
+        "left_partial": bool(list(out.glob(".official*"))),
+    }
     suite, runs = work / "suite", work / "runs"
-    p = _run([str(BIN / "aw-prepare"), "official", str(pkg.root), "--episodes", str(logs), "--out", str(suite), "--runs", str(runs)])
+    p = _run(
+        [
+            str(BIN / "aw-prepare"),
+            "official",
+            str(pkg.root),
+            "--episodes",
+            str(logs),
+            "--out",
+            str(suite),
+            "--runs",
+            str(runs),
+        ]
+    )
     said = _error_line(p["stderr"], "aw-prepare")
-    rec["aw_prepare"] = {"code": p["code"], "said": said, "traceback": "Traceback" in p["stderr"],
-                         "named": bool(said) and variant.message in said, "seconds": p["seconds"], "peak_rss_mb": p["peak_rss_mb"],
-                         "left_suite": (suite / "manifest.json").exists(),
-                         "left_runs": runs.exists() and any(runs.iterdir())}
+    rec["aw_prepare"] = {
+        "code": p["code"],
+        "said": said,
+        "traceback": "Traceback" in p["stderr"],
+        "named": bool(said) and variant.message in said,
+        "seconds": p["seconds"],
+        "peak_rss_mb": p["peak_rss_mb"],
+        "left_suite": (suite / "manifest.json").exists(),
+        "left_runs": runs.exists() and any(runs.iterdir()),
+    }
     return rec
 
 
@@ -135,22 +168,35 @@ def main() -> None:
         pkg = OfficialPackage(write_package(root / "pkg", {SAMPLE[0]: [SAMPLE[1]]}), strict=False)
         pristine = good_run(pkg, root / "good" / "logs")
         trials = []
-        huge = _big_arguments(f"arguments-{args.huge_mib}MiB-array", args.huge_mib << 20, slice(0, 1),
-                              "over the limit of 67108864", True)
+        huge = _big_arguments(
+            f"arguments-{args.huge_mib}MiB-array", args.huge_mib << 20, slice(0, 1), "over the limit of 67108864", True
+        )
         # the most the limits let through: every call's arguments just under the row limit
         largest = _big_arguments("largest-accepted", (4 << 20) - 4096, slice(None), "", True)
         for k, variant in enumerate([*VARIANTS, huge, largest]):
             rec = trial(variant, pkg, pristine, root / f"t{k:02d}")
             trials.append(rec)
-            print(json.dumps({k: rec[k] for k in ("variant", "archive_mb")} | {
-                c: {x: rec[c][x] for x in ("code", "named", "traceback", "peak_rss_mb")} for c in ("aw_score", "aw_prepare")}),
-                flush=True)
+            print(
+                json.dumps(
+                    {k: rec[k] for k in ("variant", "archive_mb")}
+                    | {
+                        c: {x: rec[c][x] for x in ("code", "named", "traceback", "peak_rss_mb")}
+                        for c in ("aw_score", "aw_prepare")
+                    }
+                ),
+                flush=True,
+            )
             shutil.rmtree(root / f"t{k:02d}", ignore_errors=True)
         hostile_trials = trials[:-1]
         ok = sum(r[c]["named"] and not r[c]["traceback"] for r in hostile_trials for c in ("aw_score", "aw_prepare"))
-        doc = {"command": " ".join(["benchmarks/hostile_official.py", *sys.argv[1:]]), "variants": len(hostile_trials),
-               "named_one_line_errors": ok, "of": 2 * len(hostile_trials), "trials": hostile_trials,
-               "largest_accepted": trials[-1]}
+        doc = {
+            "command": " ".join(["benchmarks/hostile_official.py", *sys.argv[1:]]),
+            "variants": len(hostile_trials),
+            "named_one_line_errors": ok,
+            "of": 2 * len(hostile_trials),
+            "trials": hostile_trials,
+            "largest_accepted": trials[-1],
+        }
         target.write_text(json.dumps(doc, indent=1) + "\n")
         print(f"{len(hostile_trials)} variants: {ok}/{2 * len(hostile_trials)} named one-line errors; wrote {target}")
     finally:

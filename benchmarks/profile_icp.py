@@ -47,8 +47,14 @@ def profile(p: int, checkpoint: int, repeat: int, search: str) -> dict:
     else:
         tree_p = build_tree(pred)
         graph_p = graph_for(tree_p) if search == "graph" else None
-        prob = ICPProblem(pred, index.target, tree_t=index.tree_t, tree_p=tree_p,
-                          graph_t=index.graph_t if search == "graph" else None, graph_p=graph_p)
+        prob = ICPProblem(
+            pred,
+            index.target,
+            tree_t=index.tree_t,
+            tree_p=tree_p,
+            graph_t=index.graph_t if search == "graph" else None,
+            graph_p=graph_p,
+        )
     t_build = time.perf_counter() - t
     best = np.inf
     for _ in range(repeat):
@@ -64,11 +70,20 @@ def profile(p: int, checkpoint: int, repeat: int, search: str) -> dict:
     still = prob.run(win.rotation, win.translation, 200, -np.inf)
     t_still = time.perf_counter() - t
     still_evals = (still.iterations + 1) * (len(pred) + len(index.target))
-    return {"parts": p, "search": search, "starts": len(r0), "icp_s": best, "per_checkpoint_build_s": t_build,
-            "iterations": iters, "query_evaluations": evals, "searches": sum(r.searched for r in res),
-            "ns_per_query_evaluation": 1e9 * best / evals, "objectives": np.array([r.objective for r in res]),
-            "converged_ns_per_query_evaluation": 1e9 * t_still / still_evals,
-            "converged_searched_fraction": still.searched / still_evals}
+    return {
+        "parts": p,
+        "search": search,
+        "starts": len(r0),
+        "icp_s": best,
+        "per_checkpoint_build_s": t_build,
+        "iterations": iters,
+        "query_evaluations": evals,
+        "searches": sum(r.searched for r in res),
+        "ns_per_query_evaluation": 1e9 * best / evals,
+        "objectives": np.array([r.objective for r in res]),
+        "converged_ns_per_query_evaluation": 1e9 * t_still / still_evals,
+        "converged_searched_fraction": still.searched / still_evals,
+    }
 
 
 def main(argv=None) -> int:
@@ -82,18 +97,25 @@ def main(argv=None) -> int:
     for p in args.parts:
         runs = {s: profile(p, args.checkpoint, args.repeat, s) for s in args.searches}
         for r in runs.values():
-            print(f"parts={p} search={r['search']}: {r['starts']} starts, {r['iterations']} iterations, ICP {r['icp_s']:.3f} s "
-                  f"(best of {args.repeat}), built per checkpoint {r['per_checkpoint_build_s']:.3f} s, "
-                  f"{r['query_evaluations'] / 1e6:.2f} M query evaluations, {r['searches'] / 1e6:.2f} M searches, "
-                  f"{r['ns_per_query_evaluation']:.0f} ns per query evaluation; converged: "
-                  f"{r['converged_ns_per_query_evaluation']:.0f} ns per query evaluation with "
-                  f"{100 * r['converged_searched_fraction']:.2f}% searched", flush=True)
+            print(
+                f"parts={p} search={r['search']}: {r['starts']} starts, {r['iterations']} iterations, ICP {r['icp_s']:.3f} s "
+                f"(best of {args.repeat}), built per checkpoint {r['per_checkpoint_build_s']:.3f} s, "
+                f"{r['query_evaluations'] / 1e6:.2f} M query evaluations, {r['searches'] / 1e6:.2f} M searches, "
+                f"{r['ns_per_query_evaluation']:.0f} ns per query evaluation; converged: "
+                f"{r['converged_ns_per_query_evaluation']:.0f} ns per query evaluation with "
+                f"{100 * r['converged_searched_fraction']:.2f}% searched",
+                flush=True,
+            )
         if "kd" in runs and "graph" in runs:
-            print(f"parts={p}: objectives kd == graph bitwise: {np.array_equal(runs['kd']['objectives'], runs['graph']['objectives'])}")
+            print(
+                f"parts={p}: objectives kd == graph bitwise: {np.array_equal(runs['kd']['objectives'], runs['graph']['objectives'])}"
+            )
         if "parts" in runs:
             for other in set(runs) - {"parts"}:
                 a, b = runs["parts"]["objectives"], runs[other]["objectives"]
-                print(f"parts={p}: objectives parts vs {other}: max relative difference {np.max(np.abs(a - b) / b):.1e}")
+                print(
+                    f"parts={p}: objectives parts vs {other}: max relative difference {np.max(np.abs(a - b) / b):.1e}"
+                )
     return 0
 
 

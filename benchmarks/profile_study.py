@@ -91,8 +91,11 @@ def profile_exact(geom, poses: np.ndarray, repeat: int) -> dict:
             regs[name] = registration.register_points(prob, r0, t0, st.max_iters, st.tol, hook)
             best[name] = min(best[name], time.perf_counter() - t)
     a, b = regs.values()
-    return {"seconds": best, "first_start_walks_per_search": first.part_walks / max(first.part_searches, 1),
-            "scd_max_rel_diff": abs(a.scd - b.scd) / a.scd}
+    return {
+        "seconds": best,
+        "first_start_walks_per_search": first.part_walks / max(first.part_searches, 1),
+        "scd_max_rel_diff": abs(a.scd - b.scd) / a.scd,
+    }
 
 
 def main() -> int:
@@ -100,8 +103,13 @@ def main() -> int:
     ap.add_argument("--tasks", type=int, default=2, help="box tasks (of the suite's 5)")
     ap.add_argument("--checkpoints", type=int, default=100, help="consecutive checkpoints for the fast part")
     ap.add_argument("--repeat", type=int, default=2)
-    ap.add_argument("--out", type=Path, required=True, metavar="DIR",
-                    help="folder to write profile_study.json to (a new file; never overwritten)")
+    ap.add_argument(
+        "--out",
+        type=Path,
+        required=True,
+        metavar="DIR",
+        help="folder to write profile_study.json to (a new file; never overwritten)",
+    )
     args = ap.parse_args()
     from _output import output_file
 
@@ -119,22 +127,34 @@ def main() -> int:
             write_scripted_run(run, suite, e.task_id, system="sys", correct=ids[:-1], jitter_edits=500, seed=k)
             task_dir, targets = suite_paths(suite, e.task_id)
             geom = aw_eval.load_task_geometry(task_dir, targets, cache_dir=tmp / "cache")
-            states = [geom.poses_from_dict(r["poses"]) for r in map(json.loads, (run / "trajectory.jsonl").read_text().splitlines())
-                      if r.get("poses")]
+            states = [
+                geom.poses_from_dict(r["poses"])
+                for r in map(json.loads, (run / "trajectory.jsonl").read_text().splitlines())
+                if r.get("poses")
+            ]
             fin = json.loads((run / "final.json").read_text())
-            row = {"task": e.task_id, "fast": profile_fast(geom, np.stack(states[100:100 + args.checkpoints])),
-                   "exact_final": profile_exact(geom, geom.poses_from_dict(fin.get("poses", fin)), args.repeat)}
+            row = {
+                "task": e.task_id,
+                "fast": profile_fast(geom, np.stack(states[100 : 100 + args.checkpoints])),
+                "exact_final": profile_exact(geom, geom.poses_from_dict(fin.get("poses", fin)), args.repeat),
+            }
             result["tasks"].append(row)
             f, x = row["fast"], row["exact_final"]
             n = args.checkpoints
-            print(f"{e.task_id}: fast on {n} checkpoints, as a trajectory {f['trajectory']['seconds']:.1f} s "
-                  f"({f['trajectory']['refinements']} refinements, {f['trajectory']['iterations']} ICP iterations), "
-                  f"one at a time {f['one_at_a_time']['seconds']:.1f} s ({f['one_at_a_time']['refinements']}, "
-                  f"{f['one_at_a_time']['iterations']}); PA/SR identical {f['pa_sr_identical']}/{n}, "
-                  f"SCD within {f['scd_max_rel_diff']:.1e}")
+            print(
+                f"{e.task_id}: fast on {n} checkpoints, as a trajectory {f['trajectory']['seconds']:.1f} s "
+                f"({f['trajectory']['refinements']} refinements, {f['trajectory']['iterations']} ICP iterations), "
+                f"one at a time {f['one_at_a_time']['seconds']:.1f} s ({f['one_at_a_time']['refinements']}, "
+                f"{f['one_at_a_time']['iterations']}); PA/SR identical {f['pa_sr_identical']}/{n}, "
+                f"SCD within {f['scd_max_rel_diff']:.1e}"
+            )
             s = x["seconds"]
-            print(f"  exact final state: first start {x['first_start_walks_per_search']:.2f} part walks per search; "
-                  + ", ".join(f"{k} {v:.2f} s" for k, v in s.items()) + f"; SCD within {x['scd_max_rel_diff']:.1e}", flush=True)
+            print(
+                f"  exact final state: first start {x['first_start_walks_per_search']:.2f} part walks per search; "
+                + ", ".join(f"{k} {v:.2f} s" for k, v in s.items())
+                + f"; SCD within {x['scd_max_rel_diff']:.1e}",
+                flush=True,
+            )
     out.write_text(json.dumps(result, indent=2) + "\n")
     print(f"wrote {out}")
     return 0

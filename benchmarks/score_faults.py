@@ -25,9 +25,9 @@ import psutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from benchmarks._output import output_file  # noqa: E402
 from aw.formats import read_manifest  # noqa: E402
 from aw_eval.study.fixtures import box_suite, write_scripted_run  # noqa: E402
+from benchmarks._output import output_file  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 WAIT = 180  # seconds a signalled aw-score is given to exit
@@ -44,9 +44,16 @@ def _study(root: Path) -> tuple[Path, Path]:
 def _popen(code: Path, study, out: Path, *extra: str, **kw) -> subprocess.Popen:
     env = {**os.environ, "PYTHONPATH": str(code)}
     # SIGINT as in a terminal: a shell starts background jobs with SIGINT ignored, and Python keeps that
-    return subprocess.Popen([sys.executable, "-m", "aw_eval.cli", str(study[0]), str(study[1]), "--out", str(out), *OPTS,
-                             *extra], env=env, cwd=code, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **kw)
+    return subprocess.Popen(
+        [sys.executable, "-m", "aw_eval.cli", str(study[0]), str(study[1]), "--out", str(out), *OPTS, *extra],
+        env=env,
+        cwd=code,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        **kw,
+    )
 
 
 def kill_trial(code: Path, study, out: Path, sig: signal.Signals) -> dict:
@@ -72,10 +79,15 @@ def kill_trial(code: Path, study, out: Path, sig: signal.Signals) -> dict:
         w.kill()
     err = proc.stderr.read()
     proc.stderr.close()
-    return {"signal": sig.name, "exit": code_, "seconds_to_exit": round(exited, 2),
-            "seconds_until_workers_gone": None if workers_gone is None else round(workers_gone, 2),
-            "workers_alive_90_s_later": len(alive), "traceback": "Traceback" in err,
-            **({"stderr_tail": err[-2000:]} if "Traceback" in err else {})}
+    return {
+        "signal": sig.name,
+        "exit": code_,
+        "seconds_to_exit": round(exited, 2),
+        "seconds_until_workers_gone": None if workers_gone is None else round(workers_gone, 2),
+        "workers_alive_90_s_later": len(alive),
+        "traceback": "Traceback" in err,
+        **({"stderr_tail": err[-2000:]} if "Traceback" in err else {}),
+    }
 
 
 def lock_trial(code: Path, study, out: Path) -> dict:
@@ -90,15 +102,22 @@ def lock_trial(code: Path, study, out: Path) -> dict:
 
 def disk_full_trial(code: Path, study, mount: Path, size: str) -> dict:
     mount.mkdir(parents=True, exist_ok=True)
-    if subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mount)], capture_output=True).returncode:
+    if subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(mount)], capture_output=True
+    ).returncode:
         return {"skipped": "cannot mount a tmpfs (needs root)"}
     try:
         proc = _popen(code, study, mount / "out", "--jobs", "1", "--final-only")
         err = proc.communicate()[1]
         lines = [x for x in err.splitlines() if "error" in x.lower()]
         temps = [str(p.relative_to(mount)) for p in mount.rglob("*") if ".tmp" in p.name]
-        return {"tmpfs": size, "exit": proc.returncode, "traceback": "Traceback" in err,
-                "said": lines[-1] if lines else "", "temporary_files_left": temps}
+        return {
+            "tmpfs": size,
+            "exit": proc.returncode,
+            "traceback": "Traceback" in err,
+            "said": lines[-1] if lines else "",
+            "temporary_files_left": temps,
+        }
     finally:
         subprocess.run(["umount", str(mount)], check=False)
 
@@ -114,14 +133,18 @@ def main() -> None:
     work = Path(tempfile.mkdtemp(prefix="aw-faults-"))
     try:
         study = _study(work / "study")
-        doc = {"command": " ".join(["benchmarks/score_faults.py", *sys.argv[1:]]),
-               "study": "10 box tasks of 6 and 8 parts, 1 system, 30 jitter edits each; --jobs 2, exact checkpoints"}
+        doc = {
+            "command": " ".join(["benchmarks/score_faults.py", *sys.argv[1:]]),
+            "study": "10 box tasks of 6 and 8 parts, 1 system, 30 jitter edits each; --jobs 2, exact checkpoints",
+        }
         codes = {"this": ROOT, **({"baseline": Path(args.baseline).resolve()} if args.baseline else {})}
         for label, code in codes.items():
             res = {}
             if "kill" in args.trials:
-                res["kill"] = [kill_trial(code, study, work / f"{label}-{s.name}", s)
-                               for s in (signal.SIGKILL, signal.SIGTERM, signal.SIGINT)]
+                res["kill"] = [
+                    kill_trial(code, study, work / f"{label}-{s.name}", s)
+                    for s in (signal.SIGKILL, signal.SIGTERM, signal.SIGINT)
+                ]
             if "lock" in args.trials:
                 res["second_aw_score_on_one_out"] = lock_trial(code, study, work / f"{label}-lock")
             if "disk" in args.trials:

@@ -63,8 +63,15 @@ def test_help_is_plain_and_every_flag_says_what_it_does(name):
 
 def test_replace_existing_is_overwrite_everywhere_with_the_old_names_as_aliases():
     with_overwrite = [n for n, p in PARSERS.items() if any("--overwrite" in a.option_strings for a in p._actions)]
-    assert set(with_overwrite) >= {"aw-serve", "aw-run", "aw-demo", "aw-prepare synthetic", "aw-prepare folder",
-                                   "aw-prepare compose", "aw-prepare official"}
+    assert set(with_overwrite) >= {
+        "aw-serve",
+        "aw-run",
+        "aw-demo",
+        "aw-prepare synthetic",
+        "aw-prepare folder",
+        "aw-prepare compose",
+        "aw-prepare official",
+    }
     for name in with_overwrite:
         hidden = [a for a in PARSERS[name]._actions if a.dest == "overwrite" and a.help == argparse.SUPPRESS]
         assert [s for a in hidden for s in a.option_strings] == ["--force", "--fresh"], name
@@ -87,8 +94,9 @@ def test_score_mode_names_and_their_old_aliases():
 
 def _run(cmd: str, *args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
     exe = Path(sys.executable).with_name(cmd)
-    return subprocess.run([str(exe), *args], capture_output=True, text=True, timeout=120, cwd=cwd,
-                          stdin=subprocess.DEVNULL)
+    return subprocess.run(
+        [str(exe), *args], capture_output=True, text=True, timeout=120, cwd=cwd, stdin=subprocess.DEVNULL
+    )
 
 
 @pytest.mark.parametrize("cmd", COMMANDS)
@@ -99,12 +107,15 @@ def test_entry_points_print_help_and_refuse_unknown_flags_with_2(cmd):
     assert bad.returncode == 2 and "unrecognized arguments" in bad.stderr or "required" in bad.stderr
 
 
-@pytest.mark.parametrize("cmd, args", [
-    ("aw-prepare", ["synthetic", "--per-source", "1", "--blocks", "fantastic_breaks", "--out"]),
-    ("aw-run", ["SUITE", "--agent", "idle", "--out"]),
-    ("aw-score", ["SUITE", "SUITE", "--out"]),
-    ("aw-demo", ["--out"]),
-])
+@pytest.mark.parametrize(
+    "cmd, args",
+    [
+        ("aw-prepare", ["synthetic", "--per-source", "1", "--blocks", "fantastic_breaks", "--out"]),
+        ("aw-run", ["SUITE", "--agent", "idle", "--out"]),
+        ("aw-score", ["SUITE", "SUITE", "--out"]),
+        ("aw-demo", ["--out"]),
+    ],
+)
 def test_an_out_that_is_a_file_is_a_one_line_usage_error(cmd, args, tmp_path):
     (tmp_path / "SUITE").mkdir()
     (tmp_path / "a-file").write_text("x")
@@ -116,10 +127,12 @@ def test_an_out_that_is_a_file_is_a_one_line_usage_error(cmd, args, tmp_path):
 
 
 def test_missing_inputs_are_one_line_usage_errors(tmp_path):
-    for cmd, args in (("aw-run", [str(tmp_path / "nope"), "--agent", "idle", "--out", str(tmp_path / "o")]),
-                      ("aw-score", [str(tmp_path / "nope"), str(tmp_path), "--out", str(tmp_path / "o")]),
-                      ("aw-serve", [str(tmp_path / "nope"), "--record", str(tmp_path / "r")]),
-                      ("aw-prepare", ["folder", str(tmp_path / "nope"), "--out", str(tmp_path / "o")])):
+    for cmd, args in (
+        ("aw-run", [str(tmp_path / "nope"), "--agent", "idle", "--out", str(tmp_path / "o")]),
+        ("aw-score", [str(tmp_path / "nope"), str(tmp_path), "--out", str(tmp_path / "o")]),
+        ("aw-serve", [str(tmp_path / "nope"), "--record", str(tmp_path / "r")]),
+        ("aw-prepare", ["folder", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]),
+    ):
         proc = _run(cmd, *args)
         assert proc.returncode == 2, (cmd, proc.stderr)
         assert proc.stderr.startswith(f"{cmd}: error: ") and "nope" in proc.stderr and "Traceback" not in proc.stderr

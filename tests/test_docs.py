@@ -19,8 +19,6 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 RUN = {"bash", "python"}
@@ -66,9 +64,15 @@ def blocks(page: Path) -> list[Block]:
 
 
 def test_every_fence_is_run_or_marked():
-    bad = [f"{b.where}: ```{b.lang}" for p in PAGES for b in blocks(p)
-           if b.lang in REFUSED or (b.lang not in RUN and b.lang not in NOT_RUN)]
-    assert not bad, "fence these as ```bash / ```python (run), ```bash notest (cannot run here) or ```text:\n" + "\n".join(bad)
+    bad = [
+        f"{b.where}: ```{b.lang}"
+        for p in PAGES
+        for b in blocks(p)
+        if b.lang in REFUSED or (b.lang not in RUN and b.lang not in NOT_RUN)
+    ]
+    assert not bad, (
+        "fence these as ```bash / ```python (run), ```bash notest (cannot run here) or ```text:\n" + "\n".join(bad)
+    )
 
 
 def _env(scratch: Path) -> dict[str, str]:
@@ -101,7 +105,16 @@ def test_blocks_run_in_order(tmp_path):
                 cmd = ["bash", "-c", "set -eo pipefail\n" + b.code]
             else:
                 cmd = [sys.executable, "-c", b.code]
-            proc = subprocess.run(cmd, cwd=scratch, env=env, capture_output=True, text=True, timeout=BLOCK_TIMEOUT_S,
-                                  stdin=subprocess.DEVNULL)
-            assert proc.returncode == 0, (f"{b.where}: the ```{b.lang} block failed (exit {proc.returncode})\n{b.code}\n"
-                                          f"--- stdout ---\n{proc.stdout[-3000:]}\n--- stderr ---\n{proc.stderr[-3000:]}")
+            proc = subprocess.run(
+                cmd,
+                cwd=scratch,
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=BLOCK_TIMEOUT_S,
+                stdin=subprocess.DEVNULL,
+            )
+            assert proc.returncode == 0, (
+                f"{b.where}: the ```{b.lang} block failed (exit {proc.returncode})\n{b.code}\n"
+                f"--- stdout ---\n{proc.stdout[-3000:]}\n--- stderr ---\n{proc.stderr[-3000:]}"
+            )

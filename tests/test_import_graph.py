@@ -132,8 +132,12 @@ ALLOWED = {
 
 
 def upward_imports(graph: dict[str, set[str]]) -> list[str]:
-    return sorted(f"{m} -> {t}" for m, targets in graph.items() for t in targets
-                  if _layer(t) != _layer(m) and _layer(t) not in ALLOWED[_layer(m)])
+    return sorted(
+        f"{m} -> {t}"
+        for m, targets in graph.items()
+        for t in targets
+        if _layer(t) != _layer(m) and _layer(t) not in ALLOWED[_layer(m)]
+    )
 
 
 def test_no_import_cycles():

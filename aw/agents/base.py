@@ -8,9 +8,10 @@ is handed the hidden targets file explicitly (an upper-bound calibration agent, 
 from __future__ import annotations
 
 import asyncio
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Awaitable, Callable
+from typing import Any
 
 import numpy as np
 
@@ -71,7 +72,7 @@ class ObjectInfo:
         return 0.5 * (self.bounds_min + self.bounds_max)
 
     @classmethod
-    def from_record(cls, rec: dict[str, Any]) -> "ObjectInfo":
+    def from_record(cls, rec: dict[str, Any]) -> ObjectInfo:
         """From a ``get_object`` result: needs ``id``, ``position``, ``quaternion`` and either
         ``local_bounds`` {min, max} or ``extents`` (then the box is taken as centred)."""
         try:

@@ -66,7 +66,9 @@ class _Placer:
         if not np.allclose(delta, np.eye(3), atol=1e-12):
             angles = Rotation.from_matrix(delta).as_euler("xyz", degrees=True)
             await self.tools.call("rotate_objects", {"ids": [o.id], "angles": angles.tolist(), "space": "world"})
-        await self.tools.call("translate_objects", {"ids": [o.id], "delta": (position - o.position).tolist(), "space": "world"})
+        await self.tools.call(
+            "translate_objects", {"ids": [o.id], "delta": (position - o.position).tolist(), "space": "world"}
+        )
 
 
 async def run(tools: ToolSession, ctx: AgentContext) -> AgentOutcome:

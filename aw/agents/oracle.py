@@ -33,7 +33,9 @@ def _random_unit(rng: np.random.Generator) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
-def noisy_pose(target: np.ndarray, local_centre: np.ndarray, level: float, size: float, rng: np.random.Generator) -> np.ndarray:
+def noisy_pose(
+    target: np.ndarray, local_centre: np.ndarray, level: float, size: float, rng: np.random.Generator
+) -> np.ndarray:
     """``target (7,)`` perturbed by a rotation about the part's centre and a translation."""
     if level <= 0:
         return target.copy()
@@ -76,19 +78,25 @@ async def run(tools: ToolSession, ctx: AgentContext) -> AgentOutcome:
         goal = noisy_pose(np.asarray(targets.parts[pid].pose, float), objects[pid].local_centre, level, size, rng)
         await ctx.think()
         if k % 2 == 0:
-            await tools.call("set_object_pose", {"id": pid, "position": goal[:3].tolist(), "quaternion": goal[3:].tolist()})
+            await tools.call(
+                "set_object_pose", {"id": pid, "position": goal[:3].tolist(), "quaternion": goal[3:].tolist()}
+            )
         else:
             cur = objects[pid].from_record((await tools.call("get_object", {"id": pid})).data)
             delta = quat_to_matrix(goal[3:]) @ quat_to_matrix(cur.quaternion).T
             angles = Rotation.from_matrix(delta).as_euler("xyz", degrees=True)  # extrinsic: Rz Ry Rx
             await tools.call("rotate_objects", {"ids": [pid], "angles": [float(a) for a in angles], "space": "world"})
             moved = objects[pid].from_record((await tools.call("get_object", {"id": pid})).data)
-            await tools.call("translate_objects", {"ids": [pid], "delta": (goal[:3] - moved.position).tolist(), "space": "world"})
+            await tools.call(
+                "translate_objects", {"ids": [pid], "delta": (goal[:3] - moved.position).tolist(), "space": "world"}
+            )
         placed.append(pid)
         if len(placed) % 3 == 0:
             await tools.call("capture_scene")
     # Re-frame on the assembly (where the target poses put the parts' box centres).
-    centres = np.array([apply_pose(np.asarray(targets.parts[p].pose, float), objects[p].local_centre[None])[0] for p in order])
+    centres = np.array(
+        [apply_pose(np.asarray(targets.parts[p].pose, float), objects[p].local_centre[None])[0] for p in order]
+    )
     if len(centres):
         lo, hi = centres.min(axis=0), centres.max(axis=0)
         await aim_camera(tools, 0.5 * (lo + hi), radius=0.5 * float(np.linalg.norm(hi - lo)) + 0.5 * size)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from aw.agents.base import AgentContext, AgentOutcome, begin, inspect_objects, object_ids
-from aw.pose import matrix_to_quat, matrix_from_xyz_sequence
+from aw.pose import matrix_from_xyz_sequence, matrix_to_quat
 from aw.runner.tools import ToolSession
 
 
@@ -52,7 +52,9 @@ async def run(tools: ToolSession, ctx: AgentContext) -> AgentOutcome:
             await tools.call("group_objects", {"ids": pair, "name": f"random group {step}"})
             _, groups = object_ids((await tools.call("list_objects")).data)
             if groups:
-                await tools.call("translate_objects", {"ids": [groups[-1]], "delta": _vec(rng, 0.2 * size), "space": "world"})
+                await tools.call(
+                    "translate_objects", {"ids": [groups[-1]], "delta": _vec(rng, 0.2 * size), "space": "world"}
+                )
                 await tools.call("ungroup_objects", {"ids": [groups[-1]]})
         edits += 1
         if step % 4 == 3:

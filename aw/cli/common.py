@@ -16,14 +16,30 @@ import functools
 import os
 import sys
 import textwrap
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 
 __all__ = [
-    "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_INTERRUPTED",
-    "CliError", "UsageError", "new_parser", "add_commands", "add_overwrite", "add_hidden_alias", "add_jobs", "add_no_progress",
-    "default_jobs", "positive_int", "positive_float", "nonnegative_float", "check_out_dir",
-    "check_in_dir", "run_main", "plural",
+    "EXIT_OK",
+    "EXIT_FAILURE",
+    "EXIT_USAGE",
+    "EXIT_INTERRUPTED",
+    "CliError",
+    "UsageError",
+    "new_parser",
+    "add_commands",
+    "add_overwrite",
+    "add_hidden_alias",
+    "add_jobs",
+    "add_no_progress",
+    "default_jobs",
+    "positive_int",
+    "positive_float",
+    "nonnegative_float",
+    "check_out_dir",
+    "check_in_dir",
+    "run_main",
+    "plural",
 ]
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
@@ -70,8 +86,13 @@ def new_parser(prog: str, description: str, epilog: str | None = None) -> argpar
 
 def add_commands(p: argparse.ArgumentParser) -> argparse._SubParsersAction:
     """Subcommands (``args.command``, required) whose parsers speak the same plain help."""
-    return p.add_subparsers(dest="command", metavar="COMMAND", required=True, help="one of:",
-                            parser_class=functools.partial(argparse.ArgumentParser, formatter_class=_Formatter))
+    return p.add_subparsers(
+        dest="command",
+        metavar="COMMAND",
+        required=True,
+        help="one of:",
+        parser_class=functools.partial(argparse.ArgumentParser, formatter_class=_Formatter),
+    )
 
 
 def add_hidden_alias(p: argparse.ArgumentParser, *names: str, dest: str, **kwargs) -> None:
@@ -135,13 +156,21 @@ def nonnegative_float(name: str) -> Callable[[str], float]:
 
 def add_jobs(p: argparse.ArgumentParser, what: str) -> None:
     """``--jobs J`` (``args.jobs``, an int >= 1): ``what`` in parallel, default the core count."""
-    p.add_argument("--jobs", type=positive_int("--jobs"), default=default_jobs(), metavar="J",
-                   help=f"{what} in parallel (default: the number of CPU cores, here {default_jobs()})")
+    p.add_argument(
+        "--jobs",
+        type=positive_int("--jobs"),
+        default=default_jobs(),
+        metavar="J",
+        help=f"{what} in parallel (default: the number of CPU cores, here {default_jobs()})",
+    )
 
 
 def add_no_progress(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--no-progress", action="store_true",
-                   help="no progress display (on a non-terminal it is a line every few seconds)")
+    p.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress display (on a non-terminal it is a line every few seconds)",
+    )
 
 
 def check_out_dir(path: str | os.PathLike, flag: str = "--out") -> Path:
@@ -194,4 +223,3 @@ def run_main(prog: str, body: Callable[[], int]) -> int:
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         print(f"{prog}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return EXIT_FAILURE
-

@@ -30,14 +30,21 @@ __all__ = ["REGISTRARS", "add_suite_options", "run_suite", "build_parser", "main
 
 # ---------------------------------------------------------------- synthetic
 def register_synthetic(sub) -> None:
-    p = sub.add_parser("synthetic", help="the embedded procedural benchmark (four blocks)",
-                       description="Generate the procedural benchmark: PartNet-like furniture (none and image), "
-                       "IKEA-like furniture with manuals, AssemblyBench-like industrial assemblies with step "
-                       "diagrams, and two-fragment fractures.")
+    p = sub.add_parser(
+        "synthetic",
+        help="the embedded procedural benchmark (four blocks)",
+        description="Generate the procedural benchmark: PartNet-like furniture (none and image), "
+        "IKEA-like furniture with manuals, AssemblyBench-like industrial assemblies with step "
+        "diagrams, and two-fragment fractures.",
+    )
     add_suite_options(p, protocol="native")
     p.add_argument("--per-source", type=int, default=20, metavar="N", help="objects per block (default 20)")
-    p.add_argument("--blocks", default=None, metavar="B1,B2",
-                   help="comma-separated subset of partnet, ikea_manual, assemblybench, fantastic_breaks")
+    p.add_argument(
+        "--blocks",
+        default=None,
+        metavar="B1,B2",
+        help="comma-separated subset of partnet, ikea_manual, assemblybench, fantastic_breaks",
+    )
     p.set_defaults(func=_cmd_synthetic)
 
 
@@ -62,21 +69,32 @@ def _cmd_synthetic(args: argparse.Namespace) -> int:
             sources.append(block)
             ids.append((block, f"{plan(block, i, args.seed)[0]}_{i:03d}", conds))
     check_unique_task_ids(ids)
-    return run_suite(args, specs, sources, name=f"synthetic-{args.per_source}-seed{args.seed}", generator="aw.sources.synthetic")
+    return run_suite(
+        args, specs, sources, name=f"synthetic-{args.per_source}-seed{args.seed}", generator="aw.sources.synthetic"
+    )
 
 
 # ---------------------------------------------------------------- folder
 def register_folder(sub) -> None:
-    p = sub.add_parser("folder", help="a folder of assembled objects (one subfolder per object)",
-                       description="Import SRC/<object>/<part>.obj|ply|stl|glb|gltf|off (assembled frame) with an "
-                       "optional meta.json per object; see aw.sources.folder.")
+    p = sub.add_parser(
+        "folder",
+        help="a folder of assembled objects (one subfolder per object)",
+        description="Import SRC/<object>/<part>.obj|ply|stl|glb|gltf|off (assembled frame) with an "
+        "optional meta.json per object; see aw.sources.folder.",
+    )
     p.add_argument("src", metavar="SRC", help="folder with one subfolder per object")
     add_suite_options(p, protocol="native")
-    p.add_argument("--source", default="custom", help="benchmark block name for objects whose meta.json has none (default custom)")
-    p.add_argument("--up-axis", choices=UP_AXES, default="auto",
-                   help="which axis of the meshes points up, for objects whose meta.json has no up_axis: z, y (turned "
-                   "Z-up), or auto (default: Y where upright parts stand along Y and the object rests on them, else "
-                   "Z; the choice is printed per object; see docs/datasets.md)")
+    p.add_argument(
+        "--source", default="custom", help="benchmark block name for objects whose meta.json has none (default custom)"
+    )
+    p.add_argument(
+        "--up-axis",
+        choices=UP_AXES,
+        default="auto",
+        help="which axis of the meshes points up, for objects whose meta.json has no up_axis: z, y (turned "
+        "Z-up), or auto (default: Y where upright parts stand along Y and the object rests on them, else "
+        "Z; the choice is printed per object; see docs/datasets.md)",
+    )
     p.set_defaults(func=_cmd_folder)
 
 
@@ -107,23 +125,35 @@ def _cmd_folder(args: argparse.Namespace) -> int:
     for f in found:
         obj = load_object(f.path, args.source, args.up_axis)
         if obj.n_parts < 2:
-            raise CliError(f"{f.path}: one part ({obj.parts[0].name}) cannot be assessed: the registration aligns "
-                           "any single part onto its target, so an agent that never moves scores PA 100%, SR 1; "
-                           "an object needs at least 2 parts")
+            raise CliError(
+                f"{f.path}: one part ({obj.parts[0].name}) cannot be assessed: the registration aligns "
+                "any single part onto its target, so an agent that never moves scores PA 100%, SR 1; "
+                "an object needs at least 2 parts"
+            )
         up = obj.meta["up_axis"]
         print(f"{f.object_id}: up axis {up['axis'].upper()} ({up['how']})", file=sys.stderr)
-    return run_suite(args, specs, sources, name=f"folder-{Path(args.src).resolve().name}", generator="aw.sources.folder")
+    return run_suite(
+        args, specs, sources, name=f"folder-{Path(args.src).resolve().name}", generator="aw.sources.folder"
+    )
 
 
 from aw.cli.compose import register_compose, register_official, register_official_export  # noqa: E402  (dataset sources, official import)
 
-REGISTRARS: list[Callable] = [register_synthetic, register_folder, register_compose, register_official,
-                               register_official_export]
+REGISTRARS: list[Callable] = [
+    register_synthetic,
+    register_folder,
+    register_compose,
+    register_official,
+    register_official_export,
+]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = new_parser("aw-prepare", "Build AssemblyWorld task suites (SUITE/manifest.json, SUITE/tasks/<id>/, "
-                        "SUITE/targets/<id>.json).", epilog="Run 'aw-prepare COMMAND --help' for a command's options.")
+    parser = new_parser(
+        "aw-prepare",
+        "Build AssemblyWorld task suites (SUITE/manifest.json, SUITE/tasks/<id>/, SUITE/targets/<id>.json).",
+        epilog="Run 'aw-prepare COMMAND --help' for a command's options.",
+    )
     sub = add_commands(parser)
     for register in REGISTRARS:
         register(sub)

@@ -17,14 +17,23 @@ __all__ = ["CliError", "add_suite_options", "check_unique_task_ids", "run_suite"
 def add_suite_options(p: argparse.ArgumentParser, protocol: str = "official") -> None:
     """Options every suite-building subcommand shares; ``protocol`` is its default preparation."""
     p.add_argument("--out", required=True, metavar="SUITE", help="suite directory to write")
-    p.add_argument("--protocol", choices=("official", "native"), default=protocol,
-                   help="official: the official benchmark's preparation (its layout, part ids and evaluation points "
-                   "in eval_points/); native: this project's standardization, needed for --variants "
-                   f"(default {protocol})")
+    p.add_argument(
+        "--protocol",
+        choices=("official", "native"),
+        default=protocol,
+        help="official: the official benchmark's preparation (its layout, part ids and evaluation points "
+        "in eval_points/); native: this project's standardization, needed for --variants "
+        f"(default {protocol})",
+    )
     p.add_argument("--seed", type=int, default=0, help="initialization (and generation) seed (default 0)")
-    p.add_argument("--variants", type=int, default=0, metavar="K",
-                   help="also build the Appendix E robustness variants (two layouts, one removed part, "
-                   "one distractor) for the first K objects of each source (default 0)")
+    p.add_argument(
+        "--variants",
+        type=int,
+        default=0,
+        metavar="K",
+        help="also build the Appendix E robustness variants (two layouts, one removed part, "
+        "one distractor) for the first K objects of each source (default 0)",
+    )
     add_jobs(p, "objects prepared")
     add_overwrite(p, "a suite already in --out (only its manifest.json, tasks/ and targets/)")
     add_no_progress(p)
@@ -59,7 +68,9 @@ def variant_plans(specs: Sequence[ObjectSpec], sources: Sequence[str], k: int, s
     return plans
 
 
-def run_suite(args: argparse.Namespace, specs: list[ObjectSpec], sources: list[str], *, name: str, generator: str) -> int:
+def run_suite(
+    args: argparse.Namespace, specs: list[ObjectSpec], sources: list[str], *, name: str, generator: str
+) -> int:
     """Build the suite of ``specs`` (``sources[i]`` is spec i's source) and print its summary."""
     if args.variants < 0:
         raise UsageError("--variants must be >= 0")
@@ -69,11 +80,21 @@ def run_suite(args: argparse.Namespace, specs: list[ObjectSpec], sources: list[s
     plans = variant_plans(specs, sources, args.variants, args.seed) if args.variants else None
     start = time.perf_counter()
     manifest, results = build_suite(
-        specs, args.out, name=name, generator=generator, seed=args.seed, variants=plans, jobs=args.jobs,
-        force=args.overwrite, progress=not args.no_progress, protocol=args.protocol,
+        specs,
+        args.out,
+        name=name,
+        generator=generator,
+        seed=args.seed,
+        variants=plans,
+        jobs=args.jobs,
+        force=args.overwrite,
+        progress=not args.no_progress,
+        protocol=args.protocol,
     )
     elapsed = time.perf_counter() - start
     print(format_summary(summarize(manifest, results)))
-    print(f"wrote {plural(len(manifest.tasks), 'task')} of {plural(len(results), 'object')} to {args.out} "
-          f"in {elapsed:.1f} s")
+    print(
+        f"wrote {plural(len(manifest.tasks), 'task')} of {plural(len(results), 'object')} to {args.out} "
+        f"in {elapsed:.1f} s"
+    )
     return 0

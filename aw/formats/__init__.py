@@ -10,13 +10,13 @@ from aw.formats.suite import SuiteEntry, SuiteManifest, read_manifest, suite_pat
 from aw.formats.targets import PartTarget, Targets, read_targets, write_targets
 from aw.formats.task import CONVENTIONS, Task, TaskPart, read_task, write_task
 from aw.formats.trajectory import (
+    FinalState,
     RecordingError,
     Trajectory,
     TrajectoryCall,
     TrajectoryEnd,
     TrajectoryHeader,
     TrajectoryWriter,
-    FinalState,
     read_final,
     read_trajectory,
     write_final,

@@ -142,7 +142,7 @@ def staging_dir(parent: str | Path, name: str) -> Path:
     parent.mkdir(parents=True, exist_ok=True)
     prefix = f".{name}-"
     for old in parent.glob(prefix + "*"):
-        pid = old.name[len(prefix):].split("-")[0]
+        pid = old.name[len(prefix) :].split("-")[0]
         if pid.isdigit() and not pid_alive(int(pid)):
             shutil.rmtree(old, ignore_errors=True)
     return Path(tempfile.mkdtemp(dir=parent, prefix=f"{prefix}{os.getpid()}-"))

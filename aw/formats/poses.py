@@ -59,8 +59,12 @@ def read_initial_poses(path: str | Path, task_id: str, part_ids: list[str]) -> d
     missing = [p for p in part_ids if p not in doc.poses]
     unknown = [p for p in doc.poses if p not in part_ids]
     if missing or unknown:
-        raise FormatError(path, "poses must name exactly the task's parts" + (f"; missing {missing}" if missing else "")
-                          + (f"; unknown {unknown}" if unknown else ""))
+        raise FormatError(
+            path,
+            "poses must name exactly the task's parts"
+            + (f"; missing {missing}" if missing else "")
+            + (f"; unknown {unknown}" if unknown else ""),
+        )
     return {p: list(doc.poses[p]) for p in part_ids}
 
 

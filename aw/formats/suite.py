@@ -34,7 +34,7 @@ class SuiteManifest(BaseModel):
     tasks: list[SuiteEntry]
 
     @model_validator(mode="after")
-    def _check(self) -> "SuiteManifest":
+    def _check(self) -> SuiteManifest:
         ids = [t.task_id for t in self.tasks]
         dup = sorted({i for i in ids if ids.count(i) > 1})
         if dup:

@@ -49,7 +49,7 @@ class Targets(BaseModel):
     variant: Variant = Field(default_factory=Variant)
 
     @model_validator(mode="after")
-    def _check(self) -> "Targets":
+    def _check(self) -> Targets:
         if self.equivalence_hint:
             for group in self.equivalence_hint:
                 unknown = [p for p in group if p not in self.parts]

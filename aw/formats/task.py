@@ -61,7 +61,7 @@ class Task(BaseModel):
     _root: Path | None = None
 
     @model_validator(mode="after")
-    def _check(self) -> "Task":
+    def _check(self) -> Task:
         ids = [p.id for p in self.parts]
         if len(set(ids)) != len(ids):
             raise ValueError("part ids must be unique")

@@ -18,7 +18,14 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from aw.formats.common import PoseList
 from aw.formats.errors import FormatError
-from aw.formats.io import check_format_tag, describe_validation_error, parse_json_text, parse_model, read_model, write_json_atomic
+from aw.formats.io import (
+    check_format_tag,
+    describe_validation_error,
+    parse_json_text,
+    parse_model,
+    read_model,
+    write_json_atomic,
+)
 
 TRAJECTORY_FORMAT = "assemblyworld.trajectory"
 END_REASONS = ("finished", "timeout", "error", "disconnect", "interrupted")
@@ -42,8 +49,10 @@ class TrajectoryHeader(BaseModel):
     started_at: str = Field(description="ISO 8601 UTC time of start_episode (or of the server start)")
     part_ids: list[str] = Field(min_length=1)
     initial_poses: dict[str, PoseList]
-    initial_poses_from: str | None = Field(default=None, description="the poses file the episode started from "
-                                           "(aw-serve --initial-poses); absent: the task's layout")
+    initial_poses_from: str | None = Field(
+        default=None,
+        description="the poses file the episode started from (aw-serve --initial-poses); absent: the task's layout",
+    )
     camera: CameraState | None = None
 
 
@@ -51,10 +60,15 @@ class TrajectoryCall(BaseModel):
     model_config = ConfigDict(extra="forbid")
     type: Literal["call"] = "call"
     seq: int = Field(ge=1)
-    t: float | None = Field(default=None, description="seconds since the episode clock started (start_episode or "
-                            "the first edit); absent in the file for calls before it, and filled in by "
-                            "read_trajectory as a negative time from server_t")
-    server_t: float | None = Field(default=None, description="seconds since the server started (the header's started_at)")
+    t: float | None = Field(
+        default=None,
+        description="seconds since the episode clock started (start_episode or "
+        "the first edit); absent in the file for calls before it, and filled in by "
+        "read_trajectory as a negative time from server_t",
+    )
+    server_t: float | None = Field(
+        default=None, description="seconds since the server started (the header's started_at)"
+    )
     tool: str
     args: dict[str, Any] = Field(default_factory=dict)
     ok: bool
@@ -154,7 +168,9 @@ def _check_pose_ids(poses: dict | None, part_ids: list[str], what: str, path: Pa
     if set(poses) != set(part_ids):
         missing = sorted(set(part_ids) - set(poses))
         extra = sorted(set(poses) - set(part_ids))
-        raise FormatError(path, f"{what}: poses do not match the header's part ids (missing {missing}, unknown {extra})")
+        raise FormatError(
+            path, f"{what}: poses do not match the header's part ids (missing {missing}, unknown {extra})"
+        )
 
 
 def read_trajectory(path: str | Path) -> Trajectory:
@@ -288,7 +304,7 @@ class TrajectoryWriter:
             try:
                 view = memoryview(line)
                 while view:
-                    view = view[os.write(self._fd, view):]
+                    view = view[os.write(self._fd, view) :]
                 os.fsync(self._fd)
             except OSError as exc:
                 try:

@@ -48,8 +48,17 @@ from numba import njit, types
 from numba.extending import intrinsic
 from scipy.spatial import Delaunay, QhullError
 
-__all__ = ["DelaunayGraph", "build_graph", "cloud_neighbours", "delaunay_neighbours", "graph_of", "walk", "no_graph",
-           "uncertified", "to_search"]
+__all__ = [
+    "DelaunayGraph",
+    "build_graph",
+    "cloud_neighbours",
+    "delaunay_neighbours",
+    "graph_of",
+    "walk",
+    "no_graph",
+    "uncertified",
+    "to_search",
+]
 
 
 # Every row of a graph holds a multiple of LANES entries (padded with SENTINEL neighbours), so
@@ -124,8 +133,9 @@ def cloud_neighbours(cloud: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     return found
 
 
-def graph_of(neighbours: tuple[np.ndarray, np.ndarray], points: np.ndarray, order: np.ndarray | None = None
-             ) -> DelaunayGraph | None:
+def graph_of(
+    neighbours: tuple[np.ndarray, np.ndarray], points: np.ndarray, order: np.ndarray | None = None
+) -> DelaunayGraph | None:
     """The :class:`DelaunayGraph` of ``points (n, 3)`` from :func:`delaunay_neighbours` of (an
     image of) them under a similarity; ``order (n,)``: the neighbours' row of each point
     (``points[k]`` is row ``order[k]``, e.g. a KD-tree's ``index``), else the same rows. ``None``
@@ -198,8 +208,9 @@ def _scan(typingctx, cx, cy, cz, half_inv, lo, hi, x0, x1, x2, dj):
         k.add_incoming(lo, entry)
         best.add_incoming(inf, entry)
         margin.add_incoming(inf, entry)
-        ex, ey, ez, eh = (builder.load(builder.bitcast(builder.gep(p, [k], inbounds=True), vec.as_pointer()), align=8)
-                          for p in data)
+        ex, ey, ez, eh = (
+            builder.load(builder.bitcast(builder.gep(p, [k], inbounds=True), vec.as_pointer()), align=8) for p in data
+        )
         a, b, c = builder.fsub(qx, ex), builder.fsub(qy, ey), builder.fsub(qz, ez)
         d = builder.fadd(builder.fadd(builder.fmul(a, a), builder.fmul(b, b)), builder.fmul(c, c))
         next_best = builder.call(vmin, [best, d], fastmath=("nnan", "nsz"))

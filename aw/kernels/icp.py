@@ -35,7 +35,7 @@ from numba import njit
 
 from aw.kernels.delaunay import DelaunayGraph, build_graph, cloud_neighbours, graph_of, no_graph, to_search, walk
 from aw.kernels.kdtree import STACK, KDTree, build_tree, nearest2
-from aw.kernels.partwalk import PartClouds, build_part_clouds, no_part_clouds, part_maps, parts_pass
+from aw.kernels.partwalk import PartClouds, no_part_clouds, part_maps, parts_pass
 
 __all__ = ["CertifiedNN", "ICPProblem", "ICPResult", "build_tree", "graph_for", "kabsch_pairs", "nearest_positions"]
 
@@ -44,8 +44,17 @@ _MARGIN = 1e-10
 
 
 @njit(cache=True)
-def _certified_pass(tree, graph, x: np.ndarray, cand: np.ndarray, xref: np.ndarray, slack: np.ndarray, fresh: bool,
-                    stack: np.ndarray, bounds: np.ndarray) -> int:
+def _certified_pass(
+    tree,
+    graph,
+    x: np.ndarray,
+    cand: np.ndarray,
+    xref: np.ndarray,
+    slack: np.ndarray,
+    fresh: bool,
+    stack: np.ndarray,
+    bounds: np.ndarray,
+) -> int:
     """Update ``cand (k,)`` (tree positions) to the exact nearest neighbours of ``x (k, 3)``;
     returns the number of points searched. Certificate state: ``xref (k, 3)`` where each point
     was last searched, ``slack (k, 2)`` the second-nearest squared distance there (the ball
@@ -120,7 +129,9 @@ class CertifiedNN:
             self.cand = np.zeros(len(x), np.int64)
             self.xref = np.zeros((len(x), 3))
             self.d2 = np.zeros((len(x), 2))
-        self.n_searched += _certified_pass(tuple(self.tree), tuple(no_graph()), x, self.cand, self.xref, self.d2, fresh, self._stack, self._bounds)
+        self.n_searched += _certified_pass(
+            tuple(self.tree), tuple(no_graph()), x, self.cand, self.xref, self.d2, fresh, self._stack, self._bounds
+        )
         return self.tree.index[self.cand]
 
 
@@ -225,8 +236,9 @@ def _icp(p, t, tree_t, tree_p, gt, gp, parts, r0, t0, max_iters, tol, stop_at):
     stack = np.empty(STACK, np.int64)
     bounds = np.empty(STACK)
     stats = np.zeros(2, np.int64)
-    obj, searched = _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r0, t0, fc, fx, fd, bc, bx, bd, True, xs, ys, stack, bounds,
-                              stats)
+    obj, searched = _evaluate(
+        p, t, tree_t, tree_p, gt, gp, parts, r0, t0, fc, fx, fd, bc, bx, bd, True, xs, ys, stack, bounds, stats
+    )
     best, best_r, best_t = obj, r0.copy(), t0.copy()
     prev = obj
     it = 0
@@ -235,8 +247,9 @@ def _icp(p, t, tree_t, tree_p, gt, gp, parts, r0, t0, max_iters, tol, stop_at):
     while it < max_iters:
         it += 1
         r, tr = kabsch_pairs(p, t, fc, bc)
-        new, s = _evaluate(p, t, tree_t, tree_p, gt, gp, parts, r, tr, fc, fx, fd, bc, bx, bd, False, xs, ys, stack, bounds,
-                           stats)
+        new, s = _evaluate(
+            p, t, tree_t, tree_p, gt, gp, parts, r, tr, fc, fx, fd, bc, bx, bd, False, xs, ys, stack, bounds, stats
+        )
         searched += s
         if new < best:
             best, best_r, best_t = new, r, tr
@@ -252,8 +265,9 @@ def _icp(p, t, tree_t, tree_p, gt, gp, parts, r0, t0, max_iters, tol, stop_at):
 def _nearest_positions(tree, graph, x):
     k = x.shape[0]
     cand = np.empty(k, np.int64)
-    _certified_pass(tree, graph, x, cand, np.empty((k, 3)), np.empty((k, 2)), True, np.empty(STACK, np.int64),
-                    np.empty(STACK))
+    _certified_pass(
+        tree, graph, x, cand, np.empty((k, 3)), np.empty((k, 2)), True, np.empty(STACK, np.int64), np.empty(STACK)
+    )
     return cand
 
 
@@ -285,8 +299,15 @@ class ICPProblem:
     clouds instead (no structure built per checkpoint).
     """
 
-    def __init__(self, p: np.ndarray, t_pts: np.ndarray, tree_t: KDTree | None = None, tree_p: KDTree | None = None,
-                 graph_t: DelaunayGraph | None = None, graph_p: DelaunayGraph | None = None):
+    def __init__(
+        self,
+        p: np.ndarray,
+        t_pts: np.ndarray,
+        tree_t: KDTree | None = None,
+        tree_p: KDTree | None = None,
+        graph_t: DelaunayGraph | None = None,
+        graph_p: DelaunayGraph | None = None,
+    ):
         self.tree_t = build_tree(t_pts) if tree_t is None else tree_t
         self.tree_p = build_tree(p) if tree_p is None else tree_p
         # the kernels work in tree order; sums over all points do not depend on the order
@@ -297,9 +318,17 @@ class ICPProblem:
         self._parts = _NO_PARTS
 
     @classmethod
-    def for_assembly(cls, pred_parts: np.ndarray, poses: np.ndarray, divisor: float, clouds: PartClouds,
-                     t_pts: np.ndarray, rotations: np.ndarray, tree_t: KDTree | None = None,
-                     graph_t: DelaunayGraph | None = None) -> "ICPProblem":
+    def for_assembly(
+        cls,
+        pred_parts: np.ndarray,
+        poses: np.ndarray,
+        divisor: float,
+        clouds: PartClouds,
+        t_pts: np.ndarray,
+        rotations: np.ndarray,
+        tree_t: KDTree | None = None,
+        graph_t: DelaunayGraph | None = None,
+    ) -> ICPProblem:
         """The prediction ``pred_parts (P, n, 3)`` of the poses ``(P, 7)`` with rotation matrices
         ``rotations (P, 3, 3)`` (normalized by ``divisor``), searched by walks in its parts' baked
         clouds ``clouds`` (built once per task, :func:`aw.kernels.partwalk.build_part_clouds`)
@@ -315,7 +344,9 @@ class ICPProblem:
         prob._parts = (tuple(clouds), a, b, float(divisor), np.zeros(len(a), np.int64))
         return prob
 
-    def run(self, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float, stop_at: float | None = None) -> ICPResult:
+    def run(
+        self, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float, stop_at: float | None = None
+    ) -> ICPResult:
         """The protocol's ICP from ``(r0, t0)``; returns the best state visited.
 
         ``stop_at``: return as soon as the objective is ``<= stop_at`` (for yes/no questions such
@@ -324,8 +355,20 @@ class ICPProblem:
         r0 = np.ascontiguousarray(r0, dtype=np.float64)
         t0 = np.ascontiguousarray(t0, dtype=np.float64)
         stop = -np.inf if stop_at is None else float(stop_at)
-        obj, r, t, it, searched, stats = _icp(self._p, self._t, tuple(self.tree_t), tuple(self.tree_p), self._gt, self._gp,
-                                       self._parts, r0, t0, int(max_iters), float(tol), stop)
+        obj, r, t, it, searched, stats = _icp(
+            self._p,
+            self._t,
+            tuple(self.tree_t),
+            tuple(self.tree_p),
+            self._gt,
+            self._gp,
+            self._parts,
+            r0,
+            t0,
+            int(max_iters),
+            float(tol),
+            stop,
+        )
         return ICPResult(float(obj), r, t, int(it), int(searched), int(stats[0]), int(stats[1]))
 
 

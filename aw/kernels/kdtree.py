@@ -157,8 +157,22 @@ def _build(points: np.ndarray, leaf: int):
         else:
             for k in range(start[node], end[node]):
                 leaf_of[k] = node
-    return pts, order, lo[:n_nodes].copy(), hi[:n_nodes].copy(), left[:n_nodes].copy(), right[:n_nodes].copy(), \
-        start[:n_nodes].copy(), end[:n_nodes].copy(), dims[:n_nodes].copy(), split[:n_nodes].copy(), parent, leaf_of, cell_lo, cell_hi
+    return (
+        pts,
+        order,
+        lo[:n_nodes].copy(),
+        hi[:n_nodes].copy(),
+        left[:n_nodes].copy(),
+        right[:n_nodes].copy(),
+        start[:n_nodes].copy(),
+        end[:n_nodes].copy(),
+        dims[:n_nodes].copy(),
+        split[:n_nodes].copy(),
+        parent,
+        leaf_of,
+        cell_lo,
+        cell_hi,
+    )
 
 
 def build_tree(points: np.ndarray) -> KDTree:
@@ -244,8 +258,14 @@ def nearest2(tree, x0: float, x1: float, x2: float, warm: int, stack: np.ndarray
         if up < 0:
             break
         rad = np.sqrt(d2)
-        if (x0 - clo[node, 0] >= rad and chi[node, 0] - x0 >= rad and x1 - clo[node, 1] >= rad
-                and chi[node, 1] - x1 >= rad and x2 - clo[node, 2] >= rad and chi[node, 2] - x2 >= rad):
+        if (
+            x0 - clo[node, 0] >= rad
+            and chi[node, 0] - x0 >= rad
+            and x1 - clo[node, 1] >= rad
+            and chi[node, 1] - x1 >= rad
+            and x2 - clo[node, 2] >= rad
+            and chi[node, 2] - x2 >= rad
+        ):
             break
         sib = right[up] if left[up] == node else left[up]
         if box_d2(x0, x1, x2, lo, hi, sib) < d2:

@@ -66,13 +66,22 @@ def build_part_clouds(baked: list) -> PartClouds | None:
     edge_off = np.concatenate([[0], np.cumsum(nnz)])
     indptr = np.concatenate([[0]] + [g.indptr[1:] + edge_off[q] for q, (_, g) in enumerate(baked)]).astype(np.int64)
     indices = np.concatenate([g.indices + offsets[q] for q, (_, g) in enumerate(baked)]).astype(np.int64)
-    graph = DelaunayGraph(indptr, indices, np.ascontiguousarray(np.concatenate([g.coords for _, g in baked], axis=1)),
-                          np.concatenate([g.half_inv for _, g in baked]))
+    graph = DelaunayGraph(
+        indptr,
+        indices,
+        np.ascontiguousarray(np.concatenate([g.coords for _, g in baked], axis=1)),
+        np.concatenate([g.half_inv for _, g in baked]),
+    )
     points = np.ascontiguousarray(np.concatenate([tree.points for tree, _ in baked]))
-    return PartClouds(points, offsets, np.repeat(np.arange(len(baked), dtype=np.int64), sizes),
-                      np.concatenate([tree.index for tree, _ in baked]).astype(np.int64),
-                      np.stack([tree.points.min(axis=0) for tree, _ in baked]),
-                      np.stack([tree.points.max(axis=0) for tree, _ in baked]), tuple(graph))
+    return PartClouds(
+        points,
+        offsets,
+        np.repeat(np.arange(len(baked), dtype=np.int64), sizes),
+        np.concatenate([tree.index for tree, _ in baked]).astype(np.int64),
+        np.stack([tree.points.min(axis=0) for tree, _ in baked]),
+        np.stack([tree.points.max(axis=0) for tree, _ in baked]),
+        tuple(graph),
+    )
 
 
 def no_part_clouds() -> PartClouds:
@@ -93,14 +102,27 @@ def part_maps(poses: np.ndarray, divisor: float, rotations: np.ndarray) -> tuple
 @njit(cache=True, inline="always")
 def _to_part(a, b, q, x0, x1, x2):
     """The point ``x`` in part ``q``'s baked frame: ``A_q x + b_q``."""
-    return (a[q, 0, 0] * x0 + a[q, 0, 1] * x1 + a[q, 0, 2] * x2 + b[q, 0],
-            a[q, 1, 0] * x0 + a[q, 1, 1] * x1 + a[q, 1, 2] * x2 + b[q, 1],
-            a[q, 2, 0] * x0 + a[q, 2, 1] * x1 + a[q, 2, 2] * x2 + b[q, 2])
+    return (
+        a[q, 0, 0] * x0 + a[q, 0, 1] * x1 + a[q, 0, 2] * x2 + b[q, 0],
+        a[q, 1, 0] * x0 + a[q, 1, 1] * x1 + a[q, 1, 2] * x2 + b[q, 1],
+        a[q, 2, 0] * x0 + a[q, 2, 1] * x1 + a[q, 2, 2] * x2 + b[q, 2],
+    )
 
 
 @njit(cache=True)
-def parts_pass(clouds, a: np.ndarray, b: np.ndarray, divisor: float, x: np.ndarray, cand: np.ndarray,
-               xref: np.ndarray, slack: np.ndarray, fresh: bool, warm: np.ndarray, stats: np.ndarray) -> int:
+def parts_pass(
+    clouds,
+    a: np.ndarray,
+    b: np.ndarray,
+    divisor: float,
+    x: np.ndarray,
+    cand: np.ndarray,
+    xref: np.ndarray,
+    slack: np.ndarray,
+    fresh: bool,
+    warm: np.ndarray,
+    stats: np.ndarray,
+) -> int:
     """Update ``cand (k,)`` (rows of ``clouds.points``) to the exact nearest neighbours of the
     queries ``x (k, 3)`` (normalized prediction frame) in the posed assembly; returns the number
     of queries searched. ``a (P, 3, 3)``, ``b (P, 3)``: :func:`part_maps` for ``divisor``.

@@ -33,7 +33,7 @@ import zipfile
 import zlib
 from dataclasses import dataclass, field
 from datetime import datetime
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -50,9 +50,22 @@ from aw.official.errors import (
 from aw.official.jsonio import MAX_DEPTH, nested_deeper
 
 __all__ = [
-    "FORMAT", "VERSION", "ENGINE", "CONTRACT", "MJB_MODEL", "TOOL_NAMES", "CALL_NAMES",
-    "ArchiveLimits", "Frame", "EpisodeArchive", "check_member_name", "read_archive",
-    "archive_bytes", "write_archive", "iso_timestamp", "parse_timestamp",
+    "FORMAT",
+    "VERSION",
+    "ENGINE",
+    "CONTRACT",
+    "MJB_MODEL",
+    "TOOL_NAMES",
+    "CALL_NAMES",
+    "ArchiveLimits",
+    "Frame",
+    "EpisodeArchive",
+    "check_member_name",
+    "read_archive",
+    "archive_bytes",
+    "write_archive",
+    "iso_timestamp",
+    "parse_timestamp",
 ]
 
 FORMAT = "3dwebagent-episode"
@@ -61,30 +74,93 @@ ENGINE = "3.12.0"  # assembly-world-bench common.py ENGINE: the MuJoCo that made
 CONTRACT = "3dwebagent-runtime-1"
 MJB_MODEL = {"format": "mjb", "path": "model.mjb"}  # the only compiled-world declaration (episode_model.py)
 # Page tools an episode may enable or record (episode.schema.json), ``end_episode`` being retired.
-TOOL_NAMES = ("list_objects", "get_object", "get_scene", "get_state", "translate_objects", "rotate_objects",
-              "set_object_pose", "group_objects", "ungroup_objects", "capture_scene", "move_camera",
-              "apply_force", "start_episode", "end_episode", "advance_simulation")
+TOOL_NAMES = (
+    "list_objects",
+    "get_object",
+    "get_scene",
+    "get_state",
+    "translate_objects",
+    "rotate_objects",
+    "set_object_pose",
+    "group_objects",
+    "ungroup_objects",
+    "capture_scene",
+    "move_camera",
+    "apply_force",
+    "start_episode",
+    "end_episode",
+    "advance_simulation",
+)
 HUMAN_COMMANDS = ("edit_poses", "set_camera")  # editor commands, recorded with actor "human" only
 CALL_NAMES = TOOL_NAMES + HUMAN_COMMANDS
-ERROR_CODES = ("invalid_argument", "disabled", "busy", "cancelled", "unstable_physics", "historical_edit",
-               "episode_ended", "unsupported_capability")
+ERROR_CODES = (
+    "invalid_argument",
+    "disabled",
+    "busy",
+    "cancelled",
+    "unstable_physics",
+    "historical_edit",
+    "episode_ended",
+    "unsupported_capability",
+)
 CORE_MEMBERS = ("frames.jsonl", "frames.bin", "calls.jsonl", "events.jsonl")
 
 _HEX64 = re.compile(r"[0-9a-f]{64}")
 _CONTROL = re.compile(r"[\x00-\x1f\x7f]")
 
-_MANIFEST_REQUIRED = {"format", "version", "engine", "name", "units", "stateSpec", "stateSize", "runtime", "objects",
-                      "hashes", "id", "contract", "lifecycle", "originTime", "requiredCapabilities", "producer"}
+_MANIFEST_REQUIRED = {
+    "format",
+    "version",
+    "engine",
+    "name",
+    "units",
+    "stateSpec",
+    "stateSize",
+    "runtime",
+    "objects",
+    "hashes",
+    "id",
+    "contract",
+    "lifecycle",
+    "originTime",
+    "requiredCapabilities",
+    "producer",
+}
 _MANIFEST_OPTIONAL = {"task", "end", "model"}
-_PHYSICS_KEYS = {"enabled", "gravity", "detection", "response", "strategy", "duration", "maxDuration", "quietDuration",
-                 "linearThreshold", "angularThreshold"}
+_PHYSICS_KEYS = {
+    "enabled",
+    "gravity",
+    "detection",
+    "response",
+    "strategy",
+    "duration",
+    "maxDuration",
+    "quietDuration",
+    "linearThreshold",
+    "angularThreshold",
+}
 _PRODUCER_REQUIRED = {"backend", "engine", "implementation", "language"}
 _PRODUCER_OPTIONAL = {"renderer", "build", "engineBuild"}
 _FRAME_KEYS = {"index", "camera", "groups", "groupCounter"}
 _TRACE_REQUIRED = {"call_id", "phase", "step", "sim_time"}
 _TRACE_PHASES = ("input", "physics", "final", "rollback")
-_CALL_REQUIRED = {"index", "name", "arguments", "timestamp", "state_index", "status", "id", "actor", "producer",
-                  "before_index", "trace_start", "trace_end", "sim_start", "sim_end", "steps"}
+_CALL_REQUIRED = {
+    "index",
+    "name",
+    "arguments",
+    "timestamp",
+    "state_index",
+    "status",
+    "id",
+    "actor",
+    "producer",
+    "before_index",
+    "trace_start",
+    "trace_end",
+    "sim_start",
+    "sim_end",
+    "steps",
+}
 _CALL_OPTIONAL = {"result", "error", "error_code", "cancellation", "transport"}
 _EVENT_KEYS = {"index", "call_id", "kind", "timestamp", "sim_time"}
 
@@ -159,7 +235,7 @@ class EpisodeArchive:
 
     def world_files(self) -> dict[str, bytes]:
         """The ``world/`` members, keyed by their path inside ``world/``."""
-        return {name[len("world/"):]: data for name, data in self.files.items() if name.startswith("world/")}
+        return {name[len("world/") :]: data for name, data in self.files.items() if name.startswith("world/")}
 
     def state(self, index: int) -> Frame:
         """The frame with state index ``index`` (0 is the initial frame)."""
@@ -216,13 +292,21 @@ def _members(zf: zipfile.ZipFile, path: Path, limits: ArchiveLimits) -> dict[str
         if info.filename in out:
             raise UnsafeMemberError(path, f"member {info.filename!r} appears twice")
         if info.file_size > limits.max_member_bytes:
-            raise ArchiveTooLargeError(path, f"member {info.filename!r} inflates to {info.file_size} bytes, over the limit of {limits.max_member_bytes}")
+            raise ArchiveTooLargeError(
+                path,
+                f"member {info.filename!r} inflates to {info.file_size} bytes, over the limit of {limits.max_member_bytes}",
+            )
         if info.file_size > (1 << 20) and info.file_size > limits.max_ratio * max(info.compress_size, 1):
-            raise ArchiveTooLargeError(path, f"member {info.filename!r} compresses {info.file_size // max(info.compress_size, 1)}:1, over the limit of {limits.max_ratio}:1")
+            raise ArchiveTooLargeError(
+                path,
+                f"member {info.filename!r} compresses {info.file_size // max(info.compress_size, 1)}:1, over the limit of {limits.max_ratio}:1",
+            )
         total += info.file_size
         out[info.filename] = info
     if total > limits.max_total_bytes:
-        raise ArchiveTooLargeError(path, f"archive inflates to {total} bytes, over the limit of {limits.max_total_bytes}")
+        raise ArchiveTooLargeError(
+            path, f"archive inflates to {total} bytes, over the limit of {limits.max_total_bytes}"
+        )
     return out
 
 
@@ -247,13 +331,17 @@ def _json(data: bytes, path: Path, where: str, limits: ArchiveLimits = DEFAULT_L
     return value
 
 
-def _jsonl(files: dict[str, bytes], name: str, path: Path, limits: ArchiveLimits = DEFAULT_LIMITS) -> list[dict[str, Any]]:
+def _jsonl(
+    files: dict[str, bytes], name: str, path: Path, limits: ArchiveLimits = DEFAULT_LIMITS
+) -> list[dict[str, Any]]:
     rows = []
     for k, line in enumerate(files[name].splitlines(), start=1):
         if not line.strip():
             continue
         if len(line) > limits.max_row_bytes:
-            raise ArchiveTooLargeError(path, f"{name}: line {k}: {len(line)} bytes, over the limit of {limits.max_row_bytes} per row")
+            raise ArchiveTooLargeError(
+                path, f"{name}: line {k}: {len(line)} bytes, over the limit of {limits.max_row_bytes} per row"
+            )
         row = _json(line, path, f"{name}: line {k}", limits)
         if not isinstance(row, dict):
             raise InconsistentEpisodeError(path, f"{name}: line {k}: expected a JSON object")
@@ -261,7 +349,9 @@ def _jsonl(files: dict[str, bytes], name: str, path: Path, limits: ArchiveLimits
     return rows
 
 
-def read_archive(path: str | Path, *, verify_hashes: bool = True, limits: ArchiveLimits = DEFAULT_LIMITS) -> EpisodeArchive:
+def read_archive(
+    path: str | Path, *, verify_hashes: bool = True, limits: ArchiveLimits = DEFAULT_LIMITS
+) -> EpisodeArchive:
     """Check an episode archive completely and return its records (see the module doc)."""
     path = Path(path)
     if not path.is_file():
@@ -274,9 +364,13 @@ def read_archive(path: str | Path, *, verify_hashes: bool = True, limits: Archiv
         infos = _members(zf, path, limits)
         if "manifest.json" not in infos:
             raise HashInventoryError(path, "manifest.json: member missing")
-        json_bytes = sum(infos[n].file_size for n in ("manifest.json", *CORE_MEMBERS) if n in infos and n != "frames.bin")
+        json_bytes = sum(
+            infos[n].file_size for n in ("manifest.json", *CORE_MEMBERS) if n in infos and n != "frames.bin"
+        )
         if json_bytes > limits.max_json_bytes:
-            raise ArchiveTooLargeError(path, f"the JSON members inflate to {json_bytes} bytes, over the limit of {limits.max_json_bytes}")
+            raise ArchiveTooLargeError(
+                path, f"the JSON members inflate to {json_bytes} bytes, over the limit of {limits.max_json_bytes}"
+            )
         manifest = _json(_read_member(zf, infos["manifest.json"], path), path, "manifest.json", limits)
         _check_identity(manifest, path)
         hashes = manifest.get("hashes")
@@ -311,17 +405,21 @@ def _check_identity(manifest: Any, path: Path) -> None:
             raise UnsupportedEpisodeError(path, f"manifest.json: {key} is {got!r}, expected {want!r}")
 
 
-def _episode(path: Path, manifest: dict[str, Any], files: dict[str, bytes], limits: ArchiveLimits = DEFAULT_LIMITS) -> EpisodeArchive:
+def _episode(
+    path: Path, manifest: dict[str, Any], files: dict[str, bytes], limits: ArchiveLimits = DEFAULT_LIMITS
+) -> EpisodeArchive:
     bad = InconsistentEpisodeError
     _check_manifest(manifest, files, path)
     for name in files:
         if name in CORE_MEMBERS or name.startswith("world/"):
             continue
         if name.startswith("observations/"):
-            if name[len("observations/"):] != hashlib.sha256(files[name]).hexdigest() + ".png":
+            if name[len("observations/") :] != hashlib.sha256(files[name]).hexdigest() + ".png":
                 raise bad(path, f"member {name!r}: an observation is named by the SHA-256 of its bytes plus .png")
             continue
-        raise bad(path, f"member {name!r}: not an episode member (only frames, calls, events, world/ and observations/)")
+        raise bad(
+            path, f"member {name!r}: not an episode member (only frames, calls, events, world/ and observations/)"
+        )
     missing = [m for m in CORE_MEMBERS if m not in files]
     if missing:
         raise bad(path, f"members missing: {missing}")
@@ -329,7 +427,10 @@ def _episode(path: Path, manifest: dict[str, Any], files: dict[str, bytes], limi
     size = manifest["stateSize"]
     raw = files["frames.bin"]
     if len(raw) != len(rows) * size * 8:
-        raise bad(path, f"frames.bin: {len(raw)} bytes, but {len(rows)} frames.jsonl rows of stateSize {size} need {len(rows) * size * 8}")
+        raise bad(
+            path,
+            f"frames.bin: {len(raw)} bytes, but {len(rows)} frames.jsonl rows of stateSize {size} need {len(rows) * size * 8}",
+        )
     vectors = np.frombuffer(raw, dtype="<f8").reshape(len(rows), size).astype(np.float64)
     finite = np.isfinite(vectors).all(axis=1)
     if not finite.all():
@@ -345,16 +446,30 @@ def _episode(path: Path, manifest: dict[str, Any], files: dict[str, bytes], limi
         _check_frame(record, kind == "trace", path, f"frames.jsonl: line {k}")
         if kind != "trace" and not np.abs(vector).max(initial=0.0) <= limits.max_state_value:
             # traces may hold an unstable step that was rolled back; states are what gets restored
-            raise bad(path, f"frames.bin: row {k - 1} ({kind} {record['index']}) holds a value beyond +-{limits.max_state_value:g}")
+            raise bad(
+                path,
+                f"frames.bin: row {k - 1} ({kind} {record['index']}) holds a value beyond +-{limits.max_state_value:g}",
+            )
         frames[kind].append(Frame(kind, record, vector))
     if len(frames["initial"]) != 1:
         raise bad(path, f"frames.jsonl: {len(frames['initial'])} initial frames, expected exactly one")
     for kind, first in (("state", 1), ("trace", 0)):
         got = [f.index for f in frames[kind]]
         if got != list(range(first, first + len(got))):
-            raise bad(path, f"frames.jsonl: {kind} indices {got[:8]}{'...' if len(got) > 8 else ''} are not {first}, {first + 1}, ... in order")
-    episode = EpisodeArchive(path, manifest, files, frames["initial"][0], frames["state"], frames["trace"],
-                             _jsonl(files, "calls.jsonl", path, limits), _jsonl(files, "events.jsonl", path, limits))
+            raise bad(
+                path,
+                f"frames.jsonl: {kind} indices {got[:8]}{'...' if len(got) > 8 else ''} are not {first}, {first + 1}, ... in order",
+            )
+    episode = EpisodeArchive(
+        path,
+        manifest,
+        files,
+        frames["initial"][0],
+        frames["state"],
+        frames["trace"],
+        _jsonl(files, "calls.jsonl", path, limits),
+        _jsonl(files, "events.jsonl", path, limits),
+    )
     if episode.initial.index != 0:
         raise bad(path, "frames.jsonl: the initial frame's index must be 0")
     _check_groups(episode, path)
@@ -399,9 +514,13 @@ def _check_manifest(m: dict[str, Any], files: dict[str, bytes], path: Path) -> N
         ("stateSize", _is_int(m["stateSize"], 1), "an integer >= 1"),
         ("lifecycle", m["lifecycle"] in ("setup", "active", "ended"), "'setup', 'active' or 'ended'"),
         ("originTime", _is_number(m["originTime"]), "a number"),
-        ("requiredCapabilities", isinstance(m["requiredCapabilities"], list)
-         and all(isinstance(c, str) for c in m["requiredCapabilities"])
-         and len(set(m["requiredCapabilities"])) == len(m["requiredCapabilities"]), "a list of distinct strings"),
+        (
+            "requiredCapabilities",
+            isinstance(m["requiredCapabilities"], list)
+            and all(isinstance(c, str) for c in m["requiredCapabilities"])
+            and len(set(m["requiredCapabilities"])) == len(m["requiredCapabilities"]),
+            "a list of distinct strings",
+        ),
         ("task", isinstance(m.get("task", ""), str), "a string"),
         ("objects", isinstance(m["objects"], list), "a list"),
     ]
@@ -421,14 +540,26 @@ def _check_manifest(m: dict[str, Any], files: dict[str, bytes], path: Path) -> N
         if not _is_number(physics[key]) or not 0 < physics[key] <= 60:
             raise bad(path, f"manifest.json: runtime.physics.{key} must lie in (0, 60], got {physics[key]!r}")
     tools = runtime["enabledTools"]
-    if not isinstance(tools, list) or len(set(map(str, tools))) != len(tools) or any(t not in TOOL_NAMES for t in tools):
+    if (
+        not isinstance(tools, list)
+        or len(set(map(str, tools))) != len(tools)
+        or any(t not in TOOL_NAMES for t in tools)
+    ):
         raise bad(path, f"manifest.json: runtime.enabledTools must be distinct tool names of {list(TOOL_NAMES)}")
     ids = []
     for k, obj in enumerate(m["objects"]):
         _keys(obj, {"id", "name", "type"}, {"collisionEnabled"}, path, f"manifest.json: objects[{k}]")
-        if not isinstance(obj["id"], str) or not obj["id"] or not isinstance(obj["name"], str) or obj["type"] != "rigid" \
-                or not isinstance(obj.get("collisionEnabled", False), bool):
-            raise bad(path, f"manifest.json: objects[{k}]: expected {{id: non-empty string, name: string, type: 'rigid', collisionEnabled?: bool}}")
+        if (
+            not isinstance(obj["id"], str)
+            or not obj["id"]
+            or not isinstance(obj["name"], str)
+            or obj["type"] != "rigid"
+            or not isinstance(obj.get("collisionEnabled", False), bool)
+        ):
+            raise bad(
+                path,
+                f"manifest.json: objects[{k}]: expected {{id: non-empty string, name: string, type: 'rigid', collisionEnabled?: bool}}",
+            )
         ids.append(obj["id"])
     if len(set(ids)) != len(ids):
         raise bad(path, "manifest.json: objects: object ids must be distinct")
@@ -446,21 +577,35 @@ def _check_manifest(m: dict[str, Any], files: dict[str, bytes], path: Path) -> N
 
 
 def _check_producer(producer: dict[str, Any], path: Path, where: str) -> None:
-    ok = (producer["backend"] in ("wasm", "native") and producer["engine"] == ENGINE
-          and isinstance(producer["implementation"], str) and bool(producer["implementation"])
-          and isinstance(producer["language"], str) and bool(producer["language"])
-          and isinstance(producer.get("renderer", ""), str)
-          and all(_HEX64.fullmatch(producer[k]) for k in ("build", "engineBuild") if k in producer and isinstance(producer[k], str))
-          and all(isinstance(producer[k], str) for k in ("build", "engineBuild") if k in producer))
+    ok = (
+        producer["backend"] in ("wasm", "native")
+        and producer["engine"] == ENGINE
+        and isinstance(producer["implementation"], str)
+        and bool(producer["implementation"])
+        and isinstance(producer["language"], str)
+        and bool(producer["language"])
+        and isinstance(producer.get("renderer", ""), str)
+        and all(
+            _HEX64.fullmatch(producer[k])
+            for k in ("build", "engineBuild")
+            if k in producer and isinstance(producer[k], str)
+        )
+        and all(isinstance(producer[k], str) for k in ("build", "engineBuild") if k in producer)
+    )
     if not ok:
-        raise InconsistentEpisodeError(path, f"{where}: expected backend wasm|native, engine {ENGINE}, non-empty implementation and language, 64-hex build digests")
+        raise InconsistentEpisodeError(
+            path,
+            f"{where}: expected backend wasm|native, engine {ENGINE}, non-empty implementation and language, 64-hex build digests",
+        )
 
 
 def _check_frame(rec: dict[str, Any], trace: bool, path: Path, where: str) -> None:
     bad = InconsistentEpisodeError
     _keys(rec, _FRAME_KEYS | (_TRACE_REQUIRED if trace else set()), {"applied"} if trace else set(), path, where)
     camera = _keys(rec["camera"], {"position", "target"}, set(), path, f"{where}: camera")
-    if not (_is_int(rec["index"]) and _is_int(rec["groupCounter"]) and _vec3(camera["position"]) and _vec3(camera["target"])):
+    if not (
+        _is_int(rec["index"]) and _is_int(rec["groupCounter"]) and _vec3(camera["position"]) and _vec3(camera["target"])
+    ):
         raise bad(path, f"{where}: index and groupCounter must be integers >= 0, camera position/target 3 numbers")
     if math.dist(camera["position"], camera["target"]) < 0.001:
         raise bad(path, f"{where}: camera position and target less than 0.001 apart")
@@ -469,12 +614,27 @@ def _check_frame(rec: dict[str, Any], trace: bool, path: Path, where: str) -> No
     for g in rec["groups"]:
         _keys(g, {"id", "name", "members"}, set(), path, f"{where}: group")
         members = g["members"]
-        if not (isinstance(g["id"], str) and g["id"] and isinstance(g["name"], str) and isinstance(members, list)
-                and len(members) >= 2 and all(isinstance(x, str) and x for x in members) and len(set(members)) == len(members)):
+        if not (
+            isinstance(g["id"], str)
+            and g["id"]
+            and isinstance(g["name"], str)
+            and isinstance(members, list)
+            and len(members) >= 2
+            and all(isinstance(x, str) and x for x in members)
+            and len(set(members)) == len(members)
+        ):
             raise bad(path, f"{where}: a group needs an id, a name and at least two distinct members")
     if trace:
-        if not (isinstance(rec["call_id"], str) and rec["phase"] in _TRACE_PHASES and _is_int(rec["step"]) and _is_number(rec["sim_time"])):
-            raise bad(path, f"{where}: a trace needs call_id, phase in {list(_TRACE_PHASES)}, step >= 0 and a numeric sim_time")
+        if not (
+            isinstance(rec["call_id"], str)
+            and rec["phase"] in _TRACE_PHASES
+            and _is_int(rec["step"])
+            and _is_number(rec["sim_time"])
+        ):
+            raise bad(
+                path,
+                f"{where}: a trace needs call_id, phase in {list(_TRACE_PHASES)}, step >= 0 and a numeric sim_time",
+            )
         if "applied" in rec:
             applied = _keys(rec["applied"], {"body", "values"}, set(), path, f"{where}: applied")
             if not (_is_int(applied["body"], 1) and _vec3(applied["values"])):
@@ -488,11 +648,16 @@ def _check_groups(ep: EpisodeArchive, path: Path) -> None:
         seen_members: set[str] = set()
         for g in frame.record["groups"]:
             if g["id"] in objects or g["id"] in seen_groups:
-                raise InconsistentEpisodeError(path, f"frames.jsonl: {frame.kind} {frame.index}: group id {g['id']!r} repeats or names an object")
+                raise InconsistentEpisodeError(
+                    path, f"frames.jsonl: {frame.kind} {frame.index}: group id {g['id']!r} repeats or names an object"
+                )
             seen_groups.add(g["id"])
             for member in g["members"]:
                 if member not in objects or member in seen_members:
-                    raise InconsistentEpisodeError(path, f"frames.jsonl: {frame.kind} {frame.index}: group member {member!r} unknown or in two groups")
+                    raise InconsistentEpisodeError(
+                        path,
+                        f"frames.jsonl: {frame.kind} {frame.index}: group member {member!r} unknown or in two groups",
+                    )
                 seen_members.add(member)
 
 
@@ -533,7 +698,9 @@ def _check_calls(ep: EpisodeArchive, path: Path) -> None:
         _keys(call["producer"], _PRODUCER_REQUIRED, _PRODUCER_OPTIONAL, path, f"{where}: producer")
         _check_producer(call["producer"], path, f"{where}: producer")
         if call["status"] not in ("completed", "error") or (call["status"] == "error") != ("error" in call):
-            raise bad(path, f"{where}: status must be completed or error, with an error message exactly when it is error")
+            raise bad(
+                path, f"{where}: status must be completed or error, with an error message exactly when it is error"
+            )
         if "error" in call and not isinstance(call["error"], str):
             raise bad(path, f"{where}: error must be a string")
         if "error_code" in call and call["error_code"] not in ERROR_CODES:
@@ -544,18 +711,27 @@ def _check_calls(ep: EpisodeArchive, path: Path) -> None:
                 raise bad(path, f"{where}: cancellation needs a phase string and step >= 0")
         if "transport" in call and not isinstance(call["transport"], str):
             raise bad(path, f"{where}: transport must be a string")
-        if not all(_is_int(call[key]) for key in ("before_index", "state_index", "trace_start", "trace_end", "steps")) \
-                or not all(_is_number(call[key]) for key in ("sim_start", "sim_end")):
+        if not all(
+            _is_int(call[key]) for key in ("before_index", "state_index", "trace_start", "trace_end", "steps")
+        ) or not all(_is_number(call[key]) for key in ("sim_start", "sim_end")):
             raise bad(path, f"{where}: indices and steps must be integers >= 0, sim_start/sim_end numbers")
         if call["before_index"] > n_states or call["state_index"] > n_states:
-            raise bad(path, f"{where}: before_index {call['before_index']} / state_index {call['state_index']} name a state the archive lacks (0..{n_states})")
+            raise bad(
+                path,
+                f"{where}: before_index {call['before_index']} / state_index {call['state_index']} name a state the archive lacks (0..{n_states})",
+            )
         if not call["trace_start"] <= call["trace_end"] <= n_traces:
-            raise bad(path, f"{where}: trace range [{call['trace_start']}, {call['trace_end']}) is outside 0..{n_traces}")
+            raise bad(
+                path, f"{where}: trace range [{call['trace_start']}, {call['trace_end']}) is outside 0..{n_traces}"
+            )
         owners[call["id"]] = call
     for trace in ep.traces:
         owner = owners.get(trace.record["call_id"])
         if owner is None or not owner["trace_start"] <= trace.index < owner["trace_end"]:
-            raise bad(path, f"frames.jsonl: trace {trace.index} lies outside the trace range of its call {trace.record['call_id']!r}")
+            raise bad(
+                path,
+                f"frames.jsonl: trace {trace.index} lies outside the trace range of its call {trace.record['call_id']!r}",
+            )
     _check_events(ep.events, path)
 
 
@@ -570,10 +746,18 @@ def _check_events(events: list[dict[str, Any]], path: Path) -> None:
     for k, event in enumerate(events):
         where = f"events.jsonl: line {k + 1}"
         _keys(event, _EVENT_KEYS, set(), path, where)
-        if not (_is_int(event["index"]) and isinstance(event["call_id"], str) and event["kind"] in ("request", "complete")
-                and isinstance(event["timestamp"], str) and _is_number(event["sim_time"])):
-            raise InconsistentEpisodeError(path, f"{where}: expected index >= 0, call_id and timestamp strings, "
-                                                 "kind request or complete, a numeric sim_time")
+        if not (
+            _is_int(event["index"])
+            and isinstance(event["call_id"], str)
+            and event["kind"] in ("request", "complete")
+            and isinstance(event["timestamp"], str)
+            and _is_number(event["sim_time"])
+        ):
+            raise InconsistentEpisodeError(
+                path,
+                f"{where}: expected index >= 0, call_id and timestamp strings, "
+                "kind request or complete, a numeric sim_time",
+            )
 
 
 # ---------------------------------------------------------------------------------------------------

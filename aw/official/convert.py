@@ -29,8 +29,19 @@ from pathlib import Path
 import numpy as np
 import orjson
 
-from aw.formats import (FinalState, FormatError, PartTarget, RunInfo, SuiteEntry, SuiteManifest, Targets, write_final,
-                        write_manifest, write_run_info, write_targets)
+from aw.formats import (
+    FinalState,
+    FormatError,
+    PartTarget,
+    RunInfo,
+    SuiteEntry,
+    SuiteManifest,
+    Targets,
+    write_final,
+    write_manifest,
+    write_run_info,
+    write_targets,
+)
 from aw.formats.io import staging_dir
 from aw.formats.suite import suite_paths
 from aw.formats.trajectory import CameraState, TrajectoryCall, TrajectoryEnd, TrajectoryHeader
@@ -42,8 +53,18 @@ from aw.official.jsonio import read_json_object
 from aw.official.package import REFERENCE_CONDITIONS, OfficialPackage
 from aw.runlock import RunDirBusy, RunDirLock
 
-__all__ = ["initial_archive_path", "convert_package", "project_camera", "end_reason", "episode_records",
-           "write_episode_run", "find_archives", "archive_sample", "run_log_archives", "convert"]
+__all__ = [
+    "initial_archive_path",
+    "convert_package",
+    "project_camera",
+    "end_reason",
+    "episode_records",
+    "write_episode_run",
+    "find_archives",
+    "archive_sample",
+    "run_log_archives",
+    "convert",
+]
 
 _NO_CALLS_START = "1970-01-01T00:00:00.000Z"  # an archive without calls has no wall-clock time
 _EXTRA_STATE = "state"  # tool name of a state a call recorded beyond its first
@@ -54,10 +75,14 @@ def initial_archive_path(suite_dir: str | Path, task_id: str) -> Path:
 
 
 _SUITE_ITEMS = ("targets", "eval_points", "official", "tasks", "manifest.json")  # manifest.json last: it makes a suite
+
+
 def _existing_suite(out: Path, force: bool) -> None:
     existing = [out / n for n in _SUITE_ITEMS if (out / n).exists()]
     if existing and not force:
-        raise FileExistsError(f"{out}: already holds a suite ({', '.join(p.name for p in existing)}); pass force=True to replace it")
+        raise FileExistsError(
+            f"{out}: already holds a suite ({', '.join(p.name for p in existing)}); pass force=True to replace it"
+        )
 
 
 def _chosen_samples(pkg: OfficialPackage, samples: Iterable[tuple[str, str]] | None) -> list[tuple[str, str]]:
@@ -81,13 +106,27 @@ def _write_suite(pkg: OfficialPackage, out: Path, chosen: list[tuple[str, str]])
         write_eval_inputs(eval_points_path(out, tid), inputs)
         shutil.copyfile(pkg.sample(block, sid).initial_path, initial_archive_path(out, tid))
         hint = [g for g in inputs.groups if len(g) > 1] or None
-        targets = Targets(task_id=tid, parts={p: PartTarget(pose=[float(x) for x in pose])
-                                               for p, pose in zip(inputs.part_ids, inputs.target_poses)},
-                          equivalence_hint=hint, scale=1.0, eval_divisor=inputs.divisor)
+        targets = Targets(
+            task_id=tid,
+            parts={
+                p: PartTarget(pose=[float(x) for x in pose]) for p, pose in zip(inputs.part_ids, inputs.target_poses)
+            },
+            equivalence_hint=hint,
+            scale=1.0,
+            eval_divisor=inputs.divisor,
+        )
         write_targets(suite_paths(out, tid)[1], targets)
         b = pkg.blocks[block]
-        entries.append(SuiteEntry(task_id=tid, source=b["source"], condition=REFERENCE_CONDITIONS[b["reference_mode"]],
-                                  object_id=sid, category=sid.split("/")[0] if "/" in sid else "", n_parts=inputs.n_parts))
+        entries.append(
+            SuiteEntry(
+                task_id=tid,
+                source=b["source"],
+                condition=REFERENCE_CONDITIONS[b["reference_mode"]],
+                object_id=sid,
+                category=sid.split("/")[0] if "/" in sid else "",
+                n_parts=inputs.n_parts,
+            )
+        )
     manifest = SuiteManifest(name=f"official-{pkg.root.name}", generator="aw.official", tasks=entries)
     write_manifest(out, manifest)
     return manifest
@@ -106,8 +145,12 @@ def _commit_suite(staged: Path, out: Path) -> None:
             os.replace(staged / name, out / name)
 
 
-def convert_package(package: str | Path | OfficialPackage, suite_out: str | Path, force: bool = False,
-                    samples: Iterable[tuple[str, str]] | None = None) -> SuiteManifest:
+def convert_package(
+    package: str | Path | OfficialPackage,
+    suite_out: str | Path,
+    force: bool = False,
+    samples: Iterable[tuple[str, str]] | None = None,
+) -> SuiteManifest:
     """Write the scoring suite of an official package (see the module doc): its ``samples``
     ((block, sample id) pairs, written in package order), by default every sample. Raises
     :class:`aw.official.errors.MissingPackageFileError` naming every file those samples need
@@ -166,8 +209,14 @@ def episode_records(ep: PartEpisode, task_id: str, system: str):
     arc, ids, poses = ep.archive, ep.part_ids, ep.poses
     t0 = parse_timestamp(arc.calls[0]["timestamp"]) if arc.calls else None
     started = iso_timestamp(t0) if t0 is not None else _NO_CALLS_START
-    header = TrajectoryHeader(task_id=task_id, system=system, started_at=started, part_ids=ids,
-                              initial_poses=_pose_dict(ids, poses[0]), camera=project_camera(arc.initial.record["camera"]))
+    header = TrajectoryHeader(
+        task_id=task_id,
+        system=system,
+        started_at=started,
+        part_ids=ids,
+        initial_poses=_pose_dict(ids, poses[0]),
+        camera=project_camera(arc.initial.record["camera"]),
+    )
     calls: list[TrajectoryCall] = []
     t = 0.0
     shown = 0  # the state the previous call line left
@@ -176,9 +225,14 @@ def episode_records(ep: PartEpisode, task_id: str, system: str):
         ok = call["status"] == "completed"
         new_states = range(max(call["before_index"], shown) + 1, call["state_index"] + 1)
         for k, index in enumerate(new_states or [None]):
-            rec = {"seq": len(calls) + 1, "t": t, "tool": call["name"] if k == 0 else _EXTRA_STATE,
-                   "args": call["arguments"] if k == 0 else {}, "ok": ok if k == 0 else True,
-                   "error": call.get("error") if k == 0 else None}
+            rec = {
+                "seq": len(calls) + 1,
+                "t": t,
+                "tool": call["name"] if k == 0 else _EXTRA_STATE,
+                "args": call["arguments"] if k == 0 else {},
+                "ok": ok if k == 0 else True,
+                "error": call.get("error") if k == 0 else None,
+            }
             if index is not None:
                 prev, cur = poses[shown], poses[index]
                 rec["changed"] = [p for p, a, b in zip(ids, cur, prev) if not np.array_equal(a, b)]
@@ -197,8 +251,9 @@ def _dump(rec) -> bytes:
     return orjson.dumps(rec.model_dump(mode="json", exclude_none=True))
 
 
-def write_episode_run(ep: PartEpisode, runs_out: str | Path, system: str, task_id: str, force: bool = False,
-                      extra: dict | None = None) -> Path:
+def write_episode_run(
+    ep: PartEpisode, runs_out: str | Path, system: str, task_id: str, force: bool = False, extra: dict | None = None
+) -> Path:
     """Write ``RUNS/<system>/<task_id>/`` (trajectory.jsonl, final.json, run.json) for a restored
     official episode."""
     run_dir = Path(runs_out) / system / task_id
@@ -233,9 +288,15 @@ def _write_run_files(ep: PartEpisode, run_dir: Path, system: str, task_id: str, 
             fh.write(_dump(rec) + b"\n")
     os.replace(tmp, traj)
     write_final(run_dir / "final.json", FinalState(task_id=task_id, reason=end.reason, poses=end.poses))
-    info = RunInfo(system=system, task_id=task_id, started_at=header.started_at, wall_seconds=end.t,
-                   mcp_calls=len(ep.archive.calls), ended="finished",
-                   extra={"official_archive": str(ep.path), "state_index": ep.final_index, **(extra or {})})
+    info = RunInfo(
+        system=system,
+        task_id=task_id,
+        started_at=header.started_at,
+        wall_seconds=end.t,
+        mcp_calls=len(ep.archive.calls),
+        ended="finished",
+        extra={"official_archive": str(ep.path), "state_index": ep.final_index, **(extra or {})},
+    )
     write_run_info(run_dir / "run.json", info)
 
 
@@ -297,8 +358,12 @@ def _result_beside(archive: Path) -> dict:
     return _official_result(read_json_object(path))
 
 
-def run_log_archives(folder: str | Path, pkg: OfficialPackage, skipped: list[str] | None = None,
-                     attempted: set[tuple[str, str]] | None = None) -> list[tuple[str, str, str, Path, dict]]:
+def run_log_archives(
+    folder: str | Path,
+    pkg: OfficialPackage,
+    skipped: list[str] | None = None,
+    attempted: set[tuple[str, str]] | None = None,
+) -> list[tuple[str, str, str, Path, dict]]:
     """``(system, block, sample id, final archive, extra)`` for every attempt that counts in the
     run logs of ``folder`` (a run folder or a ``logs/`` folder): runs are grouped by system
     (``aw.official.runlog.system_name``, as ``aw-score`` names them) and each group's attempts
@@ -323,21 +388,38 @@ def run_log_archives(folder: str | Path, pkg: OfficialPackage, skipped: list[str
             if attempted is not None:
                 attempted.add((block, sid))
             attempt.tool_calls  # noqa: B018 - a conversation.jsonl that aw-score would refuse is refused here too
-            why = ("the attempt is still running" if not attempt.finished else
-                   "no saved final archive" if not attempt.archive_saved else
-                   "final archive differs from result.json's sha256"
-                   if attempt.saved_sha256 and attempt.saved_sha256 != file_sha256(attempt.final_archive) else None)
+            why = (
+                "the attempt is still running"
+                if not attempt.finished
+                else "no saved final archive"
+                if not attempt.archive_saved
+                else "final archive differs from result.json's sha256"
+                if attempt.saved_sha256 and attempt.saved_sha256 != file_sha256(attempt.final_archive)
+                else None
+            )
             if why is not None:
                 if skipped is not None:
                     skipped.append(f"{attempt.directory}: {why}")
                 continue
-            extra = {"block": block, "sample_id": sid, "official_run": str(attempt.run), **_official_result(attempt.result)}
+            extra = {
+                "block": block,
+                "sample_id": sid,
+                "official_run": str(attempt.run),
+                **_official_result(attempt.result),
+            }
             out.append((name, block, sid, attempt.final_archive, extra))
     return out
 
 
-def convert(package: str | Path, episodes: str | Path | Iterable[str | Path], suite_out: str | Path, runs_out: str | Path,
-            system: str | None = None, force: bool = False, skipped: list[str] | None = None) -> tuple[SuiteManifest, list[Path]]:
+def convert(
+    package: str | Path,
+    episodes: str | Path | Iterable[str | Path],
+    suite_out: str | Path,
+    runs_out: str | Path,
+    system: str | None = None,
+    force: bool = False,
+    skipped: list[str] | None = None,
+) -> tuple[SuiteManifest, list[Path]]:
     """Convert a package and its episode archives: the counted attempts of run logs (when
     ``episodes`` is a run folder or holds run folders), else every ``*.episode.zip`` below it
     (``<block>/<slug>.episode.zip``). A run's system is ``system``, else the run log's system
@@ -363,12 +445,16 @@ def convert(package: str | Path, episodes: str | Path | Iterable[str | Path], su
             items.append((name, block, sid, arc, {"block": block, "sample_id": sid, **_result_beside(arc)}))
     attempted.update((block, sid) for _, block, sid, _, _ in items)
     if not attempted:
-        raise FormatError(folder if folder is not None else Path("."), "no attempt and no *.episode.zip archive to convert")
+        raise FormatError(
+            folder if folder is not None else Path("."), "no attempt and no *.episode.zip archive to convert"
+        )
     chosen = _chosen_samples(pkg, attempted)
     targets = [runs_root / (system or name) / task_id_for_sample(block, sid) for name, block, sid, _, _ in items]
     for k, run_dir in enumerate(targets):
         if run_dir in targets[:k]:
-            raise FormatError(items[k][3], f"a second archive for {items[k][1]}/{items[k][2]} of system {run_dir.parent.name}")
+            raise FormatError(
+                items[k][3], f"a second archive for {items[k][1]}/{items[k][2]} of system {run_dir.parent.name}"
+            )
         _free_run_dir(run_dir, force)
     # Everything is read and written in hidden folders first, then moved into place: a bad archive
     # or a full disk leaves neither a suite nor runs that look complete.

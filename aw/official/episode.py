@@ -21,25 +21,85 @@ from xml.etree import ElementTree as ET
 
 import numpy as np
 
-from aw.official.archive import ENGINE, MJB_MODEL, EpisodeArchive, Frame, read_archive
 from aw.formats.common import pose_problem
+from aw.official.archive import ENGINE, MJB_MODEL, EpisodeArchive, Frame, read_archive
 from aw.official.errors import EngineVersionError, EpisodeMismatchError, InconsistentEpisodeError, WorldModelError
 
 __all__ = [
-    "PartEpisode", "body_name", "expected_objects", "catalogue_part_ids", "require_engine", "load_model",
-    "compare_compiled_models", "check_continuation", "state_poses", "free_body_rotations", "read_part_episode",
+    "PartEpisode",
+    "body_name",
+    "expected_objects",
+    "catalogue_part_ids",
+    "require_engine",
+    "load_model",
+    "compare_compiled_models",
+    "check_continuation",
+    "state_poses",
+    "free_body_rotations",
+    "read_part_episode",
 ]
 
-_COMPILED_COUNTS = ("nbody", "njnt", "ngeom", "nmesh", "nq", "nv", "nu", "na", "neq", "ntendon", "nplugin", "nflex",
-                    "nskin", "ntex")
+_COMPILED_COUNTS = (
+    "nbody",
+    "njnt",
+    "ngeom",
+    "nmesh",
+    "nq",
+    "nv",
+    "nu",
+    "na",
+    "neq",
+    "ntendon",
+    "nplugin",
+    "nflex",
+    "nskin",
+    "ntex",
+)
 # Immutable geometry and structure of a compiled world (physics options may differ between runs).
-_COMPILED_ARRAYS = ("names", "name_bodyadr", "body_parentid", "body_jntadr", "body_jntnum", "body_geomadr",
-                    "body_geomnum", "body_pos", "body_quat", "body_ipos", "body_iquat", "body_mass", "body_inertia",
-                    "jnt_type", "jnt_bodyid", "jnt_qposadr", "jnt_dofadr", "jnt_pos", "jnt_axis", "jnt_limited",
-                    "jnt_range", "qpos0", "dof_damping", "geom_type", "geom_bodyid", "geom_dataid", "geom_pos",
-                    "geom_quat", "geom_size", "geom_rgba", "geom_friction", "geom_condim", "mesh_vertadr",
-                    "mesh_vertnum", "mesh_faceadr", "mesh_facenum", "mesh_vert", "mesh_face", "mesh_pos", "mesh_quat",
-                    "mesh_normal", "mesh_facenormal")
+_COMPILED_ARRAYS = (
+    "names",
+    "name_bodyadr",
+    "body_parentid",
+    "body_jntadr",
+    "body_jntnum",
+    "body_geomadr",
+    "body_geomnum",
+    "body_pos",
+    "body_quat",
+    "body_ipos",
+    "body_iquat",
+    "body_mass",
+    "body_inertia",
+    "jnt_type",
+    "jnt_bodyid",
+    "jnt_qposadr",
+    "jnt_dofadr",
+    "jnt_pos",
+    "jnt_axis",
+    "jnt_limited",
+    "jnt_range",
+    "qpos0",
+    "dof_damping",
+    "geom_type",
+    "geom_bodyid",
+    "geom_dataid",
+    "geom_pos",
+    "geom_quat",
+    "geom_size",
+    "geom_rgba",
+    "geom_friction",
+    "geom_condim",
+    "mesh_vertadr",
+    "mesh_vertnum",
+    "mesh_faceadr",
+    "mesh_facenum",
+    "mesh_vert",
+    "mesh_face",
+    "mesh_pos",
+    "mesh_quat",
+    "mesh_normal",
+    "mesh_facenormal",
+)
 _POSITION_TOLERANCE = 2e-7  # compiled float32 geometry of the same MJB may differ in the last bits
 _NORMAL_TOLERANCE = 1e-5  # recomputed shading normals are more sensitive near degenerate faces
 
@@ -51,17 +111,22 @@ def body_name(k: int) -> str:
 
 def expected_objects(part_ids: list[str]) -> list[dict]:
     """The object catalogue of a benchmark episode whose parts are ``part_ids`` (sorted)."""
-    return [{"id": body_name(k), "name": f"Part {pid}", "type": "rigid", "collisionEnabled": False}
-            for k, pid in enumerate(part_ids)]
+    return [
+        {"id": body_name(k), "name": f"Part {pid}", "type": "rigid", "collisionEnabled": False}
+        for k, pid in enumerate(part_ids)
+    ]
 
 
 def catalogue_part_ids(ep: EpisodeArchive) -> list[str]:
     """The part ids an archive's catalogue names, when it follows the benchmark rule."""
     objects = ep.manifest["objects"]
-    ids = [o["name"][len("Part "):] for o in objects if o["name"].startswith("Part ")]
+    ids = [o["name"][len("Part ") :] for o in objects if o["name"].startswith("Part ")]
     if len(ids) != len(objects) or ids != sorted(set(ids)) or objects != expected_objects(ids):
-        raise EpisodeMismatchError(ep.path, "manifest.json: objects do not follow the benchmark catalogue "
-                                   "(part-0001, part-0002, ... named 'Part <part id>' in part id order)")
+        raise EpisodeMismatchError(
+            ep.path,
+            "manifest.json: objects do not follow the benchmark catalogue "
+            "(part-0001, part-0002, ... named 'Part <part id>' in part id order)",
+        )
     return ids
 
 
@@ -69,7 +134,9 @@ def require_engine() -> None:
     import mujoco
 
     if mujoco.__version__ != ENGINE:
-        raise EngineVersionError("mujoco", f"official worlds and states need MuJoCo {ENGINE}; {mujoco.__version__} is installed")
+        raise EngineVersionError(
+            "mujoco", f"official worlds and states need MuJoCo {ENGINE}; {mujoco.__version__} is installed"
+        )
 
 
 def load_model(ep: EpisodeArchive):
@@ -96,7 +163,9 @@ def load_model(ep: EpisodeArchive):
     if absent:
         raise WorldModelError(ep.path, f"world/model.xml: mesh files missing from world/: {absent}")
     try:
-        return mujoco.MjModel.from_xml_string(xml.decode("utf-8"), {k: v for k, v in assets.items() if k != "model.xml"})
+        return mujoco.MjModel.from_xml_string(
+            xml.decode("utf-8"), {k: v for k, v in assets.items() if k != "model.xml"}
+        )
     except (ValueError, UnicodeDecodeError) as exc:
         raise WorldModelError(ep.path, f"world/model.xml: MuJoCo cannot compile it ({exc})") from None
 
@@ -113,8 +182,9 @@ def compare_compiled_models(actual, expected, where: Path) -> None:
         else:
             a, b = np.asarray(a), np.asarray(b)
             tol = _NORMAL_TOLERANCE if name == "mesh_normal" else _POSITION_TOLERANCE
-            same = a.shape == b.shape and (np.allclose(a, b, atol=tol, rtol=0) if np.issubdtype(a.dtype, np.floating)
-                                           else np.array_equal(a, b))
+            same = a.shape == b.shape and (
+                np.allclose(a, b, atol=tol, rtol=0) if np.issubdtype(a.dtype, np.floating) else np.array_equal(a, b)
+            )
         if not same:
             raise EpisodeMismatchError(where, f"world/model.mjb: compiled {name} differs from the initial episode's")
 
@@ -164,8 +234,11 @@ def state_poses(model, ep: EpisodeArchive, frames: list[Frame], names: list[str]
 
     spec, size = ep.manifest["stateSpec"], ep.manifest["stateSize"]
     if mujoco.mj_stateSize(model, spec) != size:
-        raise EpisodeMismatchError(ep.path, f"manifest.json: stateSize {size} differs from the world's state size "
-                                   f"{mujoco.mj_stateSize(model, spec)} for stateSpec {spec}")
+        raise EpisodeMismatchError(
+            ep.path,
+            f"manifest.json: stateSize {size} differs from the world's state size "
+            f"{mujoco.mj_stateSize(model, spec)} for stateSpec {spec}",
+        )
     bodies = _bodies(model, names, ep.path)
     free = [_free_qpos_address(model, b) for b in bodies]
     data = mujoco.MjData(model)
@@ -177,10 +250,12 @@ def state_poses(model, ep: EpisodeArchive, frames: list[Frame], names: list[str]
             if adr is None:
                 out[f, p, :3], out[f, p, 3:] = data.xpos[b], data.xquat[b]
             else:
-                out[f, p] = data.qpos[adr:adr + 7]
+                out[f, p] = data.qpos[adr : adr + 7]
             why = pose_problem(out[f, p].tolist())
             if why is not None:  # e.g. a zero quaternion: refused here rather than scored as some pose
-                raise InconsistentEpisodeError(ep.path, f"frames.bin: {frame.kind} {frame.index}: body {names[p]}: {why}")
+                raise InconsistentEpisodeError(
+                    ep.path, f"frames.bin: {frame.kind} {frame.index}: body {names[p]}: {why}"
+                )
     return out
 
 
@@ -237,8 +312,11 @@ class PartEpisode:
         return self.poses[self.final_index]
 
 
-def read_part_episode(path: str | Path | EpisodeArchive, initial: str | Path | EpisodeArchive | None = None,
-                      part_ids: list[str] | None = None) -> PartEpisode:
+def read_part_episode(
+    path: str | Path | EpisodeArchive,
+    initial: str | Path | EpisodeArchive | None = None,
+    part_ids: list[str] | None = None,
+) -> PartEpisode:
     """Read (or take) an archive and restore every state's part poses. With ``initial``, the
     archive must continue it (:func:`check_continuation`); ``part_ids`` default to the
     catalogue's."""

@@ -89,9 +89,14 @@ def read_eval_inputs(path: str | Path, sample_id: str = "") -> EvalInputs:
 def write_eval_inputs(path: str | Path, inputs: EvaluationInputs) -> None:
     """Write ``inputs`` as an ``.npz`` of the layout above."""
     Path(path).parent.mkdir(parents=True, exist_ok=True)
-    np.savez(Path(path), part_ids=np.asarray(inputs.part_ids), points=np.asarray(inputs.points, dtype=np.float64),
-             target_poses=np.asarray(inputs.target_poses, dtype=np.float64), scale_divisor=np.float64(inputs.divisor),
-             equivalence_groups=inputs.group_labels())
+    np.savez(
+        Path(path),
+        part_ids=np.asarray(inputs.part_ids),
+        points=np.asarray(inputs.points, dtype=np.float64),
+        target_poses=np.asarray(inputs.target_poses, dtype=np.float64),
+        scale_divisor=np.float64(inputs.divisor),
+        equivalence_groups=inputs.group_labels(),
+    )
 
 
 def eval_points_path(suite_dir: str | Path, task_id: str) -> Path:

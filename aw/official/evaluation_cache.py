@@ -34,9 +34,19 @@ import numpy as np
 from aw.official.errors import EvaluationCacheError
 from aw.official.jsonio import read_json
 
-__all__ = ["CACHE_FILE", "EVALUATION_PROTOCOL", "PREPARATION_PROTOCOL", "POINTS_PER_PART", "SIMILARITY_POLICY",
-           "SIMILARITY_THRESHOLD", "similarity_protocol", "EvaluationInputs", "read_evaluation", "write_evaluation",
-           "write_json"]
+__all__ = [
+    "CACHE_FILE",
+    "EVALUATION_PROTOCOL",
+    "PREPARATION_PROTOCOL",
+    "POINTS_PER_PART",
+    "SIMILARITY_POLICY",
+    "SIMILARITY_THRESHOLD",
+    "similarity_protocol",
+    "EvaluationInputs",
+    "read_evaluation",
+    "write_evaluation",
+    "write_json",
+]
 
 CACHE_FILE = "evaluation.json"
 EVALUATION_PROTOCOL = "assembly-evaluation-v1"  # assembly-world-bench common.py PROTOCOL
@@ -97,8 +107,14 @@ def _fail(path: Path, problem: str) -> EvaluationCacheError:
     return EvaluationCacheError(path, problem)
 
 
-def read_evaluation(path: str | Path, *, sample_id: str | None = None, identity: dict | None = None,
-                    initial_sha256: str | None = None, parts: int | None = None) -> EvaluationInputs:
+def read_evaluation(
+    path: str | Path,
+    *,
+    sample_id: str | None = None,
+    identity: dict | None = None,
+    initial_sha256: str | None = None,
+    parts: int | None = None,
+) -> EvaluationInputs:
     """Read and check an ``evaluation.json``. The keyword arguments are what the package says of
     the sample (config identity, initial archive digest, part count); each one given must match
     the file's key, as the official scorer requires."""
@@ -106,34 +122,73 @@ def read_evaluation(path: str | Path, *, sample_id: str | None = None, identity:
     if not path.is_file():
         raise _fail(path, "evaluation inputs not found")
     value = read_json(path, EvaluationCacheError)  # strict JSON (no NaN), bounded depth and size
-    if not isinstance(value, dict) or not {"version", "key", "part_ids", "points", "gt_poses", "scale_divisor", "equivalence"} <= set(value):
-        raise _fail(path, "expected an object with version, key, part_ids, points, gt_poses, scale_divisor, equivalence")
+    if not isinstance(value, dict) or not {
+        "version",
+        "key",
+        "part_ids",
+        "points",
+        "gt_poses",
+        "scale_divisor",
+        "equivalence",
+    } <= set(value):
+        raise _fail(
+            path, "expected an object with version, key, part_ids, points, gt_poses, scale_divisor, equivalence"
+        )
     key, equivalence = value["key"], value["equivalence"]
     if value["version"] != 1 or not isinstance(key, dict) or not isinstance(equivalence, dict):
         raise _fail(path, f"version {value['version']!r} (expected 1), or key/equivalence not objects")
-    required = ("sample_id", "identity", "initial_sha256", "parts", "preparation_protocol", "evaluation_protocol", "similarity")
+    required = (
+        "sample_id",
+        "identity",
+        "initial_sha256",
+        "parts",
+        "preparation_protocol",
+        "evaluation_protocol",
+        "similarity",
+    )
     missing = [k for k in required if k not in key]
     if missing:
         raise _fail(path, f"key: missing {missing}")
     if key["evaluation_protocol"] != EVALUATION_PROTOCOL:
-        raise _fail(path, f"key.evaluation_protocol is {key['evaluation_protocol']!r}, expected {EVALUATION_PROTOCOL!r}")
+        raise _fail(
+            path, f"key.evaluation_protocol is {key['evaluation_protocol']!r}, expected {EVALUATION_PROTOCOL!r}"
+        )
     similarity = key["similarity"]
-    if not isinstance(similarity, dict) or similarity.get("policy") != SIMILARITY_POLICY or similarity.get("threshold") != SIMILARITY_THRESHOLD:
-        raise _fail(path, f"key.similarity must be the {SIMILARITY_POLICY!r} policy at threshold {SIMILARITY_THRESHOLD}")
+    if (
+        not isinstance(similarity, dict)
+        or similarity.get("policy") != SIMILARITY_POLICY
+        or similarity.get("threshold") != SIMILARITY_THRESHOLD
+    ):
+        raise _fail(
+            path, f"key.similarity must be the {SIMILARITY_POLICY!r} policy at threshold {SIMILARITY_THRESHOLD}"
+        )
     if equivalence.get("protocol") != similarity:
         raise _fail(path, "equivalence.protocol differs from key.similarity")
     if not isinstance(key["identity"], dict) or key["preparation_protocol"] != key["identity"].get("protocol"):
         raise _fail(path, "key.preparation_protocol differs from key.identity.protocol")
-    for name, want in (("sample_id", sample_id), ("identity", identity), ("initial_sha256", initial_sha256), ("parts", parts)):
+    for name, want in (
+        ("sample_id", sample_id),
+        ("identity", identity),
+        ("initial_sha256", initial_sha256),
+        ("parts", parts),
+    ):
         if want is not None and key[name] != want:
             raise _fail(path, f"key.{name} is {key[name]!r}, the package says {want!r}")
     ids = value["part_ids"]
-    if not isinstance(ids, list) or not ids or not all(isinstance(p, str) for p in ids) or ids != sorted(set(ids)) \
-            or len(ids) != key["parts"]:
+    if (
+        not isinstance(ids, list)
+        or not ids
+        or not all(isinstance(p, str) for p in ids)
+        or ids != sorted(set(ids))
+        or len(ids) != key["parts"]
+    ):
         raise _fail(path, f"part_ids must be {key['parts']!r} distinct sorted strings")
     groups = equivalence.get("groups")
-    if not isinstance(groups, list) or any(not isinstance(g, list) or not g for g in groups) \
-            or sorted(p for g in groups for p in g) != ids:
+    if (
+        not isinstance(groups, list)
+        or any(not isinstance(g, list) or not g for g in groups)
+        or sorted(p for g in groups for p in g) != ids
+    ):
         raise _fail(path, "equivalence.groups must partition part_ids into non-empty groups")
     divisor = value["scale_divisor"]
     if isinstance(divisor, bool) or not isinstance(divisor, (int, float)) or not math.isfinite(divisor) or divisor <= 0:
@@ -146,15 +201,27 @@ def read_evaluation(path: str | Path, *, sample_id: str | None = None, identity:
         except (KeyError, TypeError, ValueError):
             raise _fail(path, f"points/gt_poses of part {pid!r}: missing or not numeric") from None
         if cloud.shape != (POINTS_PER_PART, 3) or pose.shape != (7,):
-            raise _fail(path, f"part {pid!r}: points {cloud.shape} / gt_poses {pose.shape}, expected ({POINTS_PER_PART}, 3) / (7,)")
+            raise _fail(
+                path,
+                f"part {pid!r}: points {cloud.shape} / gt_poses {pose.shape}, expected ({POINTS_PER_PART}, 3) / (7,)",
+            )
         if not np.isfinite(cloud).all() or not np.isfinite(pose).all():
             raise _fail(path, f"part {pid!r}: non-finite points or pose")
         if np.linalg.norm(pose[3:]) == 0:
             raise _fail(path, f"part {pid!r}: gt_poses quaternion is zero")
         points.append(cloud)
         poses.append(pose)
-    return EvaluationInputs(key["sample_id"], list(ids), np.stack(points), np.stack(poses), float(divisor),
-                            [list(g) for g in groups], key, equivalence, value.get("provenance"))
+    return EvaluationInputs(
+        key["sample_id"],
+        list(ids),
+        np.stack(points),
+        np.stack(poses),
+        float(divisor),
+        [list(g) for g in groups],
+        key,
+        equivalence,
+        value.get("provenance"),
+    )
 
 
 def write_json(path: str | Path, value: Any) -> None:

@@ -34,8 +34,23 @@ import numpy as np
 from aw.formats import FormatError
 from aw.official.runlog import SampleAttempt, write_json
 
-__all__ = ["PROTOCOL", "EXPECTED_TOTAL", "METRICS_FILE", "SUMMARY_FILE", "RESOURCE_NOTE", "row_base", "scored_row", "error_row",
-           "sort_rows", "summarize", "write_evaluation", "read_metrics", "read_summary", "compare_evaluations", "main"]
+__all__ = [
+    "PROTOCOL",
+    "EXPECTED_TOTAL",
+    "METRICS_FILE",
+    "SUMMARY_FILE",
+    "RESOURCE_NOTE",
+    "row_base",
+    "scored_row",
+    "error_row",
+    "sort_rows",
+    "summarize",
+    "write_evaluation",
+    "read_metrics",
+    "read_summary",
+    "compare_evaluations",
+    "main",
+]
 
 PROTOCOL = "assembly-evaluation-v1"
 EXPECTED_TOTAL = 100
@@ -48,23 +63,57 @@ _METRICS = ("SCD", "PA", "SR")
 def row_base(attempt: SampleAttempt) -> dict[str, Any]:
     """The fields every row of an attempt carries, whatever its scoring gives."""
     execution = attempt.execution
-    return {"block": attempt.block, "sample_id": attempt.sample_id, "run": str(attempt.run),
-            "duration_seconds": attempt.result.get("duration_seconds"), "usage": execution.get("usage"),
-            "cost_usd": execution.get("cost_usd"), "tool_calls": attempt.tool_calls, "attempt_finished": attempt.finished}
+    return {
+        "block": attempt.block,
+        "sample_id": attempt.sample_id,
+        "run": str(attempt.run),
+        "duration_seconds": attempt.result.get("duration_seconds"),
+        "usage": execution.get("usage"),
+        "cost_usd": execution.get("cost_usd"),
+        "tool_calls": attempt.tool_calls,
+        "attempt_finished": attempt.finished,
+    }
 
 
-def scored_row(base: Mapping[str, Any], *, scd: float, pa: float, sr: bool, episode_sha256: str, state_index: int,
-               parts: list[dict[str, Any]], alignment: dict[str, Any], scale_divisor: float) -> dict[str, Any]:
+def scored_row(
+    base: Mapping[str, Any],
+    *,
+    scd: float,
+    pa: float,
+    sr: bool,
+    episode_sha256: str,
+    state_index: int,
+    parts: list[dict[str, Any]],
+    alignment: dict[str, Any],
+    scale_divisor: float,
+) -> dict[str, Any]:
     """A scored row; ``parts`` are ``{part_id, target_part_id, chamfer, correct}`` sorted by part."""
-    return {**base, "status": "scored", "SCD": float(scd), "PA": float(pa), "SR": int(bool(sr)), "protocol_version": PROTOCOL,
-            "episode_sha256": episode_sha256, "state_index": int(state_index), "parts": parts, "alignment": alignment,
-            "scale_divisor": float(scale_divisor)}
+    return {
+        **base,
+        "status": "scored",
+        "SCD": float(scd),
+        "PA": float(pa),
+        "SR": int(bool(sr)),
+        "protocol_version": PROTOCOL,
+        "episode_sha256": episode_sha256,
+        "state_index": int(state_index),
+        "parts": parts,
+        "alignment": alignment,
+        "scale_divisor": float(scale_divisor),
+    }
 
 
 def error_row(base: Mapping[str, Any], exc: BaseException) -> dict[str, Any]:
     """An error row: the attempt counts, with PA and SR 0 and no SCD."""
-    return {**base, "status": "error", "error": f"{type(exc).__name__}: {exc}", "SCD": None, "PA": 0.0, "SR": 0,
-            "protocol_version": PROTOCOL}
+    return {
+        **base,
+        "status": "error",
+        "error": f"{type(exc).__name__}: {exc}",
+        "SCD": None,
+        "PA": 0.0,
+        "SR": 0,
+        "protocol_version": PROTOCOL,
+    }
 
 
 def sort_rows(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
@@ -91,29 +140,43 @@ def summarize(rows: Sequence[Mapping[str, Any]], benchmark: Mapping[str, Any]) -
             continue
         scored = [r for r in mine if r["status"] == "scored"]
         blocks[block["name"]] = {
-            "attempted": len(mine), "expected": len(block["samples"]), "scored": len(scored),
+            "attempted": len(mine),
+            "expected": len(block["samples"]),
+            "scored": len(scored),
             "SCD": _mean([r["SCD"] for r in scored]) if scored else None,
-            "PA": _mean([r["PA"] for r in mine]), "SR": _mean([r["SR"] for r in mine]),
+            "PA": _mean([r["PA"] for r in mine]),
+            "SR": _mean([r["SR"] for r in mine]),
         }
     expected = {(b["name"], sid) for b in block_list for sid in b["samples"]}
-    complete = ({(r["block"], r["sample_id"]) for r in rows} == expected
-                and all(r.get("attempt_finished", True) for r in rows))
+    complete = {(r["block"], r["sample_id"]) for r in rows} == expected and all(
+        r.get("attempt_finished", True) for r in rows
+    )
     summary: dict[str, Any] = {
-        "protocol": PROTOCOL, "status": "complete" if complete else "partial", "attempted": len(rows),
-        "expected": EXPECTED_TOTAL, "scored": sum(r["status"] == "scored" for r in rows), "blocks": blocks,
-        "official_overall": None, "resource_accounting": RESOURCE_NOTE,
+        "protocol": PROTOCOL,
+        "status": "complete" if complete else "partial",
+        "attempted": len(rows),
+        "expected": EXPECTED_TOTAL,
+        "scored": sum(r["status"] == "scored" for r in rows),
+        "blocks": blocks,
+        "official_overall": None,
+        "resource_accounting": RESOURCE_NOTE,
     }
     if complete:
+
         def means(parts: list[Mapping[str, Any]]) -> dict[str, float | None]:
             return {m: _mean([p[m] for p in parts]) if all(p[m] is not None for p in parts) else None for m in _METRICS}
 
         # a source without blocks (a package cut down to some blocks) has no mean, rather than NaN
-        sources = {s: means([blocks[b["name"]] for b in block_list if b["source"] == s]) for s in benchmark["sources"]
-                   if any(b["source"] == s for b in block_list)}
+        sources = {
+            s: means([blocks[b["name"]] for b in block_list if b["source"] == s])
+            for s in benchmark["sources"]
+            if any(b["source"] == s for b in block_list)
+        }
         summary["sources"] = sources
         summary["official_overall"] = means(list(sources.values()))
-    summary["resources"] = {name: _reported(rows, lambda r, n=name: r.get(n))
-                            for name in ("duration_seconds", "cost_usd", "tool_calls")}
+    summary["resources"] = {
+        name: _reported(rows, lambda r, n=name: r.get(n)) for name in ("duration_seconds", "cost_usd", "tool_calls")
+    }
     usage_keys = sorted({k for r in rows for k in (r.get("usage") or {}) if k.endswith("_tokens")})
     tokens = {k: _reported(rows, lambda r, k=k: (r.get("usage") or {}).get(k)) for k in usage_keys}
     summary["token_usage"] = {k: v for k, v in tokens.items() if v["reported_samples"]}
@@ -199,7 +262,11 @@ def _compare_rows(key: tuple[str, str], a: Mapping[str, Any], b: Mapping[str, An
     if not _close(a["SCD"], b["SCD"], rtol):
         out.append(f"{where}: SCD {a['SCD']!r} != {b['SCD']!r}")
     if a["status"] == "scored":
-        out += [f"{where}: {k} {a.get(k)!r} != {b.get(k)!r}" for k in ("state_index", "episode_sha256") if a.get(k) != b.get(k)]
+        out += [
+            f"{where}: {k} {a.get(k)!r} != {b.get(k)!r}"
+            for k in ("state_index", "episode_sha256")
+            if a.get(k) != b.get(k)
+        ]
         pa, pb = a.get("parts") or [], b.get("parts") or []
 
         def matches(parts):
@@ -223,17 +290,28 @@ def compare_evaluations(expected_dir: str | Path, actual_dir: str | Path, rtol: 
     for key in sorted(set(rows_a) & set(rows_b)):
         out += _compare_rows(key, rows_a[key], rows_b[key], rtol)
     sa, sb = read_summary(a_dir / SUMMARY_FILE), read_summary(b_dir / SUMMARY_FILE)
-    out += [f"summary: {k} {sa.get(k)!r} != {sb.get(k)!r}"
-            for k in ("status", "attempted", "expected", "scored") if sa.get(k) != sb.get(k)]
+    out += [
+        f"summary: {k} {sa.get(k)!r} != {sb.get(k)!r}"
+        for k in ("status", "attempted", "expected", "scored")
+        if sa.get(k) != sb.get(k)
+    ]
     groups = [("blocks", sa["blocks"], sb["blocks"]), ("sources", sa.get("sources") or {}, sb.get("sources") or {})]
-    groups.append(("official_overall", {"": sa["official_overall"]} if sa["official_overall"] else {},
-                   {"": sb["official_overall"]} if sb["official_overall"] else {}))
+    groups.append(
+        (
+            "official_overall",
+            {"": sa["official_overall"]} if sa["official_overall"] else {},
+            {"": sb["official_overall"]} if sb["official_overall"] else {},
+        )
+    )
     for name, ga, gb in groups:
         if set(ga) != set(gb):
             out.append(f"summary: {name} {sorted(ga)} != {sorted(gb)}")
         for k in sorted(set(ga) & set(gb)):
-            out += [f"summary: {name}[{k!r}].{m} {ga[k][m]!r} != {gb[k][m]!r}"
-                    for m in _METRICS if not _close(ga[k][m], gb[k][m], rtol)]
+            out += [
+                f"summary: {name}[{k!r}].{m} {ga[k][m]!r} != {gb[k][m]!r}"
+                for m in _METRICS
+                if not _close(ga[k][m], gb[k][m], rtol)
+            ]
     return out
 
 
@@ -243,8 +321,10 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
     import sys
 
-    p = argparse.ArgumentParser(prog="python -m aw.official.evaluation_output",
-                                description="Compare two evaluation folders (metrics.jsonl + summary.json).")
+    p = argparse.ArgumentParser(
+        prog="python -m aw.official.evaluation_output",
+        description="Compare two evaluation folders (metrics.jsonl + summary.json).",
+    )
     p.add_argument("expected", help="e.g. the official eval output")
     p.add_argument("actual", help="e.g. aw-score's OUT/official/<system>")
     p.add_argument("--rtol", type=float, default=1e-9, help="relative tolerance of SCD and Chamfers (default 1e-9)")

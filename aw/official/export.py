@@ -55,8 +55,13 @@ def official_camera(camera: CameraState) -> dict[str, list[float]]:
     return {"position": [float(x) for x in cam.position], "target": [float(x) for x in cam.target]}
 
 
-def export_trajectory(traj: Trajectory, initial: EpisodeArchive, out: str | Path,
-                      final_poses: dict[str, list[float]] | None = None, run_dir: Path | None = None) -> EpisodeArchive:
+def export_trajectory(
+    traj: Trajectory,
+    initial: EpisodeArchive,
+    out: str | Path,
+    final_poses: dict[str, list[float]] | None = None,
+    run_dir: Path | None = None,
+) -> EpisodeArchive:
     """Write ``traj`` (recorded from ``initial``'s initial state) as an official archive at
     ``out``; captures are looked up below ``run_dir`` (default: the trajectory's folder)."""
     run_dir = Path(run_dir) if run_dir is not None else Path(traj.path).parent
@@ -76,7 +81,9 @@ def export_trajectory(traj: Trajectory, initial: EpisodeArchive, out: str | Path
         raise ExportError(where, f"header started_at {traj.header.started_at!r} is not an ISO-8601 time")
     manifest = copy.deepcopy(initial.manifest)
     manifest.pop("end", None)
-    ep = EpisodeArchive(out, manifest, {n: d for n, d in initial.files.items() if n.startswith("world/")}, initial.initial)
+    ep = EpisodeArchive(
+        out, manifest, {n: d for n, d in initial.files.items() if n.startswith("world/")}, initial.initial
+    )
     current = start.copy()
     view = _StateView(model, ep)
     object_ids = dict(zip(part_ids, names))
@@ -96,10 +103,21 @@ def export_trajectory(traj: Trajectory, initial: EpisodeArchive, out: str | Path
         index = record_state(call.poses, call.camera) if call.poses is not None or mutation else None
         if call.tool not in TOOL_NAMES:
             continue
-        row = {"name": call.tool, "arguments": _object_arguments(call.args, object_ids), "actor": "agent",
-               "producer": dict(PRODUCER), "timestamp": iso_timestamp(t0 + timedelta(seconds=max(call.t, 0.0))),
-               "before_index": before, "state_index": len(ep.states), "trace_start": 0, "trace_end": 0,
-               "sim_start": 0.0, "sim_end": 0.0, "steps": 0, "status": "completed" if call.ok else "error"}
+        row = {
+            "name": call.tool,
+            "arguments": _object_arguments(call.args, object_ids),
+            "actor": "agent",
+            "producer": dict(PRODUCER),
+            "timestamp": iso_timestamp(t0 + timedelta(seconds=max(call.t, 0.0))),
+            "before_index": before,
+            "state_index": len(ep.states),
+            "trace_start": 0,
+            "trace_end": 0,
+            "sim_start": 0.0,
+            "sim_end": 0.0,
+            "steps": 0,
+            "status": "completed" if call.ok else "error",
+        }
         if not call.ok:
             row.update(error=call.error or "error", error_code="invalid_argument")
         else:
@@ -117,8 +135,9 @@ def export_trajectory(traj: Trajectory, initial: EpisodeArchive, out: str | Path
     return write_archive(ep, out)
 
 
-_MUTATIONS = frozenset({"translate_objects", "rotate_objects", "set_object_pose", "group_objects", "ungroup_objects",
-                        "move_camera"})
+_MUTATIONS = frozenset(
+    {"translate_objects", "rotate_objects", "set_object_pose", "group_objects", "ungroup_objects", "move_camera"}
+)
 
 
 class _StateView:
@@ -146,15 +165,29 @@ class _StateView:
         m, d = self.model, self.data
         b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, object_id)
         joint = m.body_jntadr[b]
-        return dict(info, position=d.xpos[b].tolist(), quaternion=d.xquat[b].tolist(), velocity=d.cvel[b].tolist(),
-                    mass=float(m.body_mass[b]),
-                    movable=bool(m.body_parentid[b] == 0 and m.body_jntnum[b] == 1 and m.jnt_type[joint] == 0),
-                    inertia=m.body_inertia[b].tolist(), centerOfMass=m.body_ipos[b].tolist(),
-                    inertiaQuaternion=m.body_iquat[b].tolist(),
-                    geometries=[{"index": g, "type": int(m.geom_type[g]), "size": m.geom_size[g].tolist(),
-                                 "friction": m.geom_friction[g].tolist(), "condim": int(m.geom_condim[g]),
-                                 "collidable": bool(m.geom_contype[g] or m.geom_conaffinity[g])}
-                                for g in range(m.ngeom) if m.geom_bodyid[g] == b])
+        return dict(
+            info,
+            position=d.xpos[b].tolist(),
+            quaternion=d.xquat[b].tolist(),
+            velocity=d.cvel[b].tolist(),
+            mass=float(m.body_mass[b]),
+            movable=bool(m.body_parentid[b] == 0 and m.body_jntnum[b] == 1 and m.jnt_type[joint] == 0),
+            inertia=m.body_inertia[b].tolist(),
+            centerOfMass=m.body_ipos[b].tolist(),
+            inertiaQuaternion=m.body_iquat[b].tolist(),
+            geometries=[
+                {
+                    "index": g,
+                    "type": int(m.geom_type[g]),
+                    "size": m.geom_size[g].tolist(),
+                    "friction": m.geom_friction[g].tolist(),
+                    "condim": int(m.geom_condim[g]),
+                    "collidable": bool(m.geom_contype[g] or m.geom_conaffinity[g]),
+                }
+                for g in range(m.ngeom)
+                if m.geom_bodyid[g] == b
+            ],
+        )
 
     def frame(self) -> dict:
         return self.ep.final_state().record
@@ -183,14 +216,26 @@ def _result(call, index: int | None, view: _StateView, run_dir: Path) -> dict | 
     if name == "list_objects":
         return {"objects": copy.deepcopy(m["objects"]), "groups": copy.deepcopy(frame["groups"])}
     if name == "get_scene":
-        return {"name": m["name"], "units": m["units"], "up": "Z", "quaternion": "wxyz",
-                "runtime": copy.deepcopy(m["runtime"]), "objects": copy.deepcopy(m["objects"])}
+        return {
+            "name": m["name"],
+            "units": m["units"],
+            "up": "Z",
+            "quaternion": "wxyz",
+            "runtime": copy.deepcopy(m["runtime"]),
+            "objects": copy.deepcopy(m["objects"]),
+        }
     if name == "get_object":
-        object_ids = dict(zip([o["name"][len("Part "):] for o in m["objects"]], [o["id"] for o in m["objects"]]))
+        object_ids = dict(zip([o["name"][len("Part ") :] for o in m["objects"]], [o["id"] for o in m["objects"]]))
         return view.object(object_ids.get(call.args.get("id"), call.args.get("id")))
     if name == "get_state":
-        return {"index": len(view.ep.states), "units": m["units"], "objects": [view.object(o["id"]) for o in m["objects"]],
-                "groups": copy.deepcopy(frame["groups"]), "camera": copy.deepcopy(frame["camera"]), "contacts": []}
+        return {
+            "index": len(view.ep.states),
+            "units": m["units"],
+            "objects": [view.object(o["id"]) for o in m["objects"]],
+            "groups": copy.deepcopy(frame["groups"]),
+            "camera": copy.deepcopy(frame["camera"]),
+            "contacts": [],
+        }
     if name == "capture_scene" and call.image:
         path = run_dir / call.image
         if not path.is_file():
@@ -199,8 +244,11 @@ def _result(call, index: int | None, view: _StateView, run_dir: Path) -> dict | 
         key = hashlib.sha256(png).hexdigest() + ".png"
         view.ep.files["observations/" + key] = png
         camera = official_camera(call.camera) if call.camera is not None else copy.deepcopy(frame["camera"])
-        return {"content": [{"type": "image", "mimeType": "image/png", "observation": key}], "camera": camera,
-                "render": dict(RENDER)}
+        return {
+            "content": [{"type": "image", "mimeType": "image/png", "observation": key}],
+            "camera": camera,
+            "render": dict(RENDER),
+        }
     return None
 
 
@@ -208,8 +256,15 @@ def _append_call(ep: EpisodeArchive, row: dict) -> None:
     n = len(ep.calls)
     ep.calls.append({"index": n, "id": f"call-{n}", **row})
     for kind in ("request", "complete"):
-        ep.events.append({"index": len(ep.events), "call_id": f"call-{n}", "kind": kind, "timestamp": row["timestamp"],
-                          "sim_time": 0.0})
+        ep.events.append(
+            {
+                "index": len(ep.events),
+                "call_id": f"call-{n}",
+                "kind": kind,
+                "timestamp": row["timestamp"],
+                "sim_time": 0.0,
+            }
+        )
 
 
 def export_run(run_dir: str | Path, initial: str | Path | EpisodeArchive, out: str | Path) -> EpisodeArchive:
@@ -222,7 +277,9 @@ def export_run(run_dir: str | Path, initial: str | Path | EpisodeArchive, out: s
     return export_trajectory(traj, init, out, final, run_dir)
 
 
-def task_setup_archive(task_dir: str | Path, initial_poses: dict[str, list[float]], path: str | Path = "<setup>") -> EpisodeArchive:
+def task_setup_archive(
+    task_dir: str | Path, initial_poses: dict[str, list[float]], path: str | Path = "<setup>"
+) -> EpisodeArchive:
     """The setup archive of one of this project's tasks: its meshes (in their baked frame) at
     the given initial poses, parts in sorted id order."""
     from aw.formats import read_task
@@ -233,9 +290,14 @@ def task_setup_archive(task_dir: str | Path, initial_poses: dict[str, list[float
     ids = sorted(initial_poses)
     if set(ids) - set(meshes):
         raise FormatError(Path(task_dir), f"the run names parts {sorted(set(ids) - set(meshes))} the task lacks")
-    return setup_archive(ids, [(meshes[p].vertices, meshes[p].faces) for p in ids],
-                         np.array([initial_poses[p] for p in ids], dtype=float), name=task.task_id,
-                         task=task.prompt, path=path)
+    return setup_archive(
+        ids,
+        [(meshes[p].vertices, meshes[p].faces) for p in ids],
+        np.array([initial_poses[p] for p in ids], dtype=float),
+        name=task.task_id,
+        task=task.prompt,
+        path=path,
+    )
 
 
 def export_task_run(run_dir: str | Path, task_dir: str | Path, out: str | Path) -> EpisodeArchive:

@@ -25,7 +25,9 @@ def check_sample_id(sample_id: object, where: str = "<sample id>") -> str:
         raise SampleIdError(where, f"sample id must be a non-empty string, got {sample_id!r}")
     for part in sample_id.split("/"):
         if not _COMPONENT.fullmatch(part) or part in (".", ".."):
-            raise SampleIdError(where, f"unsafe sample id {sample_id!r}: component {part!r} is not [A-Za-z0-9_.-]+ (nor . or ..)")
+            raise SampleIdError(
+                where, f"unsafe sample id {sample_id!r}: component {part!r} is not [A-Za-z0-9_.-]+ (nor . or ..)"
+            )
     return sample_id
 
 

@@ -41,10 +41,12 @@ def parse(data: bytes | str, max_depth: int = MAX_DEPTH) -> Any:
     try:
         value = orjson.loads(data)
     except orjson.JSONDecodeError as exc:
-        text = exc.doc[exc.pos:exc.pos + 9] if isinstance(exc.doc, str) else ""
+        text = exc.doc[exc.pos : exc.pos + 9] if isinstance(exc.doc, str) else ""
         word = next((w for w in ("NaN", "Infinity", "-Infinity") if text.startswith(w)), None)
         if word is not None:
-            raise ValueError(f"not valid JSON: {word} at char {exc.pos} (NaN and Infinity are not JSON numbers)") from None
+            raise ValueError(
+                f"not valid JSON: {word} at char {exc.pos} (NaN and Infinity are not JSON numbers)"
+            ) from None
         raise ValueError(f"not valid JSON ({exc})") from None
     if nested_deeper(value, max_depth):
         raise ValueError(f"JSON nested deeper than {max_depth} levels")

@@ -28,19 +28,36 @@ import numpy as np
 from aw.official.archive import EpisodeArchive, read_archive
 from aw.official.episode import read_part_episode
 from aw.official.errors import MissingPackageFileError, PackageError
-from aw.official.evaluation_cache import (CACHE_FILE, EVALUATION_PROTOCOL, SIMILARITY_POLICY, SIMILARITY_THRESHOLD,
-                                          EvaluationInputs, read_evaluation)
+from aw.official.evaluation_cache import (
+    CACHE_FILE,
+    EVALUATION_PROTOCOL,
+    SIMILARITY_POLICY,
+    SIMILARITY_THRESHOLD,
+    EvaluationInputs,
+    read_evaluation,
+)
 from aw.official.ids import sample_slug
 from aw.official.jsonio import read_json
 
-__all__ = ["REPO", "REVISION", "BLOCKS", "BENCHMARK_EVALUATION", "REFERENCE_CONDITIONS", "Sample", "OfficialPackage",
-           "file_sha256"]
+__all__ = [
+    "REPO",
+    "REVISION",
+    "BLOCKS",
+    "BENCHMARK_EVALUATION",
+    "REFERENCE_CONDITIONS",
+    "Sample",
+    "OfficialPackage",
+    "file_sha256",
+]
 
 REPO = "AssemblyWorld/AssemblyWorldBench"
 REVISION = "f351f0f6e9f8a314ec7593e847d07a45b776481e"  # the pinned dataset revision (data.py)
 BLOCKS = ("partnet-none", "partnet-final-image", "ikea-manualbook", "assemblybench-manualbook", "fantastic-breaks-none")
-BENCHMARK_EVALUATION = {"protocol": EVALUATION_PROTOCOL, "similarity_policy": SIMILARITY_POLICY,
-                        "similarity_threshold": SIMILARITY_THRESHOLD}
+BENCHMARK_EVALUATION = {
+    "protocol": EVALUATION_PROTOCOL,
+    "similarity_policy": SIMILARITY_POLICY,
+    "similarity_threshold": SIMILARITY_THRESHOLD,
+}
 EXPECTED_SAMPLES = 100
 # A block's reference_mode as this project's task condition.
 REFERENCE_CONDITIONS = {"none": "none", "final-image": "image", "manualbook": "manual"}
@@ -89,22 +106,43 @@ class OfficialPackage:
         b = self.benchmark
         if not isinstance(b, dict) or b.get("version") != 1 or b.get("evaluation") != BENCHMARK_EVALUATION:
             raise PackageError(path, f"expected version 1 and evaluation {BENCHMARK_EVALUATION}")
-        if not isinstance(b.get("blocks"), list) or not all(isinstance(x, dict) and isinstance(x.get("name"), str) for x in b["blocks"]):
+        if not isinstance(b.get("blocks"), list) or not all(
+            isinstance(x, dict) and isinstance(x.get("name"), str) for x in b["blocks"]
+        ):
             raise PackageError(path, "blocks: expected a list of block objects with a name")
         names = tuple(x["name"] for x in b["blocks"])
         order_ok = names == BLOCKS if strict else (names and names == tuple(n for n in BLOCKS if n in names))
         if not order_ok:
-            raise PackageError(path, f"blocks {list(names)}: expected {'exactly' if strict else 'some of'} {list(BLOCKS)} in that order")
+            raise PackageError(
+                path,
+                f"blocks {list(names)}: expected {'exactly' if strict else 'some of'} {list(BLOCKS)} in that order",
+            )
         if strict and sum(len(x.get("samples", {})) for x in b["blocks"]) != EXPECTED_SAMPLES:
             raise PackageError(path, f"expected {EXPECTED_SAMPLES} samples over the five blocks")
-        need = ("source", "repo_id", "revision", "config_id", "data", "samples", "reference_mode", "prompt_file", "prompt_sha256")
+        need = (
+            "source",
+            "repo_id",
+            "revision",
+            "config_id",
+            "data",
+            "samples",
+            "reference_mode",
+            "prompt_file",
+            "prompt_sha256",
+        )
         for block in b["blocks"]:
             missing = [k for k in need if k not in block]
             if missing:
                 raise PackageError(path, f"block {block['name']!r}: missing {missing}")
-            if not isinstance(block["reference_mode"], str) or block["reference_mode"] not in REFERENCE_CONDITIONS \
-                    or not isinstance(block["samples"], dict) or not all(isinstance(v, dict) for v in block["samples"].values()):
-                raise PackageError(path, f"block {block['name']!r}: reference_mode {block['reference_mode']!r} or samples malformed")
+            if (
+                not isinstance(block["reference_mode"], str)
+                or block["reference_mode"] not in REFERENCE_CONDITIONS
+                or not isinstance(block["samples"], dict)
+                or not all(isinstance(v, dict) for v in block["samples"].values())
+            ):
+                raise PackageError(
+                    path, f"block {block['name']!r}: reference_mode {block['reference_mode']!r} or samples malformed"
+                )
             if block["source"] not in b.get("sources", []):
                 raise PackageError(path, f"block {block['name']!r}: source {block['source']!r} is not one of sources")
         self.blocks: dict[str, dict[str, Any]] = {x["name"]: x for x in b["blocks"]}
@@ -124,7 +162,11 @@ class OfficialPackage:
         path = self.root / rel
         allowed = [self.root]
         repo = self.root.parent.parent
-        if self.root.parent.name == "snapshots" and _HF_SNAPSHOT.fullmatch(self.root.name) and repo.name.startswith("datasets--"):
+        if (
+            self.root.parent.name == "snapshots"
+            and _HF_SNAPSHOT.fullmatch(self.root.name)
+            and repo.name.startswith("datasets--")
+        ):
             allowed += [(repo / "blobs").resolve(), (repo.parent / "blobs").resolve()]
         if not any(path.resolve().is_relative_to(a) for a in allowed):
             raise PackageError(path, "links outside the package")
@@ -150,12 +192,18 @@ class OfficialPackage:
             samples = cfg.get("samples") if isinstance(cfg, dict) else None
             if not isinstance(identity, dict) or not isinstance(samples, dict):
                 raise PackageError(where, "expected identity and samples objects")
-            if cfg.get("config_id") != b["config_id"] or identity.get("dataset") != b["repo_id"] or identity.get("revision") != b["revision"]:
+            if (
+                cfg.get("config_id") != b["config_id"]
+                or identity.get("dataset") != b["repo_id"]
+                or identity.get("revision") != b["revision"]
+            ):
                 raise PackageError(where, f"config_id / identity differ from block {block!r} in benchmark.json")
             if set(samples) != set(b["samples"]):
                 raise PackageError(where, f"samples differ from block {block!r} in benchmark.json")
             for sid, entry in samples.items():
-                if not isinstance(entry, dict) or any(entry.get(k) != b["samples"][sid].get(k) for k in ("sha256", "parts", "episode_id")):
+                if not isinstance(entry, dict) or any(
+                    entry.get(k) != b["samples"][sid].get(k) for k in ("sha256", "parts", "episode_id")
+                ):
                     raise PackageError(where, f"sample {sid!r}: sha256, parts or episode_id differ from benchmark.json")
             task_path = self.path(b["prompt_file"])
             task = task_path.read_bytes()
@@ -202,8 +250,9 @@ class OfficialPackage:
         missing = self.missing_files(samples)
         if missing:
             names = ", ".join(str(p.relative_to(self.root)) if p.is_relative_to(self.root) else str(p) for p in missing)
-            raise MissingPackageFileError(self.root, f"{len(missing)} files {what} needs are not in the package "
-                                                     f"(partly downloaded?): {names}")
+            raise MissingPackageFileError(
+                self.root, f"{len(missing)} files {what} needs are not in the package (partly downloaded?): {names}"
+            )
 
     def listed_samples(self) -> list[tuple[str, str]]:
         """Every (block, sample id) as ``benchmark.json`` lists them (no ``config.json`` read)."""
@@ -231,8 +280,13 @@ class OfficialPackage:
             refdir = f"{folder}/cache/{slug}/reference/{b['reference_mode']}"
             reference = self._json(f"{refdir}/pages.json")
             where = self.root / refdir / "pages.json"
-            if not isinstance(reference, dict) or reference.get("dataset") != b["repo_id"] or reference.get("revision") != b["revision"] \
-                    or reference.get("reference_mode") != b["reference_mode"] or not reference.get("pages"):
+            if (
+                not isinstance(reference, dict)
+                or reference.get("dataset") != b["repo_id"]
+                or reference.get("revision") != b["revision"]
+                or reference.get("reference_mode") != b["reference_mode"]
+                or not reference.get("pages")
+            ):
                 raise PackageError(where, "dataset, revision or reference_mode differ from the block, or no pages")
             for index, page in enumerate(reference["pages"], start=1):
                 if not isinstance(page, dict) or not isinstance(page.get("file"), str):
@@ -241,7 +295,9 @@ class OfficialPackage:
                 if page.get("page") != index or file_sha256(image) != page.get("source_sha256"):
                     raise PackageError(where, f"page {index}: out of order or its SHA-256 differs")
                 pages.append(image)
-        sample = Sample(block, sample_id, expected, initial, self.root / folder / "cache" / slug / CACHE_FILE, reference, pages)
+        sample = Sample(
+            block, sample_id, expected, initial, self.root / folder / "cache" / slug / CACHE_FILE, reference, pages
+        )
         self._samples[key] = sample
         return sample
 
@@ -252,8 +308,13 @@ class OfficialPackage:
             s = self.sample(block, sample_id)
             self.path(str(s.evaluation_path.relative_to(self.root)))
             _, cfg, _ = self.configuration(block)
-            self._inputs[key] = read_evaluation(s.evaluation_path, sample_id=sample_id, identity=cfg["identity"],
-                                                initial_sha256=s.expected["sha256"], parts=s.parts)
+            self._inputs[key] = read_evaluation(
+                s.evaluation_path,
+                sample_id=sample_id,
+                identity=cfg["identity"],
+                initial_sha256=s.expected["sha256"],
+                parts=s.parts,
+            )
         return self._inputs[key]
 
     def initial_archive(self, block: str, sample_id: str) -> EpisodeArchive:
@@ -262,7 +323,9 @@ class OfficialPackage:
             s = self.sample(block, sample_id)
             arc = read_archive(s.initial_path)
             if arc.manifest["id"] != s.expected["episode_id"]:
-                raise PackageError(s.initial_path, f"manifest id {arc.manifest['id']!r} differs from config.json episode_id")
+                raise PackageError(
+                    s.initial_path, f"manifest id {arc.manifest['id']!r} differs from config.json episode_id"
+                )
             self._initials[key] = arc
         return self._initials[key]
 
@@ -297,6 +360,11 @@ class OfficialPackage:
         inputs = attempt.inputs
         _, cfg, _ = self.configuration(attempt.block)
         expected = cfg["samples"].get(attempt.sample_id)
-        if expected is None or inputs.get("sample_id") != attempt.sample_id or inputs.get("block") != attempt.block \
-                or inputs.get("identity") != cfg["identity"] or any(inputs.get(k) != expected.get(k) for k in ("sha256", "episode_id", "parts")):
+        if (
+            expected is None
+            or inputs.get("sample_id") != attempt.sample_id
+            or inputs.get("block") != attempt.block
+            or inputs.get("identity") != cfg["identity"]
+            or any(inputs.get(k) != expected.get(k) for k in ("sha256", "episode_id", "parts"))
+        ):
             raise PackageError(where, "the run's input identity differs from the package's sample")

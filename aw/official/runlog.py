@@ -26,7 +26,7 @@ import re
 import uuid
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -35,10 +35,29 @@ from aw.official.evaluation_cache import write_json
 from aw.official.ids import sample_slug
 from aw.official.jsonio import parse, read_json_object
 
-__all__ = ["RUN_KIND", "RUN_FILE", "FINAL_ARCHIVE", "RunLog", "SampleAttempt", "sample_slug", "new_run_id", "utc_now",
-           "read_run", "is_run_dir", "find_runs", "read_attempts", "select_attempts", "count_tool_calls",
-           "chain_root", "system_name", "systems", "archive_system",
-           "write_json", "create_run", "write_result"]
+__all__ = [
+    "RUN_KIND",
+    "RUN_FILE",
+    "FINAL_ARCHIVE",
+    "RunLog",
+    "SampleAttempt",
+    "sample_slug",
+    "new_run_id",
+    "utc_now",
+    "read_run",
+    "is_run_dir",
+    "find_runs",
+    "read_attempts",
+    "select_attempts",
+    "count_tool_calls",
+    "chain_root",
+    "system_name",
+    "systems",
+    "archive_system",
+    "write_json",
+    "create_run",
+    "write_result",
+]
 
 RUN_KIND = "assembly-world-bench"
 RUN_FILE = "run.json"
@@ -47,7 +66,7 @@ FINAL_ARCHIVE = "final.episode.zip"
 
 def utc_now() -> str:
     """ISO-8601 UTC time with microseconds, as the runner stamps run and sample files."""
-    return datetime.now(timezone.utc).isoformat(timespec="microseconds")
+    return datetime.now(UTC).isoformat(timespec="microseconds")
 
 
 def new_run_id() -> str:
@@ -74,9 +93,12 @@ def _check_result(file: Path, result: dict[str, Any]) -> None:
     _objects(file, result, ("archive", "execution"))
     execution = result.get("execution") or {}
     _objects(file, execution, ("usage",))
-    numbers = {"duration_seconds": result.get("duration_seconds"), "tool_calls": result.get("tool_calls"),
-               "execution.cost_usd": execution.get("cost_usd"),
-               **{f"execution.usage.{k}": v for k, v in (execution.get("usage") or {}).items() if k.endswith("_tokens")}}
+    numbers = {
+        "duration_seconds": result.get("duration_seconds"),
+        "tool_calls": result.get("tool_calls"),
+        "execution.cost_usd": execution.get("cost_usd"),
+        **{f"execution.usage.{k}": v for k, v in (execution.get("usage") or {}).items() if k.endswith("_tokens")},
+    }
     for key, value in numbers.items():
         if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
             raise FormatError(file, f"{key}: expected a number or null, got {type(value).__name__}")
@@ -131,11 +153,15 @@ def read_run(path: str | Path) -> RunLog:
     file = root / RUN_FILE
     meta = _json_object(file)
     if meta.get("kind") != RUN_KIND or meta.get("version") != 1:
-        raise FormatError(file, f"not an official run log (kind {meta.get('kind')!r}, version {meta.get('version')!r}; "
-                          f"expected {RUN_KIND!r}, 1)")
+        raise FormatError(
+            file,
+            f"not an official run log (kind {meta.get('kind')!r}, version {meta.get('version')!r}; "
+            f"expected {RUN_KIND!r}, 1)",
+        )
     selection = meta.get("selection")
     if not isinstance(selection, dict) or not all(
-            isinstance(ids, list) and all(isinstance(s, str) for s in ids) for ids in selection.values()):
+        isinstance(ids, list) and all(isinstance(s, str) for s in ids) for ids in selection.values()
+    ):
         raise FormatError(file, "selection: expected an object of block -> list of sample ids")
     for ids in selection.values():
         for sid in ids:
@@ -249,8 +275,11 @@ def read_attempts(run: RunLog, root: Path | None = None) -> list[SampleAttempt]:
                     _inside(run.path, directory / name)
             inputs = _json_object(directory / "input.json")
             if inputs.get("sample_id") != sid or inputs.get("block") != block:
-                raise FormatError(directory / "input.json", f"names {inputs.get('block')!r}/{inputs.get('sample_id')!r}, "
-                                  f"but the run selects it as {block!r}/{sid!r}")
+                raise FormatError(
+                    directory / "input.json",
+                    f"names {inputs.get('block')!r}/{inputs.get('sample_id')!r}, "
+                    f"but the run selects it as {block!r}/{sid!r}",
+                )
             result = _json_object(directory / "result.json")
             if not isinstance(result.get("status"), str):
                 raise FormatError(directory / "result.json", "status: missing")
@@ -330,8 +359,10 @@ def select_attempts(runs: Iterable[str | Path | RunLog]) -> dict[tuple[str, str]
                 if previous.root != attempt.root:
                     raise ValueError(f"Duplicate sample in unrelated runs: {key} in {previous.run} and {attempt.run}")
                 if previous.run not in ancestors[path]:
-                    raise ValueError(f"Ambiguous sibling attempts: {key} in {previous.run} and {attempt.run} "
-                                     "(neither run resumes the other)")
+                    raise ValueError(
+                        f"Ambiguous sibling attempts: {key} in {previous.run} and {attempt.run} "
+                        "(neither run resumes the other)"
+                    )
             chosen[key] = attempt
     return chosen
 
@@ -339,10 +370,21 @@ def select_attempts(runs: Iterable[str | Path | RunLog]) -> dict[tuple[str, str]
 # --- writing -----------------------------------------------------------------------------------
 
 
-def create_run(logs_dir: str | Path, selection: Mapping[str, Sequence[str]], inputs: Mapping[tuple[str, str], Mapping[str, Any]],
-               prompts: Mapping[str, str], reference_modes: Mapping[str, str], options: Mapping[str, Any] | None = None,
-               *, protocol_text: str = "", source_run: str | Path | None = None, benchmark: Mapping[str, Any] | None = None,
-               run_id: str | None = None, started_at: str | None = None, versions: Mapping[str, Any] | None = None) -> RunLog:
+def create_run(
+    logs_dir: str | Path,
+    selection: Mapping[str, Sequence[str]],
+    inputs: Mapping[tuple[str, str], Mapping[str, Any]],
+    prompts: Mapping[str, str],
+    reference_modes: Mapping[str, str],
+    options: Mapping[str, Any] | None = None,
+    *,
+    protocol_text: str = "",
+    source_run: str | Path | None = None,
+    benchmark: Mapping[str, Any] | None = None,
+    run_id: str | None = None,
+    started_at: str | None = None,
+    versions: Mapping[str, Any] | None = None,
+) -> RunLog:
     """Create ``LOGS/<run id>/`` with ``run.json`` (status ``running``) and every selected
     sample's ``input.json``, ``result.json`` (``pending``), ``prompt.txt`` and an empty
     ``conversation.jsonl``, as the runner does before it executes anything.
@@ -359,12 +401,18 @@ def create_run(logs_dir: str | Path, selection: Mapping[str, Sequence[str]], inp
         raise ValueError(f"no task text for blocks {unknown}")
     directory.mkdir(parents=True)
     meta = {
-        "version": 1, "kind": RUN_KIND, "status": "running", "started_at": started_at or utc_now(),
+        "version": 1,
+        "kind": RUN_KIND,
+        "status": "running",
+        "started_at": started_at or utc_now(),
         "source_run": str(Path(source_run).resolve()) if source_run else None,
-        "options": dict(options or {}), "selection": {b: list(ids) for b, ids in selection.items()},
+        "options": dict(options or {}),
+        "selection": {b: list(ids) for b, ids in selection.items()},
         "benchmark": dict(benchmark or {"revision": None, "local": None}),
-        "tasks": {b: prompts[b] for b in selection}, "reference_modes": {b: reference_modes[b] for b in selection},
-        "code_commit": None, "versions": dict(versions or {}),
+        "tasks": {b: prompts[b] for b in selection},
+        "reference_modes": {b: reference_modes[b] for b in selection},
+        "code_commit": None,
+        "versions": dict(versions or {}),
     }
     write_json(directory / RUN_FILE, meta)
     log = RunLog(directory, meta)
@@ -379,9 +427,16 @@ def create_run(logs_dir: str | Path, selection: Mapping[str, Sequence[str]], inp
     return log
 
 
-def write_result(run: RunLog, block: str, sample_id: str, result: Mapping[str, Any], *,
-                 conversation: Iterable[Mapping[str, Any]] = (), final_archive: bytes | None = None,
-                 archive_calls: int | None = None) -> Path:
+def write_result(
+    run: RunLog,
+    block: str,
+    sample_id: str,
+    result: Mapping[str, Any],
+    *,
+    conversation: Iterable[Mapping[str, Any]] = (),
+    final_archive: bytes | None = None,
+    archive_calls: int | None = None,
+) -> Path:
     """Record one sample's attempt: ``conversation.jsonl`` rows, ``final.episode.zip`` (then
     ``result.archive`` is ``{"status": "saved", "sha256", "calls"}``) and ``result.json``
     (``tool_calls`` counted from the conversation unless given). Returns the sample folder."""
@@ -393,8 +448,11 @@ def write_result(run: RunLog, block: str, sample_id: str, result: Mapping[str, A
     record = dict(result)
     if final_archive is not None:
         (sample / FINAL_ARCHIVE).write_bytes(final_archive)
-        record["archive"] = {"status": "saved", "sha256": hashlib.sha256(final_archive).hexdigest(),
-                             **({"calls": archive_calls} if archive_calls is not None else {})}
+        record["archive"] = {
+            "status": "saved",
+            "sha256": hashlib.sha256(final_archive).hexdigest(),
+            **({"calls": archive_calls} if archive_calls is not None else {}),
+        }
     record.setdefault("archive", {"status": "not_saved"})
     record.setdefault("tool_calls", sum(r.get("type") == "tool_call" for r in rows))
     write_json(sample / "result.json", record)

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import tempfile
 from collections.abc import Mapping
-from datetime import datetime, timedelta, timezone
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -37,9 +37,16 @@ __all__ = ["export_runs", "main"]
 _EXECUTION = {"finished": "completed", "timeout": "timeout", "error": "failed", "crashed": "failed", "hung": "failed"}
 
 
-def export_runs(system_dir: str | Path, package: OfficialPackage, logs_dir: str | Path, *,
-                options: Mapping[str, Any] | None = None, protocol_text: str = "", run_id: str | None = None,
-                all_samples: bool = False) -> RunLog:
+def export_runs(
+    system_dir: str | Path,
+    package: OfficialPackage,
+    logs_dir: str | Path,
+    *,
+    options: Mapping[str, Any] | None = None,
+    protocol_text: str = "",
+    run_id: str | None = None,
+    all_samples: bool = False,
+) -> RunLog:
     """Write ``LOGS/<run id>/`` from ``RUNS/<system>/`` (module doc); returns the run."""
     src = Path(system_dir)
     tasks = sorted(p for p in src.iterdir() if (p / "trajectory.jsonl").is_file()) if src.is_dir() else []
@@ -49,7 +56,9 @@ def export_runs(system_dir: str | Path, package: OfficialPackage, logs_dir: str 
     recorded: dict[tuple[str, str], Path] = {}
     for task_dir in tasks:
         if task_dir.name not in by_task:
-            raise FormatError(task_dir, f"task id {task_dir.name!r} is not <block>--<slug> of a sample of {package.root}")
+            raise FormatError(
+                task_dir, f"task id {task_dir.name!r} is not <block>--<slug> of a sample of {package.root}"
+            )
         recorded[by_task[task_dir.name]] = task_dir
     selection: dict[str, list[str]] = {}
     for block, sid in package.samples():
@@ -60,17 +69,35 @@ def export_runs(system_dir: str | Path, package: OfficialPackage, logs_dir: str 
         identity = package.configuration(block)[1]["identity"]
         for sid in ids:
             sample = package.sample(block, sid)
-            inputs[(block, sid)] = {**sample.expected, "initial_path": str(sample.initial_path),
-                                    "initial_calls": len(package.initial_archive(block, sid).calls),
-                                    "identity": identity, "reference": sample.reference}
-    run = create_run(logs_dir, selection, inputs, {b: package.task_text(b) for b in selection},
-                     {b: package.blocks[b]["reference_mode"] for b in selection}, options or {"agent": src.name},
-                     protocol_text=protocol_text, run_id=run_id,
-                     benchmark={"revision": REVISION, "local": str(package.root)})
-    statuses = [_write_sample(run, package, block, sid, task_dir) for (block, sid), task_dir in sorted(recorded.items())]
+            inputs[(block, sid)] = {
+                **sample.expected,
+                "initial_path": str(sample.initial_path),
+                "initial_calls": len(package.initial_archive(block, sid).calls),
+                "identity": identity,
+                "reference": sample.reference,
+            }
+    run = create_run(
+        logs_dir,
+        selection,
+        inputs,
+        {b: package.task_text(b) for b in selection},
+        {b: package.blocks[b]["reference_mode"] for b in selection},
+        options or {"agent": src.name},
+        protocol_text=protocol_text,
+        run_id=run_id,
+        benchmark={"revision": REVISION, "local": str(package.root)},
+    )
+    statuses = [
+        _write_sample(run, package, block, sid, task_dir) for (block, sid), task_dir in sorted(recorded.items())
+    ]
     done = len(statuses) == len(inputs) and all(s == "completed" for s in statuses)
-    meta = dict(run.meta, status="completed" if done else "failed",
-                finished_at=datetime.now(timezone.utc).isoformat(timespec="microseconds"), pause_reason=None, errors=[])
+    meta = dict(
+        run.meta,
+        status="completed" if done else "failed",
+        finished_at=datetime.now(UTC).isoformat(timespec="microseconds"),
+        pause_reason=None,
+        errors=[],
+    )
     write_json(run.path / "run.json", meta)
     return RunLog(run.path, meta)
 
@@ -85,11 +112,26 @@ def _write_sample(run: RunLog, package: OfficialPackage, block: str, sid: str, t
     conversation = []
     for call in traj.calls:
         stamp = (t0 + timedelta(seconds=max(call.t, 0.0))).isoformat(timespec="microseconds")
-        conversation.append({"timestamp": stamp, "type": "tool_call", "id": f"call-{call.seq}", "name": call.tool,
-                             "arguments": call.args})
-        conversation.append({"timestamp": stamp, "type": "tool_result", "id": f"call-{call.seq}",
-                             "result": {"ok": call.ok, **({"error": call.error} if call.error else {})}})
-    execution: dict[str, Any] = {"status": _EXECUTION[info.ended] if info else ("completed" if traj.end else "interrupted")}
+        conversation.append(
+            {
+                "timestamp": stamp,
+                "type": "tool_call",
+                "id": f"call-{call.seq}",
+                "name": call.tool,
+                "arguments": call.args,
+            }
+        )
+        conversation.append(
+            {
+                "timestamp": stamp,
+                "type": "tool_result",
+                "id": f"call-{call.seq}",
+                "result": {"ok": call.ok, **({"error": call.error} if call.error else {})},
+            }
+        )
+    execution: dict[str, Any] = {
+        "status": _EXECUTION[info.ended] if info else ("completed" if traj.end else "interrupted")
+    }
     if info is not None:
         if info.error:
             execution["error"] = info.error
@@ -100,11 +142,17 @@ def _write_sample(run: RunLog, package: OfficialPackage, block: str, sid: str, t
         archive = export_run(task_dir, package.initial_archive(block, sid), Path(tmp) / "final.episode.zip")
         data = archive.path.read_bytes()
     end = t0 + timedelta(seconds=info.wall_seconds) if info and info.wall_seconds is not None else None
-    result = {"status": "completed" if execution["status"] == "completed" else "failed",
-              "started_at": t0.isoformat(timespec="microseconds"),
-              **({"finished_at": end.isoformat(timespec="microseconds")} if end else {}),
-              "duration_seconds": info.wall_seconds if info else None, "execution": execution, "agent_outcome": None}
-    write_result(run, block, sid, result, conversation=conversation, final_archive=data, archive_calls=len(archive.calls))
+    result = {
+        "status": "completed" if execution["status"] == "completed" else "failed",
+        "started_at": t0.isoformat(timespec="microseconds"),
+        **({"finished_at": end.isoformat(timespec="microseconds")} if end else {}),
+        "duration_seconds": info.wall_seconds if info else None,
+        "execution": execution,
+        "agent_outcome": None,
+    }
+    write_result(
+        run, block, sid, result, conversation=conversation, final_archive=data, archive_calls=len(archive.calls)
+    )
     return result["status"]
 
 
@@ -113,7 +161,7 @@ def _parse_time(text: str) -> datetime:
         t = datetime.fromisoformat(text.replace("Z", "+00:00"))
     except ValueError:
         raise ValueError(f"started_at {text!r} is not an ISO-8601 time") from None
-    return t if t.tzinfo else t.replace(tzinfo=timezone.utc)
+    return t if t.tzinfo else t.replace(tzinfo=UTC)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -121,18 +169,27 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
     import sys
 
-    p = argparse.ArgumentParser(prog="python -m aw.official.runlog_export",
-                                description="Write one system's recorded runs as an official run log.")
+    p = argparse.ArgumentParser(
+        prog="python -m aw.official.runlog_export",
+        description="Write one system's recorded runs as an official run log.",
+    )
     p.add_argument("package", metavar="PKG", help="official benchmark package (benchmark.json)")
     p.add_argument("system_dir", metavar="RUNS/SYSTEM", help="recorded runs: SYSTEM/<block>--<slug>/trajectory.jsonl")
     p.add_argument("--logs", default="logs", help="folder that receives the run (default logs)")
     p.add_argument("--model", default=None, help="model name recorded in run.json's options")
-    p.add_argument("--all-samples", action="store_true", help="select every package sample (unrecorded ones stay pending)")
+    p.add_argument(
+        "--all-samples", action="store_true", help="select every package sample (unrecorded ones stay pending)"
+    )
     args = p.parse_args(argv)
     options = {"agent": Path(args.system_dir).name, **({"model": args.model} if args.model else {})}
     try:
-        run = export_runs(args.system_dir, OfficialPackage(args.package, strict=False), args.logs, options=options,
-                          all_samples=args.all_samples)
+        run = export_runs(
+            args.system_dir,
+            OfficialPackage(args.package, strict=False),
+            args.logs,
+            options=options,
+            all_samples=args.all_samples,
+        )
     except (FormatError, ValueError, OSError) as exc:
         print(f"runlog_export: error: {exc}", file=sys.stderr)
         return 2

@@ -56,8 +56,13 @@ def world_files(meshes: Sequence[tuple[np.ndarray, np.ndarray]], initial_poses: 
         name = body_name(k)
         files[f"world/meshes/{name}.obj"] = _obj(vertices, faces)
         ET.SubElement(asset, "mesh", name=name, file=f"meshes/{name}.obj", inertia="shell")
-        body = ET.SubElement(world, "body", name=name, pos=" ".join(_number(x) for x in pose[:3]),
-                             quat=" ".join(_number(x) for x in pose[3:]))
+        body = ET.SubElement(
+            world,
+            "body",
+            name=name,
+            pos=" ".join(_number(x) for x in pose[:3]),
+            quat=" ".join(_number(x) for x in pose[3:]),
+        )
         ET.SubElement(body, "freejoint")
         ET.SubElement(body, "inertial", pos="0 0 0", mass="1", diaginertia="0.1 0.1 0.1")
         ET.SubElement(body, "geom", type="mesh", mesh=name, contype="0", conaffinity="0", rgba=_RGBA)
@@ -71,14 +76,23 @@ def camera_for(meshes: Sequence[tuple[np.ndarray, np.ndarray]], poses: np.ndarra
     from aw.camera import Camera
     from aw.pose import apply_pose
 
-    points = np.concatenate([apply_pose(np.asarray(p, float), np.asarray(v, float)) for (v, _), p in zip(meshes, poses)])
+    points = np.concatenate(
+        [apply_pose(np.asarray(p, float), np.asarray(v, float)) for (v, _), p in zip(meshes, poses)]
+    )
     cam = Camera.framing(points.min(axis=0), points.max(axis=0))
     return {"position": [float(x) for x in cam.position], "target": [float(x) for x in cam.target]}
 
 
-def setup_archive(part_ids: list[str], meshes: Sequence[tuple[np.ndarray, np.ndarray]], initial_poses: np.ndarray, *,
-                  name: str, task: str = "", camera: dict[str, list[float]] | None = None,
-                  path: str | Path = "<setup>") -> EpisodeArchive:
+def setup_archive(
+    part_ids: list[str],
+    meshes: Sequence[tuple[np.ndarray, np.ndarray]],
+    initial_poses: np.ndarray,
+    *,
+    name: str,
+    task: str = "",
+    camera: dict[str, list[float]] | None = None,
+    path: str | Path = "<setup>",
+) -> EpisodeArchive:
     """The initial (``setup``) episode of parts ``part_ids`` (sorted, distinct) with their
     meshes and initial poses ``(P, 7)``. Its id is derived from its world and name."""
     import mujoco
@@ -92,8 +106,10 @@ def setup_archive(part_ids: list[str], meshes: Sequence[tuple[np.ndarray, np.nda
         raise ExportError(path, f"need one mesh and one pose (7 numbers) per part ({len(part_ids)})")
     files = world_files(meshes, initial_poses)
     try:
-        model = mujoco.MjModel.from_xml_string(files["world/model.xml"].decode(),
-                                               {k[len("world/"):]: v for k, v in files.items() if k != "world/model.xml"})
+        model = mujoco.MjModel.from_xml_string(
+            files["world/model.xml"].decode(),
+            {k[len("world/") :]: v for k, v in files.items() if k != "world/model.xml"},
+        )
     except ValueError as exc:
         raise ExportError(path, f"MuJoCo cannot compile the parts' world ({exc})") from None
     data = mujoco.MjData(model)
@@ -101,21 +117,35 @@ def setup_archive(part_ids: list[str], meshes: Sequence[tuple[np.ndarray, np.nda
     spec = int(mujoco.mjtState.mjSTATE_INTEGRATION)
     state = np.empty(mujoco.mj_stateSize(model, spec))
     mujoco.mj_getState(model, data, state, spec)
-    digest = hashlib.sha256(name.encode() + b"".join(hashlib.sha256(files[k]).digest() for k in sorted(files))).hexdigest()
+    digest = hashlib.sha256(
+        name.encode() + b"".join(hashlib.sha256(files[k]).digest() for k in sorted(files))
+    ).hexdigest()
     manifest = {
-        "format": FORMAT, "version": VERSION, "id": f"aw-{digest}", "contract": CONTRACT, "engine": ENGINE,
-        "name": name, "units": "normalized", "stateSpec": spec, "stateSize": int(state.size), "lifecycle": "setup",
-        "originTime": 0, "requiredCapabilities": ["state"], "producer": dict(PRODUCER),
+        "format": FORMAT,
+        "version": VERSION,
+        "id": f"aw-{digest}",
+        "contract": CONTRACT,
+        "engine": ENGINE,
+        "name": name,
+        "units": "normalized",
+        "stateSpec": spec,
+        "stateSize": int(state.size),
+        "lifecycle": "setup",
+        "originTime": 0,
+        "requiredCapabilities": ["state"],
+        "producer": dict(PRODUCER),
         "runtime": {"enabledTools": list(ENABLED_TOOLS), "physics": dict(PHYSICS)},
-        "objects": expected_objects(list(part_ids)), "hashes": {},
+        "objects": expected_objects(list(part_ids)),
+        "hashes": {},
         **({"task": task} if task else {}),
     }
     frame = {"index": 0, "camera": camera or camera_for(meshes, initial_poses), "groups": [], "groupCounter": 0}
     return EpisodeArchive(Path(path), manifest, files, Frame("initial", frame, state))
 
 
-def append_state(model, ep: EpisodeArchive, poses: dict[int, np.ndarray], camera: dict | None = None,
-                 groups: list | None = None) -> Frame:
+def append_state(
+    model, ep: EpisodeArchive, poses: dict[int, np.ndarray], camera: dict | None = None, groups: list | None = None
+) -> Frame:
     """Record a new state on top of ``ep``'s last one: parts ``k`` in ``poses`` (``(7,)`` each)
     moved there at rest, everything else of the state kept bit for bit. Returns the new frame
     (appended to ``ep.states``)."""
@@ -130,13 +160,17 @@ def append_state(model, ep: EpisodeArchive, poses: dict[int, np.ndarray], camera
         adr = _free_qpos_address(model, body)
         if adr is None:
             raise ExportError(ep.path, f"body {body_name(k)} is not a top-level body on a free joint")
-        data.qpos[adr:adr + 7] = pose
+        data.qpos[adr : adr + 7] = pose
         dof = int(model.jnt_dofadr[model.body_jntadr[body]])
-        data.qvel[dof:dof + 6] = 0.0
+        data.qvel[dof : dof + 6] = 0.0
     state = np.empty(ep.manifest["stateSize"])
     mujoco.mj_getState(model, data, state, spec)
-    record = {"index": len(ep.states) + 1, "camera": camera or last.record["camera"],
-              "groups": last.record["groups"] if groups is None else groups, "groupCounter": last.record["groupCounter"]}
+    record = {
+        "index": len(ep.states) + 1,
+        "camera": camera or last.record["camera"],
+        "groups": last.record["groups"] if groups is None else groups,
+        "groupCounter": last.record["groupCounter"],
+    }
     frame = Frame("state", record, state)
     ep.states.append(frame)
     return frame

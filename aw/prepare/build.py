@@ -33,7 +33,7 @@ class VariantPlan:
     distractor_seed: int | None = None
 
     @classmethod
-    def appendix_e(cls, seed: int = 0) -> "VariantPlan":
+    def appendix_e(cls, seed: int = 0) -> VariantPlan:
         """The paper's set: two alternative layouts, one removed part, one distractor."""
         return cls(layout_seeds=(seed + 1001, seed + 1002), missing_seed=seed + 2001, distractor_seed=seed + 3001)
 
@@ -44,10 +44,14 @@ def _check_assessable(prep: PreparedObject) -> None:
     if not together:
         return
     n = len(prep.scored_parts)
-    what = (f"its one part {together[0]} is on its target after the registration" if n == 1 else
-            f"{len(together)} of its {n} parts ({', '.join(together)}) are already assembled in the initial layout")
-    raise ValueError(f"object {prep.obj.object_id} cannot be assessed: {what}, so an agent that never moves scores "
-                     "them as placed")
+    what = (
+        f"its one part {together[0]} is on its target after the registration"
+        if n == 1
+        else f"{len(together)} of its {n} parts ({', '.join(together)}) are already assembled in the initial layout"
+    )
+    raise ValueError(
+        f"object {prep.obj.object_id} cannot be assessed: {what}, so an agent that never moves scores them as placed"
+    )
 
 
 def prepare_object(

@@ -25,7 +25,11 @@ def obj_bytes(mesh: trimesh.Trimesh, decimals: int = OBJ_DECIMALS) -> bytes:
     if not np.all(np.isfinite(v)):
         raise ValueError("mesh has non-finite vertices")
     fmt = f"v %.{decimals}f %.{decimals}f %.{decimals}f\n"
-    text = [f"# {len(v)} vertices, {len(f)} faces\n", (fmt * len(v)) % tuple(v.ravel()), ("f %d %d %d\n" * len(f)) % tuple(f.ravel())]
+    text = [
+        f"# {len(v)} vertices, {len(f)} faces\n",
+        (fmt * len(v)) % tuple(v.ravel()),
+        ("f %d %d %d\n" * len(f)) % tuple(f.ravel()),
+    ]
     return "".join(text).encode("ascii")
 
 

@@ -132,7 +132,8 @@ def rotation_of(quaternion: Sequence[float]) -> np.ndarray:
 def pose_of(position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
     """``(7,)`` pose of a position and a proper rotation, quaternion canonical (``w >= 0``)."""
     if not np.allclose(rotation.T @ rotation, np.eye(3), atol=1e-10, rtol=0) or not np.isclose(
-            np.linalg.det(rotation), 1, atol=1e-10, rtol=0):
+        np.linalg.det(rotation), 1, atol=1e-10, rtol=0
+    ):
         raise ValueError("rotation is not orthonormal and right-handed")
     quat = Rotation.from_matrix(rotation).as_quat(canonical=True)[[3, 0, 1, 2]]
     return np.concatenate([np.asarray(position, dtype=np.float64), quat])
@@ -226,7 +227,9 @@ def _einsum_sums_x_z_then_y() -> bool:
     """Whether this NumPy's ``einsum("ij,ij->i", d, d)`` rounds as ``(x x + z z) + y y`` (its
     two-lane loop does here), checked on spread-out random rows, once per process."""
     d = np.random.default_rng(0).normal(size=(4096, 3)) * [1.0, 30.0, 0.01] + 7.0
-    return bool(np.array_equal(np.einsum("ij,ij->i", d, d), (d[:, 0] * d[:, 0] + d[:, 2] * d[:, 2]) + d[:, 1] * d[:, 1]))
+    return bool(
+        np.array_equal(np.einsum("ij,ij->i", d, d), (d[:, 0] * d[:, 0] + d[:, 2] * d[:, 2]) + d[:, 1] * d[:, 1])
+    )
 
 
 def farthest_point_samples(points: np.ndarray, count: int, firsts: Sequence[int], chunk: int = 16) -> np.ndarray:
@@ -287,8 +290,15 @@ def _apart_from_all(box: np.ndarray, others: np.ndarray, gap: float) -> bool:
     return bool(np.all(np.any(box[1] + gap <= others[:, 0], axis=1) | np.any(others[:, 1] + gap <= box[0], axis=1)))
 
 
-def place_parts(local: dict[str, np.ndarray], dataset: str, sample_id: str, seed: int, gap: float = MIN_GAP,
-                attempts: int = 128, expansions: int = 5) -> dict[str, np.ndarray]:
+def place_parts(
+    local: dict[str, np.ndarray],
+    dataset: str,
+    sample_id: str,
+    seed: int,
+    gap: float = MIN_GAP,
+    attempts: int = 128,
+    expansions: int = 5,
+) -> dict[str, np.ndarray]:
     """Initial pose ``(7,)`` per part: a random yaw, then XY positions drawn in a square (grown 1.5x
     up to ``expansions`` times) until every part's XY box keeps ``gap`` from the earlier ones, a
     grid when that fails; the layout is centred on the origin and every part rests on ``z = 0``."""
@@ -373,8 +383,13 @@ def allocate_fracture_samples(areas, total: int = FRACTURE_TOTAL, minimum: int =
     return counts
 
 
-def fracture_samples(meshes: Sequence[tuple[np.ndarray, Sequence[Sequence[int]]]], part_ids: Sequence[str],
-                     dataset: str, sample_id: str, seed: int = FRACTURE_SEED) -> list[np.ndarray]:
+def fracture_samples(
+    meshes: Sequence[tuple[np.ndarray, Sequence[Sequence[int]]]],
+    part_ids: Sequence[str],
+    dataset: str,
+    sample_id: str,
+    seed: int = FRACTURE_SEED,
+) -> list[np.ndarray]:
     """The fracture protocol's shared samples of the part meshes ``(vertices (n_i, 3), faces)``
     (in ``part_ids`` order): a list of ``(c_i, 3)`` arrays in the meshes' frame, ``c_i`` from
     :func:`allocate_fracture_samples`, part ``i`` drawn from the stream ``(seed, dataset,
@@ -383,8 +398,12 @@ def fracture_samples(meshes: Sequence[tuple[np.ndarray, Sequence[Sequence[int]]]
     if not meshes or len(meshes) != len(part_ids):
         raise ValueError(f"need one mesh per part id, got {len(meshes)} meshes for {len(part_ids)} ids")
     counts = allocate_fracture_samples([surface_area(v, f) for v, f in meshes])
-    return [sample_surface(np.asarray(v, dtype=np.float64), f, int(n), stream(seed, dataset, sample_id, pid, "garf-evaluation"))
-            for (v, f), pid, n in zip(meshes, part_ids, counts)]
+    return [
+        sample_surface(
+            np.asarray(v, dtype=np.float64), f, int(n), stream(seed, dataset, sample_id, pid, "garf-evaluation")
+        )
+        for (v, f), pid, n in zip(meshes, part_ids, counts)
+    ]
 
 
 # ------------------------------------------------------------------ the protocol
@@ -407,7 +426,9 @@ def _normalization(assembled: np.ndarray, source_to_z_up: np.ndarray, scale: flo
     return matrix
 
 
-def prepare_official(sample: OfficialSample, seed: int = 0, gap: float = MIN_GAP, groups: bool = True) -> OfficialPrepared:
+def prepare_official(
+    sample: OfficialSample, seed: int = 0, gap: float = MIN_GAP, groups: bool = True
+) -> OfficialPrepared:
     """Prepare ``sample`` by the official protocol (sampling and initialization seed ``seed``).
 
     ``groups=False`` leaves the equivalence groups as singletons (no registration)."""
@@ -433,7 +454,9 @@ def prepare_official(sample: OfficialSample, seed: int = 0, gap: float = MIN_GAP
         target_basis = sample.source_to_z_up @ rotation_of(q[3:]) @ basis
         where = (sample.dataset, sample.sample_id, p.part_id)
         try:
-            candidates[p.part_id] = sample_surface(local[p.part_id], p.faces, SURFACE_POINTS, stream(seed, *where, "surface"))
+            candidates[p.part_id] = sample_surface(
+                local[p.part_id], p.faces, SURFACE_POINTS, stream(seed, *where, "surface")
+            )
         except ValueError as exc:
             raise ValueError(f"{sample.dataset}/{sample.sample_id}/{p.part_id}: {exc}") from None
         firsts[p.part_id] = int(stream(seed, *where, "fps").integers(SURFACE_POINTS))  # farthest_point_sample's draw
@@ -457,6 +480,16 @@ def prepare_official(sample: OfficialSample, seed: int = 0, gap: float = MIN_GAP
     points = np.stack([clouds[pid] for pid in order])
     verts = [baked[pid] for pid in order]
     found = geometry_groups(order, points, verts, divisor) if groups else [[pid] for pid in order]
-    return OfficialPrepared(order, verts, [faces[pid] for pid in order], points, np.stack([targets[pid] for pid in order]),
-                            divisor, found, scale, fracture_divisor([p.vertices for p in parts], to_task),
-                            sample.dataset, sample.sample_id)
+    return OfficialPrepared(
+        order,
+        verts,
+        [faces[pid] for pid in order],
+        points,
+        np.stack([targets[pid] for pid in order]),
+        divisor,
+        found,
+        scale,
+        fracture_divisor([p.vertices for p in parts], to_task),
+        sample.dataset,
+        sample.sample_id,
+    )

@@ -26,12 +26,20 @@ from itertools import permutations, product
 
 import numpy as np
 
+from aw.kernels.icp import ICPProblem, build_tree, graph_for
 from aw.pair_search import registration_groups
 from aw.prepare.official_frame import pca_frame
-from aw.kernels.icp import ICPProblem, build_tree, graph_for
 
-__all__ = ["THRESHOLD", "MAX_ITERATIONS", "IMPROVEMENT_TOLERANCE", "official_starts", "register", "search_structures",
-           "geometry_groups", "geometry_groups_all_pairs"]
+__all__ = [
+    "THRESHOLD",
+    "MAX_ITERATIONS",
+    "IMPROVEMENT_TOLERANCE",
+    "official_starts",
+    "register",
+    "search_structures",
+    "geometry_groups",
+    "geometry_groups_all_pairs",
+]
 
 THRESHOLD = 1e-4
 MAX_ITERATIONS = 100
@@ -86,9 +94,15 @@ def _part_clouds(points: np.ndarray, vertices: list[np.ndarray], divisor: float)
     return clouds
 
 
-def geometry_groups(part_ids: list[str], points: np.ndarray, vertices: list[np.ndarray], divisor: float,
-                    threshold: float = THRESHOLD, show_progress: bool = False,
-                    workers: int | None = None) -> list[list[str]]:
+def geometry_groups(
+    part_ids: list[str],
+    points: np.ndarray,
+    vertices: list[np.ndarray],
+    divisor: float,
+    threshold: float = THRESHOLD,
+    show_progress: bool = False,
+    workers: int | None = None,
+) -> list[list[str]]:
     """Groups of interchangeable parts: ``part_ids`` sorted, ``points (P, n, 3)`` and ``vertices``
     (each part's mesh, ``(n_i, 3)``) in the same frame, ``divisor`` the scale divisor.
     ``show_progress``: a progress display when many pairs need registering. ``workers``: pairs
@@ -105,13 +119,20 @@ def geometry_groups(part_ids: list[str], points: np.ndarray, vertices: list[np.n
     def is_edge(j: int, i: int) -> bool:  # the official order: the later part onto the earlier
         return register(clouds[i], clouds[j], enough=threshold, structures=(search(i), search(j))) <= threshold
 
-    found = registration_groups(clouds, threshold, is_edge, what=f"geometry groups of {len(part_ids)} parts",
-                                show_progress=show_progress, workers=workers)
+    found = registration_groups(
+        clouds,
+        threshold,
+        is_edge,
+        what=f"geometry groups of {len(part_ids)} parts",
+        show_progress=show_progress,
+        workers=workers,
+    )
     return [[part_ids[k] for k in g] for g in found]
 
 
-def geometry_groups_all_pairs(part_ids: list[str], points: np.ndarray, vertices: list[np.ndarray], divisor: float,
-                              threshold: float = THRESHOLD) -> list[list[str]]:
+def geometry_groups_all_pairs(
+    part_ids: list[str], points: np.ndarray, vertices: list[np.ndarray], divisor: float, threshold: float = THRESHOLD
+) -> list[list[str]]:
     """:func:`geometry_groups` by registering every pair ``(i, j)``, ``j < i``, in full."""
     clouds = _part_clouds(points, vertices, divisor)
     parent = list(range(len(part_ids)))

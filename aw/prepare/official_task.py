@@ -55,7 +55,9 @@ def official_sample(obj: AssembledObject) -> OfficialSample:
             vertices = np.asarray(p.mesh.vertices, dtype=np.float64) @ frame
         polygons = faces.get(p.name)
         polygons = tuple(tuple(int(i) for i in f) for f in (polygons if polygons is not None else p.mesh.faces))
-        pose = tuple(float(x) for x in poses.get(p.name, (0, 0, 0, 1, 0, 0, 0)))  # prepare_official reads it as the adapters do
+        pose = tuple(
+            float(x) for x in poses.get(p.name, (0, 0, 0, 1, 0, 0, 0))
+        )  # prepare_official reads it as the adapters do
         parts.append(OfficialPart(p.name, vertices, polygons, pose))
     dataset = str(info.get("dataset") or OFFICIAL_DATASETS.get(obj.source, obj.dataset))
     return OfficialSample(dataset, str(info.get("sample_id", obj.object_id)), tuple(parts), frame)
@@ -68,7 +70,9 @@ def prepare_official_object(obj: AssembledObject, seed: int = 0) -> tuple[Prepar
     meshes = {p.name: p.mesh for p in obj.parts}
     parts = []
     for pid, baked, target in zip(done.part_ids, done.vertices, done.targets):
-        parts.append(PreparedPart(pid, pid, trimesh.Trimesh(baked, np.asarray(meshes[pid].faces), process=False), target))
+        parts.append(
+            PreparedPart(pid, pid, trimesh.Trimesh(baked, np.asarray(meshes[pid].faces), process=False), target)
+        )
     upright = np.concatenate([np.asarray(p.mesh.vertices, dtype=np.float64) for p in obj.parts])
     centre = 0.5 * (upright.min(axis=0) + upright.max(axis=0))
     hint = sorted(g for g in done.groups if len(g) > 1) or None
@@ -87,9 +91,15 @@ def write_eval_points(suite_dir: str | Path, task_id: str, done: OfficialPrepare
     path = Path(suite_dir) / "eval_points" / f"{task_id}.npz"
     path.parent.mkdir(parents=True, exist_ok=True)
     label = {pid: g for g, members in enumerate(done.groups) for pid in members}
-    np.savez(path, part_ids=np.asarray(done.part_ids), points=np.asarray(done.points, dtype=np.float64),
-             target_poses=np.asarray(done.targets, dtype=np.float64), scale_divisor=np.float64(done.divisor),
-             equivalence_groups=np.asarray([label[pid] for pid in done.part_ids], dtype=np.int64),
-             dataset=np.asarray(done.dataset), sample_id=np.asarray(done.sample_id),
-             fracture_divisor=np.float64(done.fracture_divisor))
+    np.savez(
+        path,
+        part_ids=np.asarray(done.part_ids),
+        points=np.asarray(done.points, dtype=np.float64),
+        target_poses=np.asarray(done.targets, dtype=np.float64),
+        scale_divisor=np.float64(done.divisor),
+        equivalence_groups=np.asarray([label[pid] for pid in done.part_ids], dtype=np.int64),
+        dataset=np.asarray(done.dataset),
+        sample_id=np.asarray(done.sample_id),
+        fracture_divisor=np.float64(done.fracture_divisor),
+    )
     return path

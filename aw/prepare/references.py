@@ -99,7 +99,11 @@ def _label(img: Image.Image, text: str) -> Image.Image:
     font = _font(size)
     pad = size // 2
     box = draw.textbbox((pad, pad), text, font=font)
-    draw.rectangle((box[0] - pad // 2, box[1] - pad // 2, box[2] + pad // 2, box[3] + pad // 2), fill=(255, 255, 255), outline=(40, 40, 40))
+    draw.rectangle(
+        (box[0] - pad // 2, box[1] - pad // 2, box[2] + pad // 2, box[3] + pad // 2),
+        fill=(255, 255, 255),
+        outline=(40, 40, 40),
+    )
     draw.text((pad, pad), text, fill=(20, 20, 20), font=font)
     return img
 
@@ -136,7 +140,7 @@ class ReferenceRenderer:
     def close(self) -> None:
         self._renderer.close()
 
-    def __enter__(self) -> "ReferenceRenderer":
+    def __enter__(self) -> ReferenceRenderer:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -107,7 +107,7 @@ class PreparedObject:
             return self.eval_divisor
         return eval_divisor([p.mesh for p in self.scored_parts])
 
-    def with_parts(self, parts: list[PreparedPart], **changes) -> "PreparedObject":
+    def with_parts(self, parts: list[PreparedPart], **changes) -> PreparedObject:
         return replace(self, parts=sorted(parts, key=lambda p: p.part_id), **changes)
 
 
@@ -131,12 +131,20 @@ def assembled_at_start(prep: PreparedObject, tol: float = ASSEMBLED_TOLERANCE) -
     targets = np.array([q.target for q in parts], dtype=np.float64)  # (P, 7)
     firsts = np.array([np.asarray(q.mesh.vertices[0], dtype=np.float64) for q in parts])  # (P, 3)
     moved = apply_pose(targets[None], firsts[:, None, None, :])[:, :, 0]  # (a, b, 3): pose b on a vertex of a
-    near = np.abs(moved - moved[np.arange(len(parts)), np.arange(len(parts))][:, None]).max(axis=-1) <= tol * (1 + 1e-6) + 1e-12
+    near = (
+        np.abs(moved - moved[np.arange(len(parts)), np.arange(len(parts))][:, None]).max(axis=-1)
+        <= tol * (1 + 1e-6) + 1e-12
+    )
     best: list[str] = []
     for ia, a in enumerate(parts):
-        group = [parts[ib].part_id for ib in np.flatnonzero(near[ia])
-                 if all(float(np.abs(apply_pose(a.target, m.vertices) - apply_pose(parts[ib].target, m.vertices)).max()) <= tol
-                        for m in (a.mesh, parts[ib].mesh))]
+        group = [
+            parts[ib].part_id
+            for ib in np.flatnonzero(near[ia])
+            if all(
+                float(np.abs(apply_pose(a.target, m.vertices) - apply_pose(parts[ib].target, m.vertices)).max()) <= tol
+                for m in (a.mesh, parts[ib].mesh)
+            )
+        ]
         if len(group) > len(best):
             best = group
         if len(best) == len(parts):

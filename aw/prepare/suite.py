@@ -28,7 +28,16 @@ from aw.prepare.build import VariantPlan, prepare_object
 from aw.prepare.geometry import part_size_ratio
 from aw.prepare.references import IMAGE_SIZE, MANUAL_SIZE
 
-__all__ = ["ObjectError", "ObjectSpec", "ObjectResult", "build_suite", "prepare_output_dir", "summarize", "format_summary", "SuiteExistsError"]
+__all__ = [
+    "ObjectError",
+    "ObjectSpec",
+    "ObjectResult",
+    "build_suite",
+    "prepare_output_dir",
+    "summarize",
+    "format_summary",
+    "SuiteExistsError",
+]
 
 
 class ObjectError(RuntimeError):
@@ -47,7 +56,7 @@ class ObjectSpec:
     loader: str
     args: tuple = ()
     conditions: tuple[str, ...] = ("none",)
-    donor: "ObjectSpec | None" = None
+    donor: ObjectSpec | None = None
 
     def load(self) -> AssembledObject:
         module, _, name = self.loader.partition(":")
@@ -104,7 +113,13 @@ def _build_one(index: int, spec: ObjectSpec, settings: _Settings) -> ObjectResul
     except Exception as exc:
         raise ObjectError(f"object {obj.source}/{obj.object_id}: {type(exc).__name__}: {exc}") from None
     return ObjectResult(
-        index, obj.object_id, obj.source, obj.category, obj.n_parts, part_size_ratio([p.mesh for p in obj.parts]), entries
+        index,
+        obj.object_id,
+        obj.source,
+        obj.category,
+        obj.n_parts,
+        part_size_ratio([p.mesh for p in obj.parts]),
+        entries,
     )
 
 
@@ -118,7 +133,9 @@ def _existing_suite(out: Path, force: bool) -> list[Path]:
         raise NotADirectoryError(f"{out}: exists and is not a directory")
     existing = [out / n for n in SUITE_ENTRIES if (out / n).exists()]
     if existing and not force:
-        raise SuiteExistsError(f"{out}: already holds a suite ({', '.join(p.name for p in existing)}); pass --overwrite to replace it")
+        raise SuiteExistsError(
+            f"{out}: already holds a suite ({', '.join(p.name for p in existing)}); pass --overwrite to replace it"
+        )
     return existing
 
 
@@ -171,9 +188,19 @@ def build_suite(
     # leaves no partial suite (nor half of a replaced one), and the same command can be rerun.
     stage = staging_dir(out, "partial-suite")  # also removes those a killed build left
     try:
-        manifest, done = _build_into(specs, prepare_output_dir(stage), name=name, generator=generator, seed=seed,
-                                     variants=variants, jobs=jobs, progress=progress, image_size=image_size,
-                                     manual_size=manual_size, protocol=protocol)
+        manifest, done = _build_into(
+            specs,
+            prepare_output_dir(stage),
+            name=name,
+            generator=generator,
+            seed=seed,
+            variants=variants,
+            jobs=jobs,
+            progress=progress,
+            image_size=image_size,
+            manual_size=manual_size,
+            protocol=protocol,
+        )
         replaced = stage / ".replaced"
         replaced.mkdir()
         for p in reversed([out / n for n in SUITE_ENTRIES]):  # the old suite out of the way, manifest first
@@ -189,8 +216,9 @@ def build_suite(
     return manifest, done
 
 
-def _build_into(specs, out: Path, *, name, generator, seed, variants, jobs, progress, image_size, manual_size,
-                protocol) -> tuple[SuiteManifest, list[ObjectResult]]:
+def _build_into(
+    specs, out: Path, *, name, generator, seed, variants, jobs, progress, image_size, manual_size, protocol
+) -> tuple[SuiteManifest, list[ObjectResult]]:
     """:func:`build_suite`'s work, written into the empty suite folder ``out``."""
     plans = list(variants) if isinstance(variants, Sequence) else [variants] * len(specs)
     if len(plans) != len(specs):
@@ -277,19 +305,32 @@ def format_summary(summary: dict[str, dict[str, Any]]) -> str:
     rows = []
     for source, s in summary.items():
         b = s["part_bands"]
-        rows.append((
-            source,
-            str(s["objects"]),
-            str(s["tasks"]),
-            f"{s['parts_min']}/{s['parts_median']:g}/{s['parts_max']}",
-            f"{b['2-5']}/{b['6-10']}/{b['11-20']}",
-            f"{s['size_ratio_median']:.2f} [{s['size_ratio_q1']:.2f}-{s['size_ratio_q3']:.2f}]",
-        ))
-    rows.append(("total", str(sum(s["objects"] for s in summary.values())), str(sum(s["tasks"] for s in summary.values())), "", "", ""))
+        rows.append(
+            (
+                source,
+                str(s["objects"]),
+                str(s["tasks"]),
+                f"{s['parts_min']}/{s['parts_median']:g}/{s['parts_max']}",
+                f"{b['2-5']}/{b['6-10']}/{b['11-20']}",
+                f"{s['size_ratio_median']:.2f} [{s['size_ratio_q1']:.2f}-{s['size_ratio_q3']:.2f}]",
+            )
+        )
+    rows.append(
+        (
+            "total",
+            str(sum(s["objects"] for s in summary.values())),
+            str(sum(s["tasks"] for s in summary.values())),
+            "",
+            "",
+            "",
+        )
+    )
     widths = [max(len(r[k]) for r in [head, *rows]) for k in range(len(head))]
 
     def fmt(r):
-        return "  ".join(c.ljust(w) if k in (0, 3, 4, 5) else c.rjust(w) for k, (c, w) in enumerate(zip(r, widths))).rstrip()
+        return "  ".join(
+            c.ljust(w) if k in (0, 3, 4, 5) else c.rjust(w) for k, (c, w) in enumerate(zip(r, widths))
+        ).rstrip()
 
     rule = "-" * len(fmt(head))
     lines = [fmt(head), rule, *(fmt(r) for r in rows[:-1]), rule, fmt(rows[-1])]
@@ -297,5 +338,7 @@ def format_summary(summary: dict[str, dict[str, Any]]) -> str:
         conds = ", ".join(f"{k} {v}" for k, v in s["conditions"].items())
         cats = ", ".join(f"{k or '(no category)'} {v}" for k, v in s["categories"].items())
         variants = ", ".join(f"{k} {v}" for k, v in s["variants"].items())
-        lines.append(f"{source}: conditions {conds}; variants {variants}; categories {cats}; part counts {s['part_counts']}")
+        lines.append(
+            f"{source}: conditions {conds}; variants {variants}; categories {cats}; part counts {s['part_counts']}"
+        )
     return "\n".join(lines)

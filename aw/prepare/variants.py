@@ -19,8 +19,8 @@ from aw.prepare.standardize import (
     PartFrame,
     PreparedObject,
     PreparedPart,
-    footprint,
     clean_object,
+    footprint,
     normalization_divisor,
     part_ids,
     standardize,
@@ -37,7 +37,9 @@ def layout_variant(obj: AssembledObject, layout_seed: int) -> PreparedObject:
     return prep
 
 
-def _reanonymize(prep: PreparedObject, parts: list[PreparedPart], rng: np.random.Generator, **changes) -> PreparedObject:
+def _reanonymize(
+    prep: PreparedObject, parts: list[PreparedPart], rng: np.random.Generator, **changes
+) -> PreparedObject:
     new_ids = part_ids(len(parts), rng.permutation(len(parts)))
     renamed = {p.part_id: nid for p, nid in zip(parts, new_ids)}
     out = [PreparedPart(renamed[p.part_id], p.source_name, p.mesh, p.target, p.distractor) for p in parts]

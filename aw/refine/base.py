@@ -73,7 +73,9 @@ def check_poses(name: str, request: RefineRequest, poses: Any) -> np.ndarray:
     if arr.ndim != 2 or arr.shape[1] != 7:
         got = arr.shape[0] if arr.ndim >= 1 else 0
         if arr.ndim == 2 and arr.shape[0] == n:
-            raise RefinerError(f"refiner {name}: each pose needs 7 numbers [x, y, z, qw, qx, qy, qz], got {arr.shape[1]}")
+            raise RefinerError(
+                f"refiner {name}: each pose needs 7 numbers [x, y, z, qw, qx, qy, qz], got {arr.shape[1]}"
+            )
         raise RefinerError(f"refiner {name}: returned {got} poses for {n} parts")
     if arr.shape[0] != n:
         raise RefinerError(f"refiner {name}: returned {arr.shape[0]} poses for {n} parts")
@@ -87,9 +89,12 @@ def check_poses(name: str, request: RefineRequest, poses: Any) -> np.ndarray:
     arr[:, 3:] /= norms[:, None]
     a = request.anchor
     start = request.initial_poses[a]
-    moved = max(float(np.abs(arr[a, :3] - start[:3]).max()),
-                float(np.abs(rotation_of(arr[a, 3:]) - rotation_of(start[3:])).max()))
+    moved = max(
+        float(np.abs(arr[a, :3] - start[:3]).max()),
+        float(np.abs(rotation_of(arr[a, 3:]) - rotation_of(start[3:])).max()),
+    )
     if moved > ANCHOR_TOLERANCE:
-        raise RefinerError(f"refiner {name}: moved the anchor {request.part_ids[a]} (by {moved:.3g}; it must keep its "
-                           "initial pose)")
+        raise RefinerError(
+            f"refiner {name}: moved the anchor {request.part_ids[a]} (by {moved:.3g}; it must keep its initial pose)"
+        )
     return arr

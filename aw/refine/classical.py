@@ -93,8 +93,15 @@ def _candidates(mesh: trimesh.Trimesh, size: float) -> list[np.ndarray]:
     return (rough or large)[:4]
 
 
-def _icp(src: _Surface, dst: _Surface, rot: np.ndarray, shift: np.ndarray, radius: float, floor: float,
-         iterations: int = ICP_ITERATIONS) -> tuple[np.ndarray, np.ndarray]:
+def _icp(
+    src: _Surface,
+    dst: _Surface,
+    rot: np.ndarray,
+    shift: np.ndarray,
+    radius: float,
+    floor: float,
+    iterations: int = ICP_ITERATIONS,
+) -> tuple[np.ndarray, np.ndarray]:
     """Move ``src`` onto ``dst`` (opposed normals only); returns the refined ``(R (3, 3), t (3,))``."""
     for _ in range(iterations):
         p = src.points @ rot.T + shift
@@ -136,7 +143,8 @@ def _coverage(a: _Surface, b: _Surface, rot: np.ndarray, shift: np.ndarray, eps:
         hit = ok.copy()
         k = j[ok]
         hit[ok] = (np.einsum("ij,ij->i", src_n[ok], dst_n[k]) < OPPOSED) & (
-            np.abs(np.einsum("ij,ij->i", src[ok] - dst[k], dst_n[k])) < PLANE_SHARE * eps)
+            np.abs(np.einsum("ij,ij->i", src[ok] - dst[k], dst_n[k])) < PLANE_SHARE * eps
+        )
         return float(hit.mean())
 
     return min(share(p, n, a.points, a.normals, a.tree), share(a.points, a.normals, p, n, cKDTree(p)))
@@ -150,8 +158,9 @@ def _sunk(anchor_body: _Surface, other_body: _Surface, rot: np.ndarray, shift: n
     return float(np.mean(depth < -2 * eps))
 
 
-def register_pair(anchor: trimesh.Trimesh, other: trimesh.Trimesh, start: tuple[np.ndarray, np.ndarray] | None,
-                  seed: int = 42) -> tuple[np.ndarray, np.ndarray, float]:
+def register_pair(
+    anchor: trimesh.Trimesh, other: trimesh.Trimesh, start: tuple[np.ndarray, np.ndarray] | None, seed: int = 42
+) -> tuple[np.ndarray, np.ndarray, float]:
     """``(R, t, score)`` mapping ``other``'s frame into ``anchor``'s so that their fracture
     surfaces meet; ``start`` (R, t) asks for local refinement from it instead of a global search."""
     rng = np.random.default_rng(seed)

@@ -32,21 +32,53 @@ def _option(text: str) -> tuple[str, object]:
 
 def add_refiner_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("refiners (see docs/agents.md, Refiners)")
-    g.add_argument("--refiner", metavar="NAME", help="run a geometric refiner: classical (built in) or an installed "
-                   "assemblyworld.refiners entry point; with --agent only together with --refinement-study")
-    g.add_argument("--refiner-command", metavar="CMD", help="an external refiner: a command line that reads "
-                   "{request} and writes {result} (JSON, docs/formats.md; appended when absent)")
-    g.add_argument("--refiner-option", type=_option, action="append", default=[], metavar="KEY=VALUE",
-                   help="refiner-specific setting, passed in the request's options (repeatable)")
-    g.add_argument("--refiner-timeout", type=positive_float("--refiner-timeout"), default=300.0, metavar="S",
-                   help="seconds a refiner may take per task before it is killed (default 300)")
-    g.add_argument("--refiner-seed", type=int, default=42, metavar="S",
-                   help="seed of the shared point samples and the refiner (default 42, the fracture protocol's)")
-    g.add_argument("--refiner-steps", type=positive_int("--refiner-steps"), default=20, metavar="N",
-                   help="refinement steps asked of a learned refiner (default 20, the paper's GARF setting)")
-    g.add_argument("--refinement-study", action="store_true",
-                   help="run the four arms (agent, refiner, agent then refiner, refiner then agent) as four systems "
-                   "and write RUNS/refinement_study.json; needs --agent and a refiner")
+    g.add_argument(
+        "--refiner",
+        metavar="NAME",
+        help="run a geometric refiner: classical (built in) or an installed "
+        "assemblyworld.refiners entry point; with --agent only together with --refinement-study",
+    )
+    g.add_argument(
+        "--refiner-command",
+        metavar="CMD",
+        help="an external refiner: a command line that reads "
+        "{request} and writes {result} (JSON, docs/formats.md; appended when absent)",
+    )
+    g.add_argument(
+        "--refiner-option",
+        type=_option,
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="refiner-specific setting, passed in the request's options (repeatable)",
+    )
+    g.add_argument(
+        "--refiner-timeout",
+        type=positive_float("--refiner-timeout"),
+        default=300.0,
+        metavar="S",
+        help="seconds a refiner may take per task before it is killed (default 300)",
+    )
+    g.add_argument(
+        "--refiner-seed",
+        type=int,
+        default=42,
+        metavar="S",
+        help="seed of the shared point samples and the refiner (default 42, the fracture protocol's)",
+    )
+    g.add_argument(
+        "--refiner-steps",
+        type=positive_int("--refiner-steps"),
+        default=20,
+        metavar="N",
+        help="refinement steps asked of a learned refiner (default 20, the paper's GARF setting)",
+    )
+    g.add_argument(
+        "--refinement-study",
+        action="store_true",
+        help="run the four arms (agent, refiner, agent then refiner, refiner then agent) as four systems "
+        "and write RUNS/refinement_study.json; needs --agent and a refiner",
+    )
 
 
 def wants_refiner(args: argparse.Namespace) -> bool:
@@ -73,10 +105,20 @@ def run_refiner_command(args: argparse.Namespace, agent_config) -> int:
         raise UsageError(str(exc)) from None
     except ValueError as exc:
         raise UsageError(f"--tasks: {exc}") from None
-    cfg = RefineConfig(suite_dir=args.suite, out_dir=args.out, system=spec.name, spec=spec, tasks=ids,
-                       timeout_s=args.refiner_timeout, seed=args.refiner_seed, steps=args.refiner_steps,
-                       options=dict(args.refiner_option), overwrite=args.overwrite, jobs=args.jobs,
-                       progress=not args.no_progress)
+    cfg = RefineConfig(
+        suite_dir=args.suite,
+        out_dir=args.out,
+        system=spec.name,
+        spec=spec,
+        tasks=ids,
+        timeout_s=args.refiner_timeout,
+        seed=args.refiner_seed,
+        steps=args.refiner_steps,
+        options=dict(args.refiner_option),
+        overwrite=args.overwrite,
+        jobs=args.jobs,
+        progress=not args.no_progress,
+    )
     if args.refinement_study:
         if not (args.agent or args.harness):
             raise UsageError("--refinement-study needs --agent NAME (or --harness) and --refiner/--refiner-command")
@@ -88,7 +130,11 @@ def run_refiner_command(args: argparse.Namespace, agent_config) -> int:
         cfg.system = spec.name
         arms = run_study(agent_cfg, cfg, ids, log=lambda m: print(f"aw-run: {m}", file=sys.stderr, flush=True))
         for a in arms:
-            note = f" ({len(a.failed)} of {a.tasks} tasks failed, first: {next(iter(a.failed.values()))})" if a.failed else ""
+            note = (
+                f" ({len(a.failed)} of {a.tasks} tasks failed, first: {next(iter(a.failed.values()))})"
+                if a.failed
+                else ""
+            )
             print(f"{a.arm}: {a.system} {a.status}{note}")
         print(f"runs: {args.out}; study: {os.path.join(str(args.out), 'refinement_study.json')}")
         bad = [a.arm for a in arms if a.status != "ok"]
@@ -96,8 +142,10 @@ def run_refiner_command(args: argparse.Namespace, agent_config) -> int:
             raise CliError(f"arms not complete: {', '.join(bad)} (the others are written; see refinement_study.json)")
         return 0
     if args.agent or args.harness:
-        raise UsageError("--refiner runs a refiner on its own; to compose it with an agent use --refinement-study "
-                         "(or run the agent with --initial-poses RUNS/<refiner>)")
+        raise UsageError(
+            "--refiner runs a refiner on its own; to compose it with an agent use --refinement-study "
+            "(or run the agent with --initial-poses RUNS/<refiner>)"
+        )
     cfg.system = args.system or spec.name
     cfg.start_from = Path(args.initial_poses) if args.initial_poses is not None else None
     try:
@@ -105,8 +153,10 @@ def run_refiner_command(args: argparse.Namespace, agent_config) -> int:
     except RefinerError as exc:
         raise UsageError(str(exc)) from None
     failed = [i for i in infos if i.ended != "finished"]
-    print(f"{cfg.system}: {plural(len(infos), 'task')} refined, {len(failed)} failed"
-          + (f"; skipped {len(skipped)} with an existing run.json" if skipped else ""))
+    print(
+        f"{cfg.system}: {plural(len(infos), 'task')} refined, {len(failed)} failed"
+        + (f"; skipped {len(skipped)} with an existing run.json" if skipped else "")
+    )
     print(f"runs: {os.path.join(str(args.out), cfg.system)}")
     for i in failed:
         print(f"  {i.task_id}: {(i.error or '').splitlines()[0] if i.error else i.ended}")

@@ -51,17 +51,28 @@ def read_request(path: str | Path) -> RefineRequest:
         m = load_mesh(doc["meshes"][pid])
         meshes.append((np.asarray(m.vertices, dtype=np.float64), np.asarray(m.faces)))
     return RefineRequest(
-        task_id=doc["task_id"], part_ids=ids, points=[np.asarray(doc["points"][pid], dtype=np.float64) for pid in ids],
-        meshes=meshes, mesh_paths=[doc["meshes"][pid] for pid in ids],
+        task_id=doc["task_id"],
+        part_ids=ids,
+        points=[np.asarray(doc["points"][pid], dtype=np.float64) for pid in ids],
+        meshes=meshes,
+        mesh_paths=[doc["meshes"][pid] for pid in ids],
         initial_poses=np.asarray([doc["initial_poses"][pid] for pid in ids], dtype=np.float64),
-        given_initial_poses=bool(doc.get("given_initial_poses", False)), seed=int(doc.get("seed", 42)),
-        steps=int(doc.get("steps", 20)), options=dict(doc.get("options") or {}),
+        given_initial_poses=bool(doc.get("given_initial_poses", False)),
+        seed=int(doc.get("seed", 42)),
+        steps=int(doc.get("steps", 20)),
+        options=dict(doc.get("options") or {}),
     )
 
 
 def write_result(path: str | Path, part_ids: list[str], poses: np.ndarray) -> None:
-    write_json_atomic(path, {"format": RESULT_FORMAT, "format_version": 1,
-                             "poses": {pid: [float(v) for v in p] for pid, p in zip(part_ids, np.asarray(poses))}})
+    write_json_atomic(
+        path,
+        {
+            "format": RESULT_FORMAT,
+            "format_version": 1,
+            "poses": {pid: [float(v) for v in p] for pid, p in zip(part_ids, np.asarray(poses))},
+        },
+    )
 
 
 def read_result(name: str, path: str | Path, part_ids: list[str]) -> list[Any]:
@@ -81,13 +92,23 @@ def read_result(name: str, path: str | Path, part_ids: list[str]) -> list[Any]:
     missing = [p for p in part_ids if p not in poses]
     extra = [p for p in poses if p not in part_ids]
     if missing or extra:
-        detail = "; ".join(x for x in (f"missing {', '.join(missing)}" if missing else "",
-                                       f"unknown {', '.join(map(str, extra))}" if extra else "") if x)
+        detail = "; ".join(
+            x
+            for x in (
+                f"missing {', '.join(missing)}" if missing else "",
+                f"unknown {', '.join(map(str, extra))}" if extra else "",
+            )
+            if x
+        )
         raise RefinerError(f"refiner {name}: returned {len(poses)} poses for {len(part_ids)} parts ({detail})")
     out = []
     for pid in part_ids:
         p = poses[pid]
-        if not isinstance(p, list) or len(p) != 7 or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p):
+        if (
+            not isinstance(p, list)
+            or len(p) != 7
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p)
+        ):
             raise RefinerError(f"refiner {name}: pose of {pid} is not 7 numbers [x, y, z, qw, qx, qy, qz]")
         out.append([float(v) for v in p])
     return out

@@ -14,11 +14,11 @@ import shlex
 import signal
 import subprocess
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import import_module
 from importlib.metadata import entry_points
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -47,13 +47,15 @@ def load_refiner(name: str) -> Callable[[RefineRequest], object]:
         return getattr(import_module(module), attr)
     eps = _entry_points()
     if name not in eps:
-        raise RefinerError(f"unknown refiner {name!r}; available: {', '.join(available())} "
-                           f"(or an external command, --refiner-command)")
+        raise RefinerError(
+            f"unknown refiner {name!r}; available: {', '.join(available())} (or an external command, --refiner-command)"
+        )
     try:
         fn = eps[name].load()
     except Exception as exc:  # a broken plug-in: say which
-        raise RefinerError(f"refiner {name}: its entry point {eps[name].value} cannot be loaded "
-                           f"({type(exc).__name__}: {exc})") from None
+        raise RefinerError(
+            f"refiner {name}: its entry point {eps[name].value} cannot be loaded ({type(exc).__name__}: {exc})"
+        ) from None
     return getattr(fn, "refine", fn)
 
 
@@ -104,10 +106,17 @@ def run_refiner(spec: RefinerSpec, request: RefineRequest, work_dir: Path, timeo
     log = work_dir / "refiner.log"
     with open(log, "wb") as out:
         try:
-            proc = subprocess.Popen(spec.argv(req, res), stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                    start_new_session=True)
+            proc = subprocess.Popen(
+                spec.argv(req, res),
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                stdin=subprocess.DEVNULL,
+                start_new_session=True,
+            )
         except OSError as exc:
-            raise RefinerError(f"refiner {spec.name}: cannot start {spec.argv(req, res)[0]} ({exc.strerror or exc})") from None
+            raise RefinerError(
+                f"refiner {spec.name}: cannot start {spec.argv(req, res)[0]} ({exc.strerror or exc})"
+            ) from None
         try:
             code = proc.wait(timeout=timeout_s)
         except subprocess.TimeoutExpired:

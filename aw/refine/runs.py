@@ -13,16 +13,27 @@ from __future__ import annotations
 
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from aw.formats import (
-    FinalState, FormatError, RunInfo, Task, TrajectoryCall, TrajectoryEnd, TrajectoryHeader, TrajectoryWriter,
-    read_manifest, read_task, write_final, write_run_info,
+    FinalState,
+    FormatError,
+    RunInfo,
+    Task,
+    TrajectoryCall,
+    TrajectoryEnd,
+    TrajectoryHeader,
+    TrajectoryWriter,
+    read_manifest,
+    read_task,
+    write_final,
+    write_run_info,
 )
 from aw.formats.poses import initial_poses_file, read_initial_poses
 from aw.formats.suite import suite_paths
@@ -50,8 +61,15 @@ def fracture_identity(suite_dir: str | Path | None, task: Task) -> tuple[str, st
     return task.dataset, task.object_id
 
 
-def build_request(task: Task, suite_dir: str | Path | None, initial: dict[str, list[float]] | None, *,
-                  seed: int = 42, steps: int = 20, options: dict[str, Any] | None = None) -> RefineRequest:
+def build_request(
+    task: Task,
+    suite_dir: str | Path | None,
+    initial: dict[str, list[float]] | None,
+    *,
+    seed: int = 42,
+    steps: int = 20,
+    options: dict[str, Any] | None = None,
+) -> RefineRequest:
     """The request for ``task`` (public files only), starting from ``initial`` (part id -> pose)
     or the layout."""
     from aw.meshes import load_task_meshes
@@ -61,17 +79,37 @@ def build_request(task: Task, suite_dir: str | Path | None, initial: dict[str, l
     dataset, sample_id = fracture_identity(suite_dir, task)
     points = fracture_samples(meshes, task.part_ids, dataset, sample_id, seed)
     start = identity_poses(len(task.parts)) if initial is None else np.array([initial[p] for p in task.part_ids], float)
-    return RefineRequest(task.task_id, task.part_ids, points, meshes, [str(task.mesh_path(p).resolve()) for p in task.part_ids],
-                         start, initial is not None, seed, steps, dict(options or {}))
+    return RefineRequest(
+        task.task_id,
+        task.part_ids,
+        points,
+        meshes,
+        [str(task.mesh_path(p).resolve()) for p in task.part_ids],
+        start,
+        initial is not None,
+        seed,
+        steps,
+        dict(options or {}),
+    )
 
 
 def _utc() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="milliseconds").replace("+00:00", "Z")
+    return datetime.now(UTC).isoformat(timespec="milliseconds").replace("+00:00", "Z")
 
 
-def refine_task(spec: RefinerSpec, task: Task, suite_dir: str | Path | None, run_dir: Path, system: str, *,
-                start_file: Path | None = None, timeout_s: float = DEFAULT_TIMEOUT_S, seed: int = 42, steps: int = 20,
-                options: dict[str, Any] | None = None) -> RunInfo:
+def refine_task(
+    spec: RefinerSpec,
+    task: Task,
+    suite_dir: str | Path | None,
+    run_dir: Path,
+    system: str,
+    *,
+    start_file: Path | None = None,
+    timeout_s: float = DEFAULT_TIMEOUT_S,
+    seed: int = 42,
+    steps: int = 20,
+    options: dict[str, Any] | None = None,
+) -> RunInfo:
     """Refine one task into ``run_dir`` (replaced); returns its ``run.json`` (also written)."""
     if run_dir.exists():
         shutil.rmtree(run_dir)
@@ -94,21 +132,45 @@ def refine_task(spec: RefinerSpec, task: Task, suite_dir: str | Path | None, run
     except RefinerError as exc:
         error = str(exc)
     seconds = time.monotonic() - t0
-    header = TrajectoryHeader(task_id=task.task_id, system=system, started_at=started, part_ids=task.part_ids,
-                              initial_poses=start,
-                              initial_poses_from=str(start_file.resolve()) if start_file is not None else None)
+    header = TrajectoryHeader(
+        task_id=task.task_id,
+        system=system,
+        started_at=started,
+        part_ids=task.part_ids,
+        initial_poses=start,
+        initial_poses_from=str(start_file.resolve()) if start_file is not None else None,
+    )
     writer = TrajectoryWriter(run_dir / "trajectory.jsonl", header)
     changed = [p for p in task.part_ids if final[p] != start[p]]
-    writer.call(TrajectoryCall(seq=1, t=round(seconds, 6), server_t=round(seconds, 6), tool="refine",
-                               args={"refiner": spec.name}, ok=error is None, error=error, changed=changed,
-                               poses=final if changed else None))
+    writer.call(
+        TrajectoryCall(
+            seq=1,
+            t=round(seconds, 6),
+            server_t=round(seconds, 6),
+            tool="refine",
+            args={"refiner": spec.name},
+            ok=error is None,
+            error=error,
+            changed=changed,
+            poses=final if changed else None,
+        )
+    )
     reason = "finished" if error is None else "error"
-    writer.end(TrajectoryEnd(reason=reason, t=round(seconds, 6), server_t=round(seconds, 6), message=error or "",
-                             poses=final))
+    writer.end(
+        TrajectoryEnd(reason=reason, t=round(seconds, 6), server_t=round(seconds, 6), message=error or "", poses=final)
+    )
     write_final(run_dir / "final.json", FinalState(task_id=task.task_id, reason=reason, poses=final))
-    info = RunInfo(system=system, task_id=task.task_id, agent=spec.name, started_at=started,
-                   wall_seconds=round(seconds, 3), mcp_calls=0, ended="finished" if error is None else "error",
-                   error=error, extra=extra)
+    info = RunInfo(
+        system=system,
+        task_id=task.task_id,
+        agent=spec.name,
+        started_at=started,
+        wall_seconds=round(seconds, 3),
+        mcp_calls=0,
+        ended="finished" if error is None else "error",
+        error=error,
+        extra=extra,
+    )
     write_run_info(run_dir / "run.json", info)
     return info
 
@@ -133,7 +195,9 @@ class RefineConfig:
     progress: bool = False
 
 
-def refine_suite(cfg: RefineConfig, on_done: Callable[[RunInfo], None] | None = None) -> tuple[list[RunInfo], list[str]]:
+def refine_suite(
+    cfg: RefineConfig, on_done: Callable[[RunInfo], None] | None = None
+) -> tuple[list[RunInfo], list[str]]:
     """Refine every task (or ``cfg.tasks``) of the suite; ``(run infos, skipped task ids)``.
     Tasks with a ``run.json`` already are skipped unless ``overwrite``; a task whose start state
     is missing under ``start_from`` is recorded as an error run."""
@@ -157,12 +221,26 @@ def refine_suite(cfg: RefineConfig, on_done: Callable[[RunInfo], None] | None = 
         if cfg.start_from is not None:
             start_file = initial_poses_file(cfg.start_from, tid)
             if start_file is None:
-                return _failed(cfg, run_dir, tid, f"no start state for {tid} under {cfg.start_from} "
-                               f"(<task_id>/final.json or <task_id>.json)")
+                return _failed(
+                    cfg,
+                    run_dir,
+                    tid,
+                    f"no start state for {tid} under {cfg.start_from} (<task_id>/final.json or <task_id>.json)",
+                )
         try:
             task = read_task(suite_paths(cfg.suite_dir, tid)[0])
-            return refine_task(cfg.spec, task, cfg.suite_dir, run_dir, cfg.system, start_file=start_file,
-                               timeout_s=cfg.timeout_s, seed=cfg.seed, steps=cfg.steps, options=cfg.options)
+            return refine_task(
+                cfg.spec,
+                task,
+                cfg.suite_dir,
+                run_dir,
+                cfg.system,
+                start_file=start_file,
+                timeout_s=cfg.timeout_s,
+                seed=cfg.seed,
+                steps=cfg.steps,
+                options=cfg.options,
+            )
         except (FormatError, ValueError, OSError) as exc:
             return _failed(cfg, run_dir, tid, str(exc))
 
@@ -182,7 +260,14 @@ def refine_suite(cfg: RefineConfig, on_done: Callable[[RunInfo], None] | None = 
 def _failed(cfg: RefineConfig, run_dir: Path, task_id: str, error: str) -> RunInfo:
     """A run.json alone, for a task the refiner could not even be given."""
     run_dir.mkdir(parents=True, exist_ok=True)
-    info = RunInfo(system=cfg.system, task_id=task_id, agent=cfg.spec.name, started_at=_utc(), ended="error",
-                   error=error, extra={"refiner": cfg.spec.name})
+    info = RunInfo(
+        system=cfg.system,
+        task_id=task_id,
+        agent=cfg.spec.name,
+        started_at=_utc(),
+        ended="error",
+        error=error,
+        extra={"refiner": cfg.spec.name},
+    )
     write_run_info(run_dir / "run.json", info)
     return info

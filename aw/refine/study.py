@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import dataclasses
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
 from aw.formats.io import write_json_atomic
 
@@ -34,8 +35,12 @@ ARMS = ("agent", "refiner", "agent_refiner", "refiner_agent")
 
 def arm_systems(agent_label: str, refiner_label: str) -> dict[str, str]:
     """The system label of each arm (they become directories under RUNS)."""
-    return {"agent": agent_label, "refiner": refiner_label, "agent_refiner": f"{agent_label}-then-{refiner_label}",
-            "refiner_agent": f"{refiner_label}-then-{agent_label}"}
+    return {
+        "agent": agent_label,
+        "refiner": refiner_label,
+        "agent_refiner": f"{agent_label}-then-{refiner_label}",
+        "refiner_agent": f"{refiner_label}-then-{agent_label}",
+    }
 
 
 @dataclass
@@ -52,16 +57,22 @@ class StudyArm:
         return "failed" if len(self.failed) >= self.tasks else "partial"
 
     def doc(self) -> dict[str, Any]:
-        return {"arm": self.arm, "system": self.system, "status": self.status, "tasks": self.tasks,
-                "failed_tasks": dict(sorted(self.failed.items()))}
+        return {
+            "arm": self.arm,
+            "system": self.system,
+            "status": self.status,
+            "tasks": self.tasks,
+            "failed_tasks": dict(sorted(self.failed.items())),
+        }
 
 
 def _first_line(text: str | None) -> str:
     return (text or "").strip().splitlines()[0] if (text or "").strip() else "no reason recorded"
 
 
-def run_study(agent_cfg: BatchConfig, refine_cfg: RefineConfig, task_ids: list[str],
-              log: Callable[[str], None] = lambda _m: None) -> list[StudyArm]:
+def run_study(
+    agent_cfg: BatchConfig, refine_cfg: RefineConfig, task_ids: list[str], log: Callable[[str], None] = lambda _m: None
+) -> list[StudyArm]:
     """Run the four arms (``agent_cfg.system`` / ``refine_cfg.system`` label the first two) and
     write ``RUNS/refinement_study.json``. ``task_ids``: the suite's tasks to run, in order."""
     from aw.refine.runs import refine_suite
@@ -126,14 +137,20 @@ def _note_skipped(arm: StudyArm, out: Path, skipped: list[str]) -> None:
             arm.failed[tid] = f"{info.ended}: {_first_line(info.error)}"
 
 
-def write_study(out: Path, agent_cfg: BatchConfig, refine_cfg: RefineConfig, arms: list[StudyArm],
-                task_ids: list[str]) -> Path:
+def write_study(
+    out: Path, agent_cfg: BatchConfig, refine_cfg: RefineConfig, arms: list[StudyArm], task_ids: list[str]
+) -> Path:
     spec = refine_cfg.spec
     doc = {
-        "format": STUDY_FORMAT, "format_version": 1, "suite": str(Path(agent_cfg.suite_dir).resolve()),
-        "agent": agent_cfg.agent or agent_cfg.harness, "agent_seed": agent_cfg.seed,
-        "refiner": spec.name, "refiner_command": list(spec.command) if spec.command else None,
-        "refiner_seed": refine_cfg.seed, "refiner_steps": refine_cfg.steps,
+        "format": STUDY_FORMAT,
+        "format_version": 1,
+        "suite": str(Path(agent_cfg.suite_dir).resolve()),
+        "agent": agent_cfg.agent or agent_cfg.harness,
+        "agent_seed": agent_cfg.seed,
+        "refiner": spec.name,
+        "refiner_command": list(spec.command) if spec.command else None,
+        "refiner_seed": refine_cfg.seed,
+        "refiner_steps": refine_cfg.steps,
         "tasks": list(task_ids),
         "arms": [a.doc() for a in arms],
         "counts": dict(Counter(a.status for a in arms)),

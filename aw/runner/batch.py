@@ -15,13 +15,14 @@ import tempfile
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
-from aw.formats import FormatError, RunInfo, read_manifest, read_run_info, read_task, read_trajectory, write_run_info
+from aw.formats import FormatError, RunInfo, read_manifest, read_run_info, read_trajectory, write_run_info
 from aw.formats.suite import suite_paths
 from aw.formats.task import MAX_BUDGET_MINUTES
 from aw.formats.trajectory import FinalState, write_final
@@ -118,8 +119,9 @@ def check_config(cfg: BatchConfig) -> None:
         unknown = sorted(set(cfg.agent_options) - known)
         if unknown:
             who = f"agent {cfg.agent!r}" if cfg.agent else f"harness {cfg.harness!r}"
-            raise RunnerError(f"unknown --agent-option {', '.join(unknown)} for {who}; known: "
-                              f"{', '.join(sorted(known)) or 'none'}")
+            raise RunnerError(
+                f"unknown --agent-option {', '.join(unknown)} for {who}; known: {', '.join(sorted(known)) or 'none'}"
+            )
     if cfg.noise is not None and cfg.agent != "oracle":
         raise RunnerError("--noise applies to the oracle agent only")
     if cfg.noise is not None and not (cfg.noise >= 0 and cfg.noise < float("inf")):
@@ -154,9 +156,16 @@ def effective_options(cfg: BatchConfig) -> dict[str, Any]:
 
 # The options that change what an episode does, and the flag that sets each (run.json keeps them
 # as ``extra.settings``). Not here: --jobs, --call-timeout, --harness-bin (how, not what, is run).
-SETTING_FLAGS = {"agent": "--agent", "harness": "--harness", "seed": "--seed", "think_seconds": "--think-seconds",
-                 "budget_minutes": "--budget-minutes", "timeout_minutes": "--timeout-minutes",
-                 "harness_model": "--harness-model", "harness_args": "--harness-arg"}
+SETTING_FLAGS = {
+    "agent": "--agent",
+    "harness": "--harness",
+    "seed": "--seed",
+    "think_seconds": "--think-seconds",
+    "budget_minutes": "--budget-minutes",
+    "timeout_minutes": "--timeout-minutes",
+    "harness_model": "--harness-model",
+    "harness_args": "--harness-arg",
+}
 
 
 def run_settings(cfg: BatchConfig) -> dict[str, Any]:
@@ -241,11 +250,18 @@ def check_reuse(cfg: BatchConfig, planned: list[Episode]) -> None:
         return
     tasks = sorted({t for ts in clashes.values() for t in ts})
     outside = [t for t in tasks if t not in {ep.task_id for ep in planned}]
-    fix = ("--overwrite to replace those runs" if not outside else
-           "--overwrite without --tasks (or with --tasks also naming " + ", ".join(outside[:3]) +
-           (", ..." if len(outside) > 3 else "") + ") to replace them")
-    raise RunnerError(f"{system_dir} holds {len(tasks)} run{'s' if len(tasks) != 1 else ''} made with other options "
-                      f"({'; '.join(clashes)}); pass --system LABEL to run these options as another system, or {fix}")
+    fix = (
+        "--overwrite to replace those runs"
+        if not outside
+        else "--overwrite without --tasks (or with --tasks also naming "
+        + ", ".join(outside[:3])
+        + (", ..." if len(outside) > 3 else "")
+        + ") to replace them"
+    )
+    raise RunnerError(
+        f"{system_dir} holds {len(tasks)} run{'s' if len(tasks) != 1 else ''} made with other options "
+        f"({'; '.join(clashes)}); pass --system LABEL to run these options as another system, or {fix}"
+    )
 
 
 def plan_episodes(cfg: BatchConfig) -> list[Episode]:
@@ -267,10 +283,13 @@ def plan_episodes(cfg: BatchConfig) -> list[Episode]:
 
             start = initial_poses_file(cfg.initial_poses, tid)
             if start is None:
-                raise RunnerError(f"--initial-poses {cfg.initial_poses}: no start state for {tid} "
-                                  f"({tid}/final.json or {tid}.json)")
+                raise RunnerError(
+                    f"--initial-poses {cfg.initial_poses}: no start state for {tid} ({tid}/final.json or {tid}.json)"
+                )
             start = start.resolve()
-        out.append(Episode(tid, task_dir.resolve(), targets.resolve(), (cfg.out_dir / cfg.system / tid).resolve(), start))
+        out.append(
+            Episode(tid, task_dir.resolve(), targets.resolve(), (cfg.out_dir / cfg.system / tid).resolve(), start)
+        )
     return out
 
 
@@ -354,23 +373,33 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
         progress_path=str(work / "progress.json"),
         result_path=str(work / "result.json"),
     )
-    started = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    started = datetime.now(UTC).isoformat(timespec="seconds")
     sup = worker.run(spec.model_dump_json(), cfg.limit_seconds, episode_marker)
     result: EpisodeResult | None = None
     if Path(spec.result_path).is_file():
         result = EpisodeResult.model_validate_json(Path(spec.result_path).read_bytes())
-    extra: dict[str, Any] = {"seed": cfg.seed, "think_seconds": cfg.think_seconds, "limit_seconds": cfg.limit_seconds,
-                             "settings": run_settings(cfg)}
+    extra: dict[str, Any] = {
+        "seed": cfg.seed,
+        "think_seconds": cfg.think_seconds,
+        "limit_seconds": cfg.limit_seconds,
+        "settings": run_settings(cfg),
+    }
     if options:
         extra["options"] = options
     if sup.timed_out:
         # No progress file yet: the agent was still connecting to the server.
-        state = _progress_state(Path(spec.progress_path)) or {"in_flight": "connect", "since": time.time() - sup.wall_seconds}
+        state = _progress_state(Path(spec.progress_path)) or {
+            "in_flight": "connect",
+            "since": time.time() - sup.wall_seconds,
+        }
         in_flight = state.get("in_flight")
         stalled = time.time() - float(state.get("since", 0.0))
         hung_after = min(60.0, 0.25 * cfg.limit_seconds)
         if in_flight and stalled > hung_after:
-            ended, error = "hung", f"killed at the {cfg.limit_seconds:g} s limit; {in_flight} had been waiting for the server for {stalled:.0f} s"
+            ended, error = (
+                "hung",
+                f"killed at the {cfg.limit_seconds:g} s limit; {in_flight} had been waiting for the server for {stalled:.0f} s",
+            )
         else:
             ended, error = "timeout", f"killed at the {cfg.limit_seconds:g} s limit while the agent was still working"
         extra["killed_pids"] = sup.killed
@@ -432,7 +461,7 @@ def _run_harness_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str]) -> 
     work.mkdir(parents=True, exist_ok=True)
     marker = new_marker()
     prepared = adapter.prepare(ep.task_dir, aw_serve_command(), _server_args(cfg, ep), env, marker, opts)
-    started = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    started = datetime.now(UTC).isoformat(timespec="seconds")
     sup = run_supervised(
         prepared.command,
         env=prepared.env,
@@ -509,9 +538,14 @@ def run_episode(
     directory that a live server is still recording into is left untouched (an ``error`` run)."""
     busy = holder_of(ep.run_dir)
     if busy is not None:
-        return RunInfo(system=cfg.system, task_id=ep.task_id, agent=cfg.agent or cfg.harness_model or "",
-                       harness=cfg.harness, ended="error",
-                       error=f"runner refused: {ep.run_dir} is being recorded by {busy}; left untouched")
+        return RunInfo(
+            system=cfg.system,
+            task_id=ep.task_id,
+            agent=cfg.agent or cfg.harness_model or "",
+            harness=cfg.harness,
+            ended="error",
+            error=f"runner refused: {ep.run_dir} is being recorded by {busy}; left untouched",
+        )
     if ep.run_dir.exists():
         shutil.rmtree(ep.run_dir)
     ep.run_dir.mkdir(parents=True)

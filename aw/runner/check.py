@@ -36,8 +36,13 @@ PROBE_PROMPT = (
 
 # Where each CLI keeps a login (presence is all the check looks at).
 _CREDENTIAL_ENV = {
-    "claude-code": ("ANTHROPIC_API_KEY", "ANTHROPIC_AUTH_TOKEN", "CLAUDE_CODE_OAUTH_TOKEN", "CLAUDE_CODE_USE_BEDROCK",
-                    "CLAUDE_CODE_USE_VERTEX"),
+    "claude-code": (
+        "ANTHROPIC_API_KEY",
+        "ANTHROPIC_AUTH_TOKEN",
+        "CLAUDE_CODE_OAUTH_TOKEN",
+        "CLAUDE_CODE_USE_BEDROCK",
+        "CLAUDE_CODE_USE_VERTEX",
+    ),
     "codex": ("OPENAI_API_KEY", "CODEX_API_KEY"),
 }
 _LOGIN_HINT = {
@@ -93,19 +98,31 @@ def credential_sources(harness: str, env: dict[str, str]) -> list[str]:
 
 def _version(binary: Path, env: dict[str, str]) -> CheckStep:
     try:
-        proc = subprocess.run([str(binary), "--version"], capture_output=True, text=True, timeout=60, env=env,
-                              stdin=subprocess.DEVNULL)
+        proc = subprocess.run(
+            [str(binary), "--version"], capture_output=True, text=True, timeout=60, env=env, stdin=subprocess.DEVNULL
+        )
     except (OSError, subprocess.TimeoutExpired) as exc:
         return CheckStep("version", False, f"{binary} --version failed: {exc}", "reinstall the harness CLI")
     text = (proc.stdout.strip() or proc.stderr.strip()).splitlines()
     if proc.returncode != 0 or not text:
-        return CheckStep("version", False, f"{binary} --version exited with code {proc.returncode}",
-                         "check that this is the harness CLI, or reinstall it")
+        return CheckStep(
+            "version",
+            False,
+            f"{binary} --version exited with code {proc.returncode}",
+            "check that this is the harness CLI, or reinstall it",
+        )
     return CheckStep("version", True, text[0][:200])
 
 
-def _probe(harness: str, binary: Path, task_dir: Path, env: dict[str, str], model: str | None,
-           extra_args: list[str], limit_s: float) -> CheckStep:
+def _probe(
+    harness: str,
+    binary: Path,
+    task_dir: Path,
+    env: dict[str, str],
+    model: str | None,
+    extra_args: list[str],
+    limit_s: float,
+) -> CheckStep:
     from aw.runner.batch import aw_serve_command
     from aw.runner.harness import HARNESSES, HarnessOptions
     from aw.runner.supervise import new_marker, run_supervised
@@ -116,37 +133,77 @@ def _probe(harness: str, binary: Path, task_dir: Path, env: dict[str, str], mode
         run_dir = Path(tmp) / "probe"
         run_dir.mkdir()
         marker = new_marker()
-        prepared = adapter.prepare(task_dir, aw_serve_command(), [str(task_dir), "--record", str(run_dir), "--system", "check"],
-                                   env, marker, opts)
+        prepared = adapter.prepare(
+            task_dir,
+            aw_serve_command(),
+            [str(task_dir), "--record", str(run_dir), "--system", "check"],
+            env,
+            marker,
+            opts,
+        )
         transcript, log = run_dir / adapter.transcript_name, run_dir / "harness.log"
-        sup = run_supervised(prepared.command, env=prepared.env, marker=marker, limit_seconds=limit_s, cwd=prepared.cwd,
-                             stdin_data=PROBE_PROMPT.encode(), stdout_path=transcript, stderr_path=log)
+        sup = run_supervised(
+            prepared.command,
+            env=prepared.env,
+            marker=marker,
+            limit_seconds=limit_s,
+            cwd=prepared.cwd,
+            stdin_data=PROBE_PROMPT.encode(),
+            stdout_path=transcript,
+            stderr_path=log,
+        )
         usage = adapter.parse(transcript, opts)
         shutil.rmtree(prepared.cwd, ignore_errors=True)
         tail = log.read_text(errors="replace").strip().splitlines()[-1:] if log.is_file() else []
     if sup.timed_out:
-        return CheckStep("probe", False, f"no answer within {limit_s:g} s (the model is likely unreachable: network, "
-                         "proxy or credentials)", "run the CLI by hand once and fix what it reports")
+        return CheckStep(
+            "probe",
+            False,
+            f"no answer within {limit_s:g} s (the model is likely unreachable: network, proxy or credentials)",
+            "run the CLI by hand once and fix what it reports",
+        )
     if sup.returncode != 0 or usage.is_error:
         why = usage.error or f"exit code {sup.returncode}" + (f": {tail[0][:300]}" if tail else "")
-        return CheckStep("probe", False, why, _LOGIN_HINT[harness] if "log" in why.lower() else
-                         "run the CLI by hand once and fix what it reports")
+        return CheckStep(
+            "probe",
+            False,
+            why,
+            _LOGIN_HINT[harness] if "log" in why.lower() else "run the CLI by hand once and fix what it reports",
+        )
     if "start_episode" not in (usage.report or ""):
-        return CheckStep("probe", False, "the harness answered but did not see aw-serve's tools "
-                         f"(reply: {(usage.report or '')[:200]!r})", "check that aw-serve runs: aw-serve TASK_DIR --print-prompt")
-    return CheckStep("probe", True, "the model answered and listed aw-serve's tools" +
-                     (f" (model {usage.model})" if usage.model else ""))
+        return CheckStep(
+            "probe",
+            False,
+            f"the harness answered but did not see aw-serve's tools (reply: {(usage.report or '')[:200]!r})",
+            "check that aw-serve runs: aw-serve TASK_DIR --print-prompt",
+        )
+    return CheckStep(
+        "probe",
+        True,
+        "the model answered and listed aw-serve's tools" + (f" (model {usage.model})" if usage.model else ""),
+    )
 
 
-def check_harness(harness: str, binary: str | None, task_dir: Path, *, model: str | None = None,
-                  extra_args: list[str] | None = None, env: dict[str, str] | None = None,
-                  probe_limit_s: float = PROBE_LIMIT_S) -> list[CheckStep]:
+def check_harness(
+    harness: str,
+    binary: str | None,
+    task_dir: Path,
+    *,
+    model: str | None = None,
+    extra_args: list[str] | None = None,
+    env: dict[str, str] | None = None,
+    probe_limit_s: float = PROBE_LIMIT_S,
+) -> list[CheckStep]:
     """Run the check's steps in order until one fails; return the steps run."""
     env = dict(os.environ if env is None else env)
     try:
         path = find_binary(harness, binary)
     except ValueError as exc:
-        return [CheckStep("binary", False, str(exc), f"install the {DEFAULT_BINARIES[harness]} CLI or pass --harness-bin PATH")]
+        return [
+            CheckStep(
+                "binary", False, str(exc), f"install the {DEFAULT_BINARIES[harness]} CLI or pass --harness-bin PATH"
+            )
+        ]
     steps = [CheckStep("binary", True, str(path))]
     steps.append(_version(path, env))
     if not steps[-1].ok:
@@ -154,8 +211,11 @@ def check_harness(harness: str, binary: str | None, task_dir: Path, *, model: st
     sources = credential_sources(harness, env)
     if not sources and harness == "claude-code" and sys.platform == "darwin":
         sources = ["none in the environment or ~/.claude (the macOS keychain is not looked at; the probe will tell)"]
-    steps.append(CheckStep("credentials", bool(sources), ", ".join(sources) if sources else "no login found",
-                           _LOGIN_HINT[harness]))
+    steps.append(
+        CheckStep(
+            "credentials", bool(sources), ", ".join(sources) if sources else "no login found", _LOGIN_HINT[harness]
+        )
+    )
     if not steps[-1].ok:
         return steps
     steps.append(_probe(harness, path, task_dir, env, model, extra_args or [], probe_limit_s))

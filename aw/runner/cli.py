@@ -23,8 +23,17 @@ import sys
 from pathlib import Path
 
 from aw.cli.common import (
-    CliError, UsageError, add_jobs, add_no_progress, add_overwrite, check_out_dir, new_parser,
-    nonnegative_float, plural, positive_float, run_main,
+    CliError,
+    UsageError,
+    add_jobs,
+    add_no_progress,
+    add_overwrite,
+    check_out_dir,
+    new_parser,
+    nonnegative_float,
+    plural,
+    positive_float,
+    run_main,
 )
 from aw.runner.batch import BatchConfig, RunnerError, check_config, run_batch, system_label
 
@@ -42,43 +51,100 @@ def _agent_option(text: str) -> tuple[str, object]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = new_parser("aw-run", "Run a baseline agent or an agent harness on the tasks of a suite.",
-                   epilog=__doc__.partition("\n\n")[2])
+    p = new_parser(
+        "aw-run",
+        "Run a baseline agent or an agent harness on the tasks of a suite.",
+        epilog=__doc__.partition("\n\n")[2],
+    )
     p.add_argument("suite", type=Path, metavar="SUITE", help="suite directory (manifest.json, tasks/, targets/)")
     who = p.add_mutually_exclusive_group()  # one of them, or a refiner (checked in _run)
-    who.add_argument("--agent", metavar="NAME", help="baseline agent: idle, random, heuristic, oracle (calibration only)")
-    who.add_argument("--harness", choices=["claude-code", "codex"], metavar="NAME",
-                     help="run a real agent harness CLI: claude-code or codex")
+    who.add_argument(
+        "--agent", metavar="NAME", help="baseline agent: idle, random, heuristic, oracle (calibration only)"
+    )
+    who.add_argument(
+        "--harness",
+        choices=["claude-code", "codex"],
+        metavar="NAME",
+        help="run a real agent harness CLI: claude-code or codex",
+    )
     p.add_argument("--out", type=Path, metavar="RUNS", help="runs directory to write (required unless --check)")
-    p.add_argument("--system", metavar="LABEL", help="system label: the runs go to RUNS/LABEL/ (default: the agent or harness name, with the "
-                   "oracle's noise level, e.g. oracle-noise0.5)")
+    p.add_argument(
+        "--system",
+        metavar="LABEL",
+        help="system label: the runs go to RUNS/LABEL/ (default: the agent or harness name, with the "
+        "oracle's noise level, e.g. oracle-noise0.5)",
+    )
     add_jobs(p, "episodes")
     p.add_argument("--tasks", nargs="+", metavar="ID", help="only these task ids")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="agent seed (default 0)")
-    p.add_argument("--noise", type=float, metavar="LEVEL", help="oracle only: residual error level >= 0 (see docs/agents.md)")
-    p.add_argument("--timeout-minutes", type=positive_float("--timeout-minutes"), metavar="M",
-                   help="wall-clock limit per episode (default 10, harnesses 65)")
-    p.add_argument("--budget-minutes", type=positive_float("--budget-minutes"), metavar="M",
-                   help="the server's execution budget (default: the task's, 60)")
-    p.add_argument("--think-seconds", type=nonnegative_float("--think-seconds"), default=0.0, metavar="S",
-                   help="baseline agents pause this long before each edit (default 0)")
-    p.add_argument("--call-timeout", type=positive_float("--call-timeout"), default=120.0, metavar="S",
-                   help="seconds a tool call may wait for the server before the episode counts as hung (default 120)")
-    p.add_argument("--agent-option", type=_agent_option, action="append", default=[], metavar="KEY=VALUE",
-                   help="agent-specific setting (repeatable)")
-    p.add_argument("--initial-poses", type=Path, metavar="DIR",
-                   help="start each episode from given poses instead of the task's layout: DIR/<task_id>/final.json "
-                   "(another system's runs, e.g. a refiner's) or DIR/<task_id>.json (assemblyworld.poses files)")
+    p.add_argument(
+        "--noise", type=float, metavar="LEVEL", help="oracle only: residual error level >= 0 (see docs/agents.md)"
+    )
+    p.add_argument(
+        "--timeout-minutes",
+        type=positive_float("--timeout-minutes"),
+        metavar="M",
+        help="wall-clock limit per episode (default 10, harnesses 65)",
+    )
+    p.add_argument(
+        "--budget-minutes",
+        type=positive_float("--budget-minutes"),
+        metavar="M",
+        help="the server's execution budget (default: the task's, 60)",
+    )
+    p.add_argument(
+        "--think-seconds",
+        type=nonnegative_float("--think-seconds"),
+        default=0.0,
+        metavar="S",
+        help="baseline agents pause this long before each edit (default 0)",
+    )
+    p.add_argument(
+        "--call-timeout",
+        type=positive_float("--call-timeout"),
+        default=120.0,
+        metavar="S",
+        help="seconds a tool call may wait for the server before the episode counts as hung (default 120)",
+    )
+    p.add_argument(
+        "--agent-option",
+        type=_agent_option,
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="agent-specific setting (repeatable)",
+    )
+    p.add_argument(
+        "--initial-poses",
+        type=Path,
+        metavar="DIR",
+        help="start each episode from given poses instead of the task's layout: DIR/<task_id>/final.json "
+        "(another system's runs, e.g. a refiner's) or DIR/<task_id>.json (assemblyworld.poses files)",
+    )
     add_overwrite(p, "runs that already have a run.json (default: skip them)")
     p.add_argument("--harness-bin", metavar="PATH", help="harness executable (default: claude / codex on PATH)")
     p.add_argument("--harness-model", metavar="MODEL", help="model passed to the harness (--model / -m)")
-    p.add_argument("--harness-arg", action="append", default=[], metavar="ARG",
-                   help="extra harness argument (repeatable; use --harness-arg=--flag)")
-    p.add_argument("--price-table", type=Path, metavar="FILE",
-                   help="Codex cost estimate: JSON {model: [input, cached_input, output]} USD per million tokens")
-    p.add_argument("--check", action="store_true", help="with --harness: run the harness check alone and exit "
-                   "(0: ready, 1: not ready)")
-    p.add_argument("--skip-check", action="store_true", help="with --harness: start the batch without the harness check")
+    p.add_argument(
+        "--harness-arg",
+        action="append",
+        default=[],
+        metavar="ARG",
+        help="extra harness argument (repeatable; use --harness-arg=--flag)",
+    )
+    p.add_argument(
+        "--price-table",
+        type=Path,
+        metavar="FILE",
+        help="Codex cost estimate: JSON {model: [input, cached_input, output]} USD per million tokens",
+    )
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="with --harness: run the harness check alone and exit (0: ready, 1: not ready)",
+    )
+    p.add_argument(
+        "--skip-check", action="store_true", help="with --harness: start the batch without the harness check"
+    )
     add_no_progress(p)
     from aw.refine.cli import add_refiner_arguments
 
@@ -109,17 +175,23 @@ def _check(args: argparse.Namespace) -> bool:
     """Run the harness check, print its steps, and say whether the harness is ready."""
     from aw.runner.check import check_harness
 
-    print(f"aw-run: checking {args.harness} (binary, version, login, one short session listing aw-serve's tools)",
-          file=sys.stderr, flush=True)
-    steps = check_harness(args.harness, args.harness_bin, _first_task_dir(args), model=args.harness_model,
-                          extra_args=args.harness_arg)
+    print(
+        f"aw-run: checking {args.harness} (binary, version, login, one short session listing aw-serve's tools)",
+        file=sys.stderr,
+        flush=True,
+    )
+    steps = check_harness(
+        args.harness, args.harness_bin, _first_task_dir(args), model=args.harness_model, extra_args=args.harness_arg
+    )
     for step in steps:
         print(f"  {step.line()}", file=sys.stderr)
     failed = [s for s in steps if not s.ok]
     if failed:
         s = failed[0]
-        print(f"aw-run: error: {args.harness} is not ready ({s.name}: {s.detail})" + (f"; {s.fix}" if s.fix else ""),
-              file=sys.stderr)
+        print(
+            f"aw-run: error: {args.harness} is not ready ({s.name}: {s.detail})" + (f"; {s.fix}" if s.fix else ""),
+            file=sys.stderr,
+        )
         return False
     return True
 
@@ -137,15 +209,33 @@ def _batch_config(args: argparse.Namespace) -> BatchConfig:
             harness_bin = str(find_binary(args.harness, args.harness_bin))
         except ValueError as exc:
             raise UsageError(str(exc)) from None
-    system = args.system or system_label(args.agent, args.harness,
-                                         {**dict(args.agent_option), **({"noise": args.noise} if args.noise is not None else {})})
+    system = args.system or system_label(
+        args.agent,
+        args.harness,
+        {**dict(args.agent_option), **({"noise": args.noise} if args.noise is not None else {})},
+    )
     cfg = BatchConfig(
-        suite_dir=args.suite, system=system, out_dir=args.out, agent=args.agent,
-        harness=args.harness, jobs=args.jobs, tasks=args.tasks, seed=args.seed, noise=args.noise,
-        timeout_minutes=args.timeout_minutes, budget_minutes=args.budget_minutes, think_seconds=args.think_seconds,
-        call_timeout=args.call_timeout, overwrite=args.overwrite, agent_options=dict(args.agent_option),
-        harness_bin=harness_bin, harness_model=args.harness_model, harness_args=args.harness_arg,
-        price_table=args.price_table, progress=not args.no_progress, initial_poses=args.initial_poses,
+        suite_dir=args.suite,
+        system=system,
+        out_dir=args.out,
+        agent=args.agent,
+        harness=args.harness,
+        jobs=args.jobs,
+        tasks=args.tasks,
+        seed=args.seed,
+        noise=args.noise,
+        timeout_minutes=args.timeout_minutes,
+        budget_minutes=args.budget_minutes,
+        think_seconds=args.think_seconds,
+        call_timeout=args.call_timeout,
+        overwrite=args.overwrite,
+        agent_options=dict(args.agent_option),
+        harness_bin=harness_bin,
+        harness_model=args.harness_model,
+        harness_args=args.harness_arg,
+        price_table=args.price_table,
+        progress=not args.no_progress,
+        initial_poses=args.initial_poses,
     )
     try:
         check_config(cfg)
@@ -175,7 +265,9 @@ def _run(args: argparse.Namespace) -> int:
     except RunnerError as exc:
         raise UsageError(str(exc)) from None
     except KeyboardInterrupt:
-        print("\naw-run: interrupted; finished episodes are kept, run the same command again to resume", file=sys.stderr)
+        print(
+            "\naw-run: interrupted; finished episodes are kept, run the same command again to resume", file=sys.stderr
+        )
         return 130
     ends = result.endings()
     summary = ", ".join(f"{k} {v}" for k, v in sorted(ends.items())) or "nothing to run"

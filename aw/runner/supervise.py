@@ -174,7 +174,9 @@ def run_supervised(
         _unregister(proc.pid)
     wall = time.monotonic() - t0
     killed += _reap_marked(marker, 0.0 if timed_out else leftover_grace)
-    return Supervised(returncode=None if timed_out else proc.returncode, timed_out=timed_out, wall_seconds=wall, killed=killed)
+    return Supervised(
+        returncode=None if timed_out else proc.returncode, timed_out=timed_out, wall_seconds=wall, killed=killed
+    )
 
 
 class WorkerProcess:
@@ -188,7 +190,7 @@ class WorkerProcess:
         self.log_path = log_path
         self.marker = new_marker()
         self.proc: subprocess.Popen | None = None
-        self._lines: "queue.Queue[str | None]" = queue.Queue()
+        self._lines: queue.Queue[str | None] = queue.Queue()
 
     def _start(self) -> None:
         env = dict(self.env)

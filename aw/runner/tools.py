@@ -72,7 +72,11 @@ class ToolSession:
         if self.progress_path is None:
             return
         tmp = self.progress_path.with_suffix(".tmp")
-        tmp.write_text(json.dumps({"calls": self.n_calls, "in_flight": in_flight, "since": time.time(), "counts": dict(self.counts)}))
+        tmp.write_text(
+            json.dumps(
+                {"calls": self.n_calls, "in_flight": in_flight, "since": time.time(), "counts": dict(self.counts)}
+            )
+        )
         os.replace(tmp, self.progress_path)
 
     async def _request(self, label: str, coro_fn):
@@ -122,9 +126,7 @@ class ToolSession:
     async def get_prompt(self, name: str, arguments: dict[str, str] | None = None) -> str:
         """Text of an MCP prompt (the task instructions)."""
         self.counts["prompts/get"] += 1
-        res = await self._request(
-            "prompts/get", lambda: self.client.get_prompt(name, arguments or {})
-        )
+        res = await self._request("prompts/get", lambda: self.client.get_prompt(name, arguments or {}))
         parts = []
         for msg in res.messages:
             content = msg.content

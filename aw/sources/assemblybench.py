@@ -57,7 +57,9 @@ def _check_pose_map(raw: Any, path: Path, field: str) -> dict[str, np.ndarray]:
         except (TypeError, ValueError):
             raise FormatError(path, f"{field}.{name}: not a list of numbers") from None
         if p.shape != (7,):
-            raise FormatError(path, f"{field}.{name}: expected [tx, ty, tz, qw, qx, qy, qz], got shape {tuple(p.shape)}")
+            raise FormatError(
+                path, f"{field}.{name}: expected [tx, ty, tz, qw, qx, qy, qz], got shape {tuple(p.shape)}"
+            )
         if not np.isfinite(p).all():
             raise FormatError(path, f"{field}.{name}: non-finite values")
         qn = np.linalg.norm(p[3:])
@@ -79,15 +81,17 @@ def read_poses(obj_dir: str | Path) -> tuple[list[list[dict[str, np.ndarray]]], 
             raw = raw.get("views")
         if not isinstance(raw, list) or not raw or not all(isinstance(v, list) and v for v in raw):
             raise FormatError(single, "views: expected a non-empty list of views, each a non-empty list of steps")
-        return [[_check_pose_map(s, single, f"views[{v}][{k}]") for k, s in enumerate(view)] for v, view in enumerate(raw)], single
+        return [
+            [_check_pose_map(s, single, f"views[{v}][{k}]") for k, s in enumerate(view)] for v, view in enumerate(raw)
+        ], single
     if not folder.is_dir():
         raise FormatError(folder, "poses: neither poses/ nor poses.json found")
-    views = sorted(((int(m.group(1)), d) for d in folder.iterdir() if d.is_dir() and (m := _VIEW.match(d.name))))
+    views = sorted((int(m.group(1)), d) for d in folder.iterdir() if d.is_dir() and (m := _VIEW.match(d.name)))
     if not views:
         raise FormatError(folder, "poses: no view_<v> folders")
     out = []
     for v, d in views:
-        steps = sorted(((int(m.group(1)), f) for f in d.iterdir() if f.suffix == ".json" and (m := _STEP.match(f.stem))))
+        steps = sorted((int(m.group(1)), f) for f in d.iterdir() if f.suffix == ".json" and (m := _STEP.match(f.stem)))
         if not steps:
             raise FormatError(d, "poses: no step_<s>.json files")
         out.append([_check_pose_map(_read_json(f), f, "poses") for _, f in steps])
@@ -131,7 +135,9 @@ def load_object(root: str | Path, key: str, object_id: str | None = None) -> Ass
     missing = sorted(set(files) - set(final), key=natural_key)
     unknown = sorted(set(final) - set(files), key=natural_key)
     if missing or unknown:
-        raise FormatError(pose_src, f"final step of view 0: poses missing for parts {missing}, poses for unknown parts {unknown}")
+        raise FormatError(
+            pose_src, f"final step of view 0: poses missing for parts {missing}, poses for unknown parts {unknown}"
+        )
     names = sorted(files, key=natural_key)
     parts = []
     for name in names:
@@ -188,9 +194,22 @@ def catalog(root: str | Path):
             continue
         n = sum(1 for p in (d / "parts").iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
         key = d.relative_to(root).as_posix()
-        out.append(CatalogEntry(SOURCE, d.name, d.parent.name.lower(), n, "aw.sources.assemblybench:load_object", (str(root), key)))
+        out.append(
+            CatalogEntry(
+                SOURCE, d.name, d.parent.name.lower(), n, "aw.sources.assemblybench:load_object", (str(root), key)
+            )
+        )
     ids = [e.object_id for e in out]
     if len(set(ids)) != len(ids):  # the same object name in two categories: qualify by category
-        out = [CatalogEntry(e.source, f"{e.category}_{e.object_id}", e.category, e.n_parts, e.loader,
-                            (*e.args, f"{e.category}_{e.object_id}")) for e in out]
+        out = [
+            CatalogEntry(
+                e.source,
+                f"{e.category}_{e.object_id}",
+                e.category,
+                e.n_parts,
+                e.loader,
+                (*e.args, f"{e.category}_{e.object_id}"),
+            )
+            for e in out
+        ]
     return out

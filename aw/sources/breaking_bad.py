@@ -44,8 +44,10 @@ def load_object(root: str | Path, rel: str, up_axis: str = "z") -> AssembledObje
     folder = root / rel
     if not folder.is_dir():
         raise FormatError(folder, "fracture folder not found")
-    files = sorted((p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES),
-                   key=lambda p: natural_key(p.name))
+    files = sorted(
+        (p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES),
+        key=lambda p: natural_key(p.name),
+    )
     if len(files) < 2:
         raise FormatError(folder, f"pieces: {len(files)} piece mesh(es); a fractured object needs at least 2")
     parts = []
@@ -78,8 +80,16 @@ def catalog(root: str | Path, subsets: list[str] | None = None):
         if subsets is not None and rel.parts[0] not in subsets:
             continue
         n = sum(1 for p in d.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
-        out.append(CatalogEntry(SOURCE, _object_id(rel.parts), _category(rel.parts), n,
-                                "aw.sources.breaking_bad:load_object", (str(root), rel.as_posix())))
+        out.append(
+            CatalogEntry(
+                SOURCE,
+                _object_id(rel.parts),
+                _category(rel.parts),
+                n,
+                "aw.sources.breaking_bad:load_object",
+                (str(root), rel.as_posix()),
+            )
+        )
     return out
 
 
@@ -146,5 +156,14 @@ def hdf5_catalog(path: str | Path):
     with _open_h5(path) as h5:
         h5.visititems(visit)
     found.sort(key=lambda t: natural_key(t[0]))
-    return [CatalogEntry(SOURCE, _object_id(tuple(k.split("/"))), _category(tuple(k.split("/"))), n,
-                         "aw.sources.breaking_bad:load_hdf5_object", (str(path), k)) for k, n in found]
+    return [
+        CatalogEntry(
+            SOURCE,
+            _object_id(tuple(k.split("/"))),
+            _category(tuple(k.split("/"))),
+            n,
+            "aw.sources.breaking_bad:load_hdf5_object",
+            (str(path), k),
+        )
+        for k, n in found
+    ]

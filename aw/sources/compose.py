@@ -102,8 +102,9 @@ def _rng(seed: int, source: str) -> np.random.Generator:
     return np.random.default_rng([int(seed), zlib.crc32(source.encode())])
 
 
-def _round_robin(pools: dict[str, list[CatalogEntry]], k: int, rng: np.random.Generator,
-                 counts: dict[str, int]) -> list[CatalogEntry]:
+def _round_robin(
+    pools: dict[str, list[CatalogEntry]], k: int, rng: np.random.Generator, counts: dict[str, int]
+) -> list[CatalogEntry]:
     """``k`` entries taking categories in turn, each pool already shuffled. Categories that
     earlier strata covered less (``counts``, updated here) go first; ties from a seeded start."""
     cats = sorted(pools)
@@ -139,7 +140,9 @@ def _shuffled_pools(entries: Sequence[CatalogEntry], rng: np.random.Generator) -
     return pools
 
 
-def sample_source(entries: Sequence[CatalogEntry], n: int, seed: int = 0, stratify_parts: bool | None = None) -> list[CatalogEntry]:
+def sample_source(
+    entries: Sequence[CatalogEntry], n: int, seed: int = 0, stratify_parts: bool | None = None
+) -> list[CatalogEntry]:
     """``n`` objects of one source (fewer if the catalog is smaller), in a stable order
     (band, then category, then object id)."""
     if n < 0:

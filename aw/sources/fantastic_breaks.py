@@ -83,6 +83,14 @@ def catalog(root: str | Path):
         if d.is_dir() and (d / "model_b_0.ply").is_file() and (d / "model_r_0.ply").is_file():
             key = d.relative_to(root).as_posix()
             cls, _, obj = key.partition("/")
-            out.append(CatalogEntry(SOURCE, f"{cls}_{obj}".lower(), cls.lower(), 2,
-                                    "aw.sources.fantastic_breaks:load_object", (str(root), key)))
+            out.append(
+                CatalogEntry(
+                    SOURCE,
+                    f"{cls}_{obj}".lower(),
+                    cls.lower(),
+                    2,
+                    "aw.sources.fantastic_breaks:load_object",
+                    (str(root), key),
+                )
+            )
     return out

@@ -32,8 +32,18 @@ from aw.formats.io import load_json, read_model
 from aw.meshes import load_mesh
 from aw.sources.up_axis import guess_up_axis
 
-__all__ = ["MESH_SUFFIXES", "UP_AXES", "ObjectMeta", "FolderObject", "SkippedPath", "UnknownMetaKeys", "load_object",
-           "scan_folder", "skipped_paths", "unknown_keys"]
+__all__ = [
+    "MESH_SUFFIXES",
+    "UP_AXES",
+    "ObjectMeta",
+    "FolderObject",
+    "SkippedPath",
+    "UnknownMetaKeys",
+    "load_object",
+    "scan_folder",
+    "skipped_paths",
+    "unknown_keys",
+]
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
 Condition = Literal["none", "image", "manual"]
@@ -67,7 +77,7 @@ class ObjectMeta(BaseModel):
     up_axis: UpAxis | None = None
 
     @model_validator(mode="after")
-    def _one_condition_field(self) -> "ObjectMeta":
+    def _one_condition_field(self) -> ObjectMeta:
         if self.condition is not None and self.conditions is not None:
             raise ValueError("give either condition or conditions, not both")
         return self
@@ -106,7 +116,9 @@ def _part_files(obj_dir: Path) -> list[Path]:
     stems = [p.stem for p in files]
     dup = sorted({s for s in stems if stems.count(s) > 1})
     if dup:
-        raise FormatError(base, f"several mesh files share the part name(s) {dup}; part names are file stems and must be unique")
+        raise FormatError(
+            base, f"several mesh files share the part name(s) {dup}; part names are file stems and must be unique"
+        )
     return files
 
 
@@ -122,8 +134,11 @@ def skipped_paths(obj_dir: Path) -> list[tuple[Path, str]]:
         elif not p.is_file():
             out.append((p, "not a regular file (a device, a socket or a broken link)"))
     if base != obj_dir:
-        out += [(p, "the object's parts are read from its parts/ folder")
-                for p in sorted(obj_dir.iterdir()) if p.suffix.lower() in MESH_SUFFIXES]
+        out += [
+            (p, "the object's parts are read from its parts/ folder")
+            for p in sorted(obj_dir.iterdir())
+            if p.suffix.lower() in MESH_SUFFIXES
+        ]
     return out
 
 

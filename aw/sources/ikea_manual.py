@@ -44,7 +44,7 @@ def read_main_data(root: str | Path) -> list[dict[str, Any]]:
     if isinstance(data, dict):
         data = data.get("data", data.get("objects"))
     if not isinstance(data, list):
-        raise FormatError(path, "expected a list of objects (or {\"data\": [...]})")
+        raise FormatError(path, 'expected a list of objects (or {"data": [...]})')
     for k, rec in enumerate(data):
         if not isinstance(rec, dict):
             raise FormatError(path, f"[{k}]: expected an object, got {type(rec).__name__}")
@@ -207,6 +207,14 @@ def catalog(root: str | Path, pages_dir: str | Path | None = None):
         if isinstance(n, bool) or not isinstance(n, int) or n < 1:
             raise FormatError(path, f"[{k}].parts_ct: expected a positive integer, got {n!r}")
         args = (str(root), object_key(rec)) + ((str(pages_dir),) if pages_dir is not None else ())
-        out.append(CatalogEntry(SOURCE, f"{rec['category']}_{rec['name']}".lower(), rec["category"].lower(), n,
-                                "aw.sources.ikea_manual:load_object", args))
+        out.append(
+            CatalogEntry(
+                SOURCE,
+                f"{rec['category']}_{rec['name']}".lower(),
+                rec["category"].lower(),
+                n,
+                "aw.sources.ikea_manual:load_object",
+                args,
+            )
+        )
     return out

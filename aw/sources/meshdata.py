@@ -67,11 +67,13 @@ def _is_ragged(faces: Any) -> bool:
 def _plane_coords(pts: np.ndarray) -> np.ndarray:
     """Coordinates ``(k, 2)`` of a polygon's vertices ``(k, 3)`` in its best-fit plane (Newell normal)."""
     nxt = np.roll(pts, -1, axis=0)
-    normal = np.array([
-        np.sum((pts[:, 1] - nxt[:, 1]) * (pts[:, 2] + nxt[:, 2])),
-        np.sum((pts[:, 2] - nxt[:, 2]) * (pts[:, 0] + nxt[:, 0])),
-        np.sum((pts[:, 0] - nxt[:, 0]) * (pts[:, 1] + nxt[:, 1])),
-    ])
+    normal = np.array(
+        [
+            np.sum((pts[:, 1] - nxt[:, 1]) * (pts[:, 2] + nxt[:, 2])),
+            np.sum((pts[:, 2] - nxt[:, 2]) * (pts[:, 0] + nxt[:, 0])),
+            np.sum((pts[:, 0] - nxt[:, 0]) * (pts[:, 1] + nxt[:, 1])),
+        ]
+    )
     norm = np.linalg.norm(normal)
     if norm == 0:
         return np.zeros((len(pts), 2))
@@ -142,7 +144,9 @@ def triangulate_polygons(vertices: np.ndarray, faces: Sequence[Sequence[int]]) -
     return np.asarray(out, dtype=np.int64).reshape(-1, 3)
 
 
-def check_faces(values: Any, n_vertices: int, where: str | Path, field: str, polygons: bool = True) -> list[list[int]] | np.ndarray:
+def check_faces(
+    values: Any, n_vertices: int, where: str | Path, field: str, polygons: bool = True
+) -> list[list[int]] | np.ndarray:
     """Face index lists, checked: integers in ``[0, n_vertices)`` with at least 3 per face.
 
     Returns an ``(m, 3)`` int array for triangles, else the polygon lists (``polygons=True``).
@@ -157,13 +161,19 @@ def check_faces(values: Any, n_vertices: int, where: str | Path, field: str, pol
         regular = False
     if regular:
         if not np.issubdtype(arr.dtype, np.integer):
-            if not np.issubdtype(arr.dtype, np.floating) or not np.all(np.isfinite(arr)) or np.any(arr != np.round(arr)):
+            if (
+                not np.issubdtype(arr.dtype, np.floating)
+                or not np.all(np.isfinite(arr))
+                or np.any(arr != np.round(arr))
+            ):
                 raise FormatError(where, f"{field}: face indices must be integers")
             arr = arr.astype(np.int64)
         if arr.shape[1] < 3:
             raise FormatError(where, f"{field}: expected faces of at least 3 vertices, got shape {tuple(arr.shape)}")
         if arr.shape[1] != 3 and not polygons:
-            raise FormatError(where, f"{field}: expected triangles of shape (m, 3), got {tuple(arr.shape)} (polygon faces)")
+            raise FormatError(
+                where, f"{field}: expected triangles of shape (m, 3), got {tuple(arr.shape)} (polygon faces)"
+            )
         polys: Any = arr.astype(np.int64)
     else:
         if not polygons:
@@ -174,7 +184,10 @@ def check_faces(values: Any, n_vertices: int, where: str | Path, field: str, pol
                 fi = np.asarray(f)
             except ValueError:
                 raise FormatError(where, f"{field}[{k}]: not a list of vertex indices") from None
-            if fi.ndim != 1 or not (np.issubdtype(fi.dtype, np.integer) or (np.issubdtype(fi.dtype, np.floating) and np.all(fi == np.round(fi)))):
+            if fi.ndim != 1 or not (
+                np.issubdtype(fi.dtype, np.integer)
+                or (np.issubdtype(fi.dtype, np.floating) and np.all(fi == np.round(fi)))
+            ):
                 raise FormatError(where, f"{field}[{k}]: face indices must be integers")
             if len(fi) < 3:
                 raise FormatError(where, f"{field}[{k}]: a face needs at least 3 vertices, got {len(fi)}")
@@ -183,11 +196,16 @@ def check_faces(values: Any, n_vertices: int, where: str | Path, field: str, pol
         raise FormatError(where, f"{field}: no faces")
     flat = np.concatenate([np.asarray(p).ravel() for p in polys]) if isinstance(polys, list) else polys.ravel()
     if flat.min() < 0 or flat.max() >= n_vertices:
-        raise FormatError(where, f"{field}: vertex index out of range [0, {n_vertices}) (min {int(flat.min())}, max {int(flat.max())})")
+        raise FormatError(
+            where,
+            f"{field}: vertex index out of range [0, {n_vertices}) (min {int(flat.min())}, max {int(flat.max())})",
+        )
     return polys
 
 
-def mesh_from_arrays(vertices: Any, faces: Any, where: str | Path, field: str, polygons: bool = True) -> trimesh.Trimesh:
+def mesh_from_arrays(
+    vertices: Any, faces: Any, where: str | Path, field: str, polygons: bool = True
+) -> trimesh.Trimesh:
     """A checked triangle mesh from raw arrays; polygon faces are triangulated when allowed.
 
     ``field`` names the mesh in errors (``<field>.vertices`` / ``<field>.faces``).

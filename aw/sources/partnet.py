@@ -29,12 +29,25 @@ from scipy.spatial import cKDTree
 from aw.assembly import AssembledObject, SourcePart, y_up_to_z_up
 from aw.formats import FormatError
 from aw.pose import quat_to_matrix
-from aw.sources.meshdata import MESH_SUFFIXES, image_files, load_part_mesh, load_pickled_npy, natural_key, points_surface
+from aw.sources.meshdata import (
+    MESH_SUFFIXES,
+    image_files,
+    load_part_mesh,
+    load_pickled_npy,
+    natural_key,
+    points_surface,
+)
 
 __all__ = ["SOURCE", "CATEGORY_NAMES", "ShapeData", "shape_path", "read_shape", "read_split", "load_object", "catalog"]
 
 SOURCE = "partnet"
-CATEGORY_NAMES = {"chair": "chair", "table": "table", "storagefurniture": "storage", "storage": "storage", "lamp": "lamp"}
+CATEGORY_NAMES = {
+    "chair": "chair",
+    "table": "table",
+    "storagefurniture": "storage",
+    "storage": "storage",
+    "lamp": "lamp",
+}
 """Split-list category (lower case) -> benchmark category name."""
 
 
@@ -60,7 +73,9 @@ class ShapeData:
         n = pcs.shape[0]
         poses = np.asarray(raw["part_poses"])
         if poses.shape != (n, 7) or not np.issubdtype(poses.dtype, np.number):
-            raise FormatError(path, f"part_poses: expected shape ({n}, 7) [tx, ty, tz, qw, qx, qy, qz], got {tuple(poses.shape)}")
+            raise FormatError(
+                path, f"part_poses: expected shape ({n}, 7) [tx, ty, tz, qw, qx, qy, qz], got {tuple(poses.shape)}"
+            )
         poses = poses.astype(np.float64)
         if not np.isfinite(poses).all():
             raise FormatError(path, "part_poses: non-finite values")
@@ -82,7 +97,9 @@ class ShapeData:
             return None
         a = np.asarray(raw[key]).reshape(-1)
         if a.shape != (n,):
-            raise FormatError(self.path, f"{key}: expected {n} entries (one per part), got shape {tuple(np.asarray(raw[key]).shape)}")
+            raise FormatError(
+                self.path, f"{key}: expected {n} entries (one per part), got shape {tuple(np.asarray(raw[key]).shape)}"
+            )
         return a
 
     @property
@@ -126,7 +143,10 @@ def read_split(path: str | Path) -> list[str]:
     if path.suffix == ".npy":
         arr = load_pickled_npy(path)
         arr = np.asarray(arr).reshape(-1)
-        return [str(int(x)) if isinstance(x, (np.integer, int)) or (isinstance(x, float) and x.is_integer()) else str(x) for x in arr.tolist()]
+        return [
+            str(int(x)) if isinstance(x, (np.integer, int)) or (isinstance(x, float) and x.is_integer()) else str(x)
+            for x in arr.tolist()
+        ]
     ids = [line.strip() for line in path.read_text().splitlines() if line.strip() and not line.startswith("#")]
     return ids
 
@@ -150,7 +170,9 @@ def _part_meshes(mesh_dir: Path, shape: ShapeData) -> tuple[list[trimesh.Trimesh
     for i in range(shape.n_parts):
         f = files.get(str(i)) or files.get(part_name(i, shape.n_parts))
         if f is None:
-            raise FormatError(mesh_dir, f"part mesh {i}: missing (expected {i}.obj or another of {MESH_SUFFIXES}) for part_pcs[{i}]")
+            raise FormatError(
+                mesh_dir, f"part mesh {i}: missing (expected {i}.obj or another of {MESH_SUFFIXES}) for part_pcs[{i}]"
+            )
         mesh = load_part_mesh(f, f"part mesh {i}")
         tree = cKDTree(np.asarray(mesh.vertices))
         d_canon = tree.query(shape.part_pcs[i])[0].mean()
@@ -263,6 +285,9 @@ def catalog(root: str | Path, level: int = 3, split: str = "test", categories: l
             continue
         seen.add(sid)
         shape = read_shape(root, sid, level)
-        out.append(CatalogEntry(SOURCE, sid, cat, shape.n_parts, "aw.sources.partnet:load_object", (str(root), sid, level, cat)))
+        out.append(
+            CatalogEntry(
+                SOURCE, sid, cat, shape.n_parts, "aw.sources.partnet:load_object", (str(root), sid, level, cat)
+            )
+        )
     return out
-

@@ -34,24 +34,38 @@ import io
 from pathlib import Path
 from typing import Any
 
-import pyarrow as pa
-
 import numpy as np
+import pyarrow as pa
 import trimesh
 
 from aw.assembly import AssembledObject, SourcePart, y_up_to_z_up
 from aw.formats import FormatError
 from aw.sources.meshdata import mesh_from_arrays, natural_key
 
-__all__ = ["ID_COLUMNS", "SOURCE_ALIASES", "data_files", "read_table", "read_row", "load_row", "catalog", "normalize_source"]
+__all__ = [
+    "ID_COLUMNS",
+    "SOURCE_ALIASES",
+    "data_files",
+    "read_table",
+    "read_row",
+    "load_row",
+    "catalog",
+    "normalize_source",
+]
 
 ID_COLUMNS = ("object_id", "sample_id", "id", "uid", "name")
 SOURCE_COLUMNS = ("source", "dataset")
 SOURCE_ALIASES = {
-    "partnet": "partnet", "ikea_manual": "ikea_manual", "ikea": "ikea_manual", "ikeamanual": "ikea_manual",
-    "assemblybench": "assemblybench", "assembly_bench": "assemblybench",
-    "fantastic_breaks": "fantastic_breaks", "fantasticbreaks": "fantastic_breaks",
-    "breaking_bad": "breaking_bad", "breakingbad": "breaking_bad",
+    "partnet": "partnet",
+    "ikea_manual": "ikea_manual",
+    "ikea": "ikea_manual",
+    "ikeamanual": "ikea_manual",
+    "assemblybench": "assemblybench",
+    "assembly_bench": "assemblybench",
+    "fantastic_breaks": "fantastic_breaks",
+    "fantasticbreaks": "fantastic_breaks",
+    "breaking_bad": "breaking_bad",
+    "breakingbad": "breaking_bad",
 }
 Y_UP_SOURCES = ("partnet", "ikea_manual")
 
@@ -152,7 +166,11 @@ def _image(value: Any, where: Path, field: str):
 
 
 def _int(value: Any, where: Path, field: str) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or (isinstance(value, float) and not value.is_integer()):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or (isinstance(value, float) and not value.is_integer())
+    ):
         raise FormatError(where, f"{field}: expected an integer, got {value!r}")
     return int(value)
 
@@ -279,21 +297,28 @@ def _final_poses(rec: dict[str, Any], path: Path, where: str) -> dict[str, list[
         chosen = views["0"][last]
         return {str(k): [float(x) for x in v] for k, v in chosen.items() if v is not None and len(v) == 7}
     except (KeyError, TypeError, ValueError):
-        raise FormatError(path, f"{where}.poses: expected view \"0\" with a 7-number pose per part at the last step of steps") from None
+        raise FormatError(
+            path, f'{where}.poses: expected view "0" with a 7-number pose per part at the last step of steps'
+        ) from None
 
 
 def _posed(mesh: trimesh.Trimesh, pose: list[float]) -> trimesh.Trimesh:
     """``mesh`` moved by ``pose`` ``[tx, ty, tz, qw, qx, qy, qz]``."""
     from aw.pose import apply_pose
 
-    return trimesh.Trimesh(apply_pose(np.asarray(pose), np.asarray(mesh.vertices)), np.asarray(mesh.faces), process=False)
+    return trimesh.Trimesh(
+        apply_pose(np.asarray(pose), np.asarray(mesh.vertices)), np.asarray(mesh.faces), process=False
+    )
 
 
 # The official re-hosted repositories (assembly_world_agent/adapters/*.py, REPO_ID): a download
 # whose path names one of them holds that source's rows (the rows themselves name no source).
 REPOSITORIES = {
-    "partnet-manualpa": "partnet", "ikea-manual": "ikea_manual", "assemblybench": "assemblybench",
-    "fantastic-breaks": "fantastic_breaks", "breaking-bad-volume-constrained": "breaking_bad",
+    "partnet-manualpa": "partnet",
+    "ikea-manual": "ikea_manual",
+    "assemblybench": "assemblybench",
+    "fantastic-breaks": "fantastic_breaks",
+    "breaking-bad-volume-constrained": "breaking_bad",
 }
 
 
@@ -323,8 +348,11 @@ def catalog(path: str | Path, source: str | None = None):
         id_col = _column(names, ID_COLUMNS)
         if id_col is None:
             raise FormatError(f, f"no object id column (one of {ID_COLUMNS})")
-        counts = small.column("parts_ct").to_pylist() if "parts_ct" in names else [
-            len(p or []) for p in read_table(f, ["parts"]).column("parts").to_pylist()]
+        counts = (
+            small.column("parts_ct").to_pylist()
+            if "parts_ct" in names
+            else [len(p or []) for p in read_table(f, ["parts"]).column("parts").to_pylist()]
+        )
         src_col = _column(names, SOURCE_COLUMNS)
         srcs = small.column(src_col).to_pylist() if src_col else [None] * small.num_rows
         cats = small.column("category").to_pylist() if "category" in names else [None] * small.num_rows

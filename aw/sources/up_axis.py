@@ -31,8 +31,17 @@ import numpy as np
 import trimesh
 from scipy.spatial import ConvexHull, QhullError
 
-__all__ = ["ELONGATION", "BASE_BAND", "STABLE_MARGIN", "UpAxisGuess", "guess_up_axis", "standing_counts", "standing_along",
-           "side_by_side", "stable_on_base"]
+__all__ = [
+    "ELONGATION",
+    "BASE_BAND",
+    "STABLE_MARGIN",
+    "UpAxisGuess",
+    "guess_up_axis",
+    "standing_counts",
+    "standing_along",
+    "side_by_side",
+    "stable_on_base",
+]
 
 ELONGATION = 1.5
 """A part stands along an axis when its extent there is at least this many times its others."""
@@ -75,10 +84,16 @@ def side_by_side(meshes: Sequence[trimesh.Trimesh], up: str) -> bool:
     """Whether two of the parts standing along ``up`` have footprints across it that do not
     overlap (legs apart), rather than all stacked end to end."""
     ground = [k for k in range(3) if k != _AXES[up]]
-    boxes = [(m.vertices[:, ground].min(axis=0), m.vertices[:, ground].max(axis=0))
-             for m in meshes if standing_along(m) == up]
-    return any(np.any(hi_a < lo_b) or np.any(hi_b < lo_a)
-               for i, (lo_a, hi_a) in enumerate(boxes) for lo_b, hi_b in boxes[i + 1:])
+    boxes = [
+        (m.vertices[:, ground].min(axis=0), m.vertices[:, ground].max(axis=0))
+        for m in meshes
+        if standing_along(m) == up
+    ]
+    return any(
+        np.any(hi_a < lo_b) or np.any(hi_b < lo_a)
+        for i, (lo_a, hi_a) in enumerate(boxes)
+        for lo_b, hi_b in boxes[i + 1 :]
+    )
 
 
 def stable_on_base(meshes: Sequence[trimesh.Trimesh], up: str) -> bool:

@@ -46,21 +46,28 @@ def quality(study: Study) -> dict[str, Any]:
     vals = {m: study.values(m) for m in ("pa", "sr", "sra", "scd")}
     cw = d.cell_weights()  # (C, T)
     sw = d.source_weights()  # (K, T)
-    out: dict[str, Any] = {"cells": [{"source": s, "condition": c, "label": cell_label(s, c),
-                                      "n_tasks": int(np.sum(d.task_cell == i))} for i, (s, c) in enumerate(d.cells)],
-                           "sources": list(d.sources), "systems": {}}
+    out: dict[str, Any] = {
+        "cells": [
+            {"source": s, "condition": c, "label": cell_label(s, c), "n_tasks": int(np.sum(d.task_cell == i))}
+            for i, (s, c) in enumerate(d.cells)
+        ],
+        "sources": list(d.sources),
+        "systems": {},
+    }
     for si, name in enumerate(study.systems):
         row: dict[str, Any] = {"cells": [], "sources": {}, "overall": {}}
         for ci in range(len(d.cells)):
             members = d.task_cell == ci
             scd = vals["scd"][si, members]
-            row["cells"].append({
-                "pa": 100 * float(cw[ci] @ vals["pa"][si]),
-                "sr": 100 * float(cw[ci] @ vals["sr"][si]),
-                "sra": 100 * float(cw[ci] @ vals["sra"][si]),
-                "scd": 1000 * float(_nanmean_rows(scd[None], d.task_weight[members])[0]),
-                "n_scored": int(np.sum(~np.isnan(scd))),
-            })
+            row["cells"].append(
+                {
+                    "pa": 100 * float(cw[ci] @ vals["pa"][si]),
+                    "sr": 100 * float(cw[ci] @ vals["sr"][si]),
+                    "sra": 100 * float(cw[ci] @ vals["sra"][si]),
+                    "scd": 1000 * float(_nanmean_rows(scd[None], d.task_weight[members])[0]),
+                    "n_scored": int(np.sum(~np.isnan(scd))),
+                }
+            )
         for k, src in enumerate(d.sources):
             row["sources"][src] = {m: 100 * float(sw[k] @ vals[m][si]) for m in ("pa", "sr", "sra")}
         row["overall"] = {m: 100 * float(d.weights @ vals[m][si]) for m in ("pa", "sr", "sra")}

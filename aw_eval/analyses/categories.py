@@ -26,10 +26,18 @@ def category_results(study: Study) -> dict[str, Any]:
         for (src, cond, cat), ids in groups.items():
             runs = [study.score(s, i) for i in ids]
             scd = [r.scd for r in runs if r.scored]
-            rows.append({"source": src, "condition": cond, "category": cat, "label": cell_label(src, cond),
-                         "n": len(runs), "pa": 100 * float(np.mean([r.pa for r in runs])),
-                         "sr": 100 * float(np.mean([r.sr for r in runs])),
-                         "sra": 100 * float(np.mean([r.sra for r in runs])),
-                         "scd": 1000 * float(np.mean(scd)) if scd else None})
+            rows.append(
+                {
+                    "source": src,
+                    "condition": cond,
+                    "category": cat,
+                    "label": cell_label(src, cond),
+                    "n": len(runs),
+                    "pa": 100 * float(np.mean([r.pa for r in runs])),
+                    "sr": 100 * float(np.mean([r.sr for r in runs])),
+                    "sra": 100 * float(np.mean([r.sra for r in runs])),
+                    "scd": 1000 * float(np.mean(scd)) if scd else None,
+                }
+            )
         out["systems"][s] = rows
     return out

@@ -32,7 +32,11 @@ def completion_reports(study: Study) -> dict[str, Any]:
                 successes += 1
             else:
                 wrong_fracs.append(1.0 - rec.score.pa)
-        out[s] = {"declared": declared, "declared_successful": successes, "not_declared": not_declared,
-                  "no_report": missing,
-                  "median_incorrect_fraction_of_failed_claims": 100 * float(np.median(wrong_fracs)) if wrong_fracs else None}
+        out[s] = {
+            "declared": declared,
+            "declared_successful": successes,
+            "not_declared": not_declared,
+            "no_report": missing,
+            "median_incorrect_fraction_of_failed_claims": 100 * float(np.median(wrong_fracs)) if wrong_fracs else None,
+        }
     return out

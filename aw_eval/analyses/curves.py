@@ -20,8 +20,17 @@ import numpy as np
 from aw_eval.study.model import RunScore
 from aw_eval.study.table import Study
 
-__all__ = ["NORMALIZED_POINTS", "BUDGET_MINUTES", "state_index", "normalized_times", "normalized_states", "normalized_values", "budget_values", "quality_curves",
-           "pa_decreases"]
+__all__ = [
+    "NORMALIZED_POINTS",
+    "BUDGET_MINUTES",
+    "state_index",
+    "normalized_times",
+    "normalized_states",
+    "normalized_values",
+    "budget_values",
+    "quality_curves",
+    "pa_decreases",
+]
 
 NORMALIZED_POINTS = tuple(round(0.1 * i, 10) for i in range(11))
 BUDGET_MINUTES = (0, 1, 2, 5, 10, 15, 20, 30, 45, 60)
@@ -76,8 +85,9 @@ def budget_values(r: RunScore, metric: str, minutes: Sequence[float] = BUDGET_MI
     return _values_at(r, times, metric)
 
 
-def quality_curves(study: Study, points: Sequence[float] = NORMALIZED_POINTS,
-                   minutes: Sequence[float] = BUDGET_MINUTES) -> dict[str, Any]:
+def quality_curves(
+    study: Study, points: Sequence[float] = NORMALIZED_POINTS, minutes: Sequence[float] = BUDGET_MINUTES
+) -> dict[str, Any]:
     """Per system, eq.-3 PA/SR (percent) over normalized time and budgets, the final values, and
     how many episodes still changed poses after the largest budget."""
     d = study.design
@@ -91,9 +101,14 @@ def quality_curves(study: Study, points: Sequence[float] = NORMALIZED_POINTS,
         for m in ("pa", "sr"):
             norm = np.stack([normalized_values(r, m, points) for r in runs])
             bud = np.stack([budget_values(r, m, minutes) for r in runs])
-            row[m] = {"normalized": (100 * d.weights @ norm).tolist(), "budget": (100 * d.weights @ bud).tolist(),
-                      "final": 100 * float(d.weights @ np.array([getattr(r, m) for r in runs]))}
-        row["edits_after_last_budget"] = int(sum(1 for r in runs if r.scored and len(r.ck_t) > 1 and r.ck_t[1:].max() > last))
+            row[m] = {
+                "normalized": (100 * d.weights @ norm).tolist(),
+                "budget": (100 * d.weights @ bud).tolist(),
+                "final": 100 * float(d.weights @ np.array([getattr(r, m) for r in runs])),
+            }
+        row["edits_after_last_budget"] = int(
+            sum(1 for r in runs if r.scored and len(r.ck_t) > 1 and r.ck_t[1:].max() > last)
+        )
         out["systems"][s] = row
     return out
 
@@ -116,6 +131,8 @@ def pa_decreases(study: Study) -> dict[str, Any]:
                 n["persist_alignment_fixed"] += int(r.ck_drop_persist_alignment.sum())
                 n["persist_both_fixed"] += int(r.ck_drop_persist_both.sum())
             elif r.ck_assignment.size:  # no diagnosis saved: assignment changes only
-                n["with_assignment_change"] += int(np.sum(np.any(r.ck_assignment[dec + 1] != r.ck_assignment[dec], axis=1)))
+                n["with_assignment_change"] += int(
+                    np.sum(np.any(r.ck_assignment[dec + 1] != r.ck_assignment[dec], axis=1))
+                )
         out[s] = n
     return out

@@ -114,8 +114,12 @@ def _summaries(evals: Sequence[EvalCalls], groups: list[np.ndarray], n_groups: i
     def wm(items):
         return weighted_median([v for v, _ in items], [w for _, w in items]) if items else None
 
-    return {"translation": [wm(x) for x in trans], "rotation_deg": [wm(x) for x in rot],
-            "n_translation": [len(x) for x in trans], "n_rotation": [len(x) for x in rot]}
+    return {
+        "translation": [wm(x) for x in trans],
+        "rotation_deg": [wm(x) for x in rot],
+        "n_translation": [len(x) for x in trans],
+        "n_rotation": [len(x) for x in rot],
+    }
 
 
 def magnitude_summary(evals: Sequence[EvalCalls], n_bins: int = N_BINS) -> dict[str, list[Any]]:
@@ -136,8 +140,10 @@ def stage_summary(evals: Sequence[EvalCalls]) -> dict[str, Any]:
     s = _summaries(evals, groups, 2)
     rev = [(float(np.mean(ev.edit_revisit)), ev.weight) for ev in evals if len(ev.edit_revisit)]
     return {
-        "translation_early": s["translation"][0], "translation_late": s["translation"][1],
-        "rotation_early": s["rotation_deg"][0], "rotation_late": s["rotation_deg"][1],
+        "translation_early": s["translation"][0],
+        "translation_late": s["translation"][1],
+        "rotation_early": s["rotation_deg"][0],
+        "rotation_late": s["rotation_deg"][1],
         "revisit": 100 * weighted_median([v for v, _ in rev], [w for _, w in rev]) if rev else None,
         "n_evaluations": sum(1 for ev in evals if len(ev.call_t)),
     }
@@ -149,8 +155,11 @@ def _evals(study: Study, system: str, task_ids: Sequence[str], weights: np.ndarr
         r = study.score(system, tid)
         if not r.scored or len(r.call_t) == 0:
             continue
-        out.append(EvalCalls(r.call_t, r.call_kind, r.edit_call, r.edit_translation, r.edit_rotation_deg,
-                             r.edit_revisit, float(w)))
+        out.append(
+            EvalCalls(
+                r.call_t, r.call_kind, r.edit_call, r.edit_translation, r.edit_rotation_deg, r.edit_revisit, float(w)
+            )
+        )
     return out
 
 

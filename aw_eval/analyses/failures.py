@@ -27,8 +27,15 @@ from aw_eval.study.table import Study
 
 __all__ = ["CLASSES", "classify_parts", "translation_fractions", "failure_analysis", "OFFSET_GRID", "CENTRED_GRID"]
 
-CLASSES = ("correct", "never_moved", "far_displaced", "translation_dominated", "near_threshold",
-           "orientation_dominated", "mixed")
+CLASSES = (
+    "correct",
+    "never_moved",
+    "far_displaced",
+    "translation_dominated",
+    "near_threshold",
+    "orientation_dominated",
+    "mixed",
+)
 CORRECT_CD = 0.01
 FAR_OFFSET = 3.0
 OFFSET_CUTOFF = 0.1
@@ -38,9 +45,17 @@ CENTRED_GRID = (0.005, 0.01, 0.02)
 TRANSLATION = CLASSES.index("translation_dominated")
 
 
-def classify_parts(errors: np.ndarray, centred_cd: np.ndarray, offset: np.ndarray, moved: np.ndarray, *,
-                   correct_cd: float = CORRECT_CD, far: float = FAR_OFFSET, offset_cutoff: float = OFFSET_CUTOFF,
-                   centred_cutoff: float = CENTRED_CUTOFF) -> np.ndarray:
+def classify_parts(
+    errors: np.ndarray,
+    centred_cd: np.ndarray,
+    offset: np.ndarray,
+    moved: np.ndarray,
+    *,
+    correct_cd: float = CORRECT_CD,
+    far: float = FAR_OFFSET,
+    offset_cutoff: float = OFFSET_CUTOFF,
+    centred_cutoff: float = CENTRED_CUTOFF,
+) -> np.ndarray:
     """Class index (into :data:`CLASSES`) of every part; all inputs ``(P,)``."""
     e, c, o = (np.asarray(x, dtype=np.float64) for x in (errors, centred_cd, offset))
     moved = np.asarray(moved, dtype=bool)
@@ -79,8 +94,12 @@ def failure_analysis(study: Study) -> dict[str, Any]:
     """Per system: class counts of incorrect parts, the default translation fractions and the
     3x3 sensitivity grid (offset cutoff x centred-CD cutoff). Original tasks with a scored final
     state only; unscored runs are counted apart."""
-    out: dict[str, Any] = {"classes": list(CLASSES), "offset_grid": list(OFFSET_GRID), "centred_grid": list(CENTRED_GRID),
-                           "systems": {}}
+    out: dict[str, Any] = {
+        "classes": list(CLASSES),
+        "offset_grid": list(OFFSET_GRID),
+        "centred_grid": list(CENTRED_GRID),
+        "systems": {},
+    }
     for s in study.systems:
         runs = [study.score(s, t) for t in study.original_ids]
         scored = [r for r in runs if r.scored and r.n_parts > 0]
@@ -93,8 +112,10 @@ def failure_analysis(study: Study) -> dict[str, Any]:
         for oc in OFFSET_GRID:
             row = []
             for cc in CENTRED_GRID:
-                cls = [classify_parts(r.part_errors, r.centred_cd, r.offset, r.moved, offset_cutoff=oc, centred_cutoff=cc)
-                       for r in scored]
+                cls = [
+                    classify_parts(r.part_errors, r.centred_cd, r.offset, r.moved, offset_cutoff=oc, centred_cutoff=cc)
+                    for r in scored
+                ]
                 p, t, _, _ = translation_fractions(cls)
                 row.append({"part_pooled": p, "task_pooled": t})
             grid.append(row)

@@ -45,9 +45,19 @@ def part_count_bands(study: Study) -> dict[str, Any]:
                 if not members:
                     continue
                 runs = [study.score(s, i) for i in members]
-                bands[b] = {"n": len(runs), "pa": 100 * float(np.mean([r.pa for r in runs])),
-                            "sr": 100 * float(np.mean([r.sr for r in runs]))}
-            rows.append({"source": src, "category": cat, "condition": cond,
-                         "label": f"{cell_label(src, cond)}" + (f" / {cat}" if cat else ""), "bands": bands})
+                bands[b] = {
+                    "n": len(runs),
+                    "pa": 100 * float(np.mean([r.pa for r in runs])),
+                    "sr": 100 * float(np.mean([r.sr for r in runs])),
+                }
+            rows.append(
+                {
+                    "source": src,
+                    "category": cat,
+                    "condition": cond,
+                    "label": f"{cell_label(src, cond)}" + (f" / {cat}" if cat else ""),
+                    "bands": bands,
+                }
+            )
         out["systems"][s] = rows
     return out

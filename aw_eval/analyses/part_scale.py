@@ -19,8 +19,14 @@ def ratio_summary(ratios) -> dict[str, Any]:
     if len(r) == 0:
         return {"n": 0, "median": None, "q1": None, "q3": None, "p90": None, "above_10": None}
     q1, med, q3, p90 = np.percentile(r, [25, 50, 75, 90])
-    return {"n": int(len(r)), "median": float(med), "q1": float(q1), "q3": float(q3), "p90": float(p90),
-            "above_10": 100 * float(np.mean(r > 10))}
+    return {
+        "n": int(len(r)),
+        "median": float(med),
+        "q1": float(q1),
+        "q3": float(q3),
+        "p90": float(p90),
+        "above_10": 100 * float(np.mean(r > 10)),
+    }
 
 
 def part_scale(study: Study) -> dict[str, Any]:

@@ -29,11 +29,19 @@ from aw_eval.fracture import SEED, fracture_metrics_from_samples
 __all__ = ["ARM_LABELS", "PAIRS", "TOLERANCE", "paired_changes", "refinement_study"]
 
 TOLERANCE = 1e-8
-ARM_LABELS = {"agent": "Agent", "refiner": "Refiner", "agent_refiner": "Agent -> Refiner",
-              "refiner_agent": "Refiner -> Agent"}
+ARM_LABELS = {
+    "agent": "Agent",
+    "refiner": "Refiner",
+    "agent_refiner": "Agent -> Refiner",
+    "refiner_agent": "Refiner -> Agent",
+}
 # (arm, baseline, metric): the paper's paired comparisons
-PAIRS = (("agent_refiner", "refiner", "pa"), ("agent_refiner", "agent", "pa"), ("refiner_agent", "refiner", "pa"),
-         ("refiner_agent", "refiner", "cd"))
+PAIRS = (
+    ("agent_refiner", "refiner", "pa"),
+    ("agent_refiner", "agent", "pa"),
+    ("refiner_agent", "refiner", "pa"),
+    ("refiner_agent", "refiner", "cd"),
+)
 SCATTER = (("agent", "agent_refiner"), ("refiner", "refiner_agent"))
 
 
@@ -48,12 +56,18 @@ def _final_poses(run_dir: Path) -> dict[str, list[float]] | None:
         return None
 
 
-def paired_changes(after: np.ndarray, before: np.ndarray, higher_is_better: bool, tol: float = TOLERANCE) -> dict[str, int]:
+def paired_changes(
+    after: np.ndarray, before: np.ndarray, higher_is_better: bool, tol: float = TOLERANCE
+) -> dict[str, int]:
     """Counts of tasks where ``after`` improved on, degraded from, or equals ``before`` (within ``tol``)."""
     d = np.asarray(after, float) - np.asarray(before, float)
     if not higher_is_better:
         d = -d
-    return {"improved": int((d > tol).sum()), "degraded": int((d < -tol).sum()), "unchanged": int((np.abs(d) <= tol).sum())}
+    return {
+        "improved": int((d > tol).sum()),
+        "degraded": int((d < -tol).sum()),
+        "unchanged": int((np.abs(d) <= tol).sum()),
+    }
 
 
 def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, Any] | None:
@@ -103,7 +117,9 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
                     failures[arm][tid] = str(exc)
                     continue
                 if info.ended != "finished":
-                    failures[arm][tid] = f"{info.ended}: {(info.error or '').strip().splitlines()[0] if info.error else ''}"
+                    failures[arm][tid] = (
+                        f"{info.ended}: {(info.error or '').strip().splitlines()[0] if info.error else ''}"
+                    )
                     continue
             poses = _final_poses(run_dir)
             if poses is None or set(poses) != set(ids):
@@ -119,18 +135,34 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
 
     table = {}
     for arm in ARMS:
-        table[arm] = {"system": systems[arm], "n": len(matched), "failed": len(failures[arm]),
-                      **({k: float(values(arm, k).mean()) for k in ("re", "te", "pa", "cd")} if matched else {})}
+        table[arm] = {
+            "system": systems[arm],
+            "n": len(matched),
+            "failed": len(failures[arm]),
+            **({k: float(values(arm, k).mean()) for k in ("re", "te", "pa", "cd")} if matched else {}),
+        }
     pairs = []
     for arm, base, metric in PAIRS:
         counts = paired_changes(values(arm, metric), values(base, metric), metric == "pa") if matched else {}
         pairs.append({"arm": arm, "baseline": base, "metric": metric, **counts})
-    scatter = [{"before": b, "after": a, "tasks": matched, "x": values(b, "cd").tolist(), "y": values(a, "cd").tolist()}
-               for b, a in SCATTER]
-    return {"study_file": str(path), "agent": study.get("agent"), "refiner": study.get("refiner"),
-            "arms": {a: {"system": systems[a], "label": ARM_LABELS[a]} for a in ARMS}, "tasks": len(rows),
-            "matched": matched, "table": table, "pairs": pairs, "scatter": scatter, "tolerance": TOLERANCE,
-            "failures": failures, "per_task": rows}
+    scatter = [
+        {"before": b, "after": a, "tasks": matched, "x": values(b, "cd").tolist(), "y": values(a, "cd").tolist()}
+        for b, a in SCATTER
+    ]
+    return {
+        "study_file": str(path),
+        "agent": study.get("agent"),
+        "refiner": study.get("refiner"),
+        "arms": {a: {"system": systems[a], "label": ARM_LABELS[a]} for a in ARMS},
+        "tasks": len(rows),
+        "matched": matched,
+        "table": table,
+        "pairs": pairs,
+        "scatter": scatter,
+        "tolerance": TOLERANCE,
+        "failures": failures,
+        "per_task": rows,
+    }
 
 
 def _divisor(suite_dir: Path, task_id: str, meshes, target: np.ndarray, scale: float) -> tuple[float, str]:

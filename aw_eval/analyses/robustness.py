@@ -44,9 +44,14 @@ def robustness(study: Study) -> dict[str, Any]:
         for base in sorted((b for b in variants if b in known), key=lambda b: _order_key(study.entry(b))):
             be = study.entry(base)
             orig = study.score(s, base)
-            row: dict[str, Any] = {"base_task_id": base, "source": be.source, "condition": be.condition,
-                                   "label": cell_label(be.source, be.condition), "object_id": be.object_id,
-                                   "original": {"pa": 100 * orig.pa, "sr": orig.sr, "status": orig.status}}
+            row: dict[str, Any] = {
+                "base_task_id": base,
+                "source": be.source,
+                "condition": be.condition,
+                "label": cell_label(be.source, be.condition),
+                "object_id": be.object_id,
+                "original": {"pa": 100 * orig.pa, "sr": orig.sr, "status": orig.status},
+            }
             for kind in VARIANT_KINDS:
                 cells = []
                 for tid in sorted(variants[base].get(kind, [])):
@@ -59,8 +64,17 @@ def robustness(study: Study) -> dict[str, Any]:
                     p["orig_sr"].append(orig.sr)
                 row[kind] = cells
             rows.append(row)
-        summary = [{"kind": k, "source": src, "n": len(v["pa"]), "pa": 100 * float(np.mean(v["pa"])),
-                    "sr": 100 * float(np.mean(v["sr"])), "original_pa": 100 * float(np.mean(v["orig_pa"])),
-                    "original_sr": 100 * float(np.mean(v["orig_sr"]))} for (k, src), v in sorted(pooled.items())]
+        summary = [
+            {
+                "kind": k,
+                "source": src,
+                "n": len(v["pa"]),
+                "pa": 100 * float(np.mean(v["pa"])),
+                "sr": 100 * float(np.mean(v["sr"])),
+                "original_pa": 100 * float(np.mean(v["orig_pa"])),
+                "original_sr": 100 * float(np.mean(v["orig_sr"])),
+            }
+            for (k, src), v in sorted(pooled.items())
+        ]
         out["systems"][s] = {"rows": rows, "summary": summary}
     return out

@@ -32,8 +32,11 @@ def system_roles(study: Study) -> dict[str, str]:
     """``system -> role`` (one of :data:`ROLE_NAMES`) for every system of ``study``."""
     out = {}
     for s in study.systems:
-        agents = {rec.info.agent for (sys_, _), rec in study.runs.items()
-                  if sys_ == s and rec.info is not None and rec.info.agent in ROLES}
+        agents = {
+            rec.info.agent
+            for (sys_, _), rec in study.runs.items()
+            if sys_ == s and rec.info is not None and rec.info.agent in ROLES
+        }
         roles = {ROLES[a] for a in agents}
         if "calibration" in roles:
             out[s] = "calibration"

@@ -30,7 +30,10 @@ def scd_concentration(scd, fraction: float = TAIL_FRACTION) -> dict[str, Any] | 
     total = float(v.sum())
     rest = order[k:]
     return {
-        "n": n, "mean": 1000 * float(v.mean()), "median": 1000 * float(np.median(v)), "k": k,
+        "n": n,
+        "mean": 1000 * float(v.mean()),
+        "median": 1000 * float(np.median(v)),
+        "k": k,
         "contribution": 100 * float(order[:k].sum()) / total if total > 0 else float("nan"),
         "remaining_mean": 1000 * float(rest.mean()) if len(rest) else float("nan"),
     }
@@ -58,7 +61,14 @@ def scd_tail(study: Study) -> dict[str, Any]:
             scored = [r for r in runs if r.scored]
             tail = sorted(scored, key=lambda r: -r.scd)[: stats["k"]]
             stats["tail_never_moved"] = int(sum(1 for r in tail if r.moved.size and not r.moved.any()))
-            rows.append({"source": src, "condition": cond, "category": cat,
-                         "label": cell_label(src, cond) + (f" / {cat}" if cat else ""), **stats})
+            rows.append(
+                {
+                    "source": src,
+                    "condition": cond,
+                    "category": cat,
+                    "label": cell_label(src, cond) + (f" / {cat}" if cat else ""),
+                    **stats,
+                }
+            )
         out["systems"][s] = rows
     return out

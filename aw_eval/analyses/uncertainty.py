@@ -36,16 +36,29 @@ def system_order(study: Study) -> list[int]:
     return sorted(range(len(study.systems)), key=lambda i: (-round(sr[i], 12), -round(pa[i], 12), study.systems[i]))
 
 
-def uncertainty(study: Study, *, n_draws: int = DEFAULT_DRAWS, n_permutations: int = DEFAULT_PERMUTATIONS,
-                seed: int = 0, level: float = 0.95) -> dict[str, Any]:
+def uncertainty(
+    study: Study,
+    *,
+    n_draws: int = DEFAULT_DRAWS,
+    n_permutations: int = DEFAULT_PERMUTATIONS,
+    seed: int = 0,
+    level: float = 0.95,
+) -> dict[str, Any]:
     """Overview intervals, all pairwise comparisons and reference effects, in percent.
 
     The bootstrap draws are made once (seed ``seed``) and shared by every system, metric and
     paired difference; randomization uses seed ``seed + 1``, reference effects ``seed + 2``.
     """
     d = study.design
-    out: dict[str, Any] = {"n_draws": n_draws, "n_permutations": n_permutations, "seed": seed, "level": level,
-                           "overview": {}, "pairs": [], "reference": []}
+    out: dict[str, Any] = {
+        "n_draws": n_draws,
+        "n_permutations": n_permutations,
+        "seed": seed,
+        "level": level,
+        "overview": {},
+        "pairs": [],
+        "reference": [],
+    }
     if d is None:
         return out
     order = system_order(study)
@@ -57,8 +70,10 @@ def uncertainty(study: Study, *, n_draws: int = DEFAULT_DRAWS, n_permutations: i
         ci = percentile_interval(draws, level)
         point = d.weights @ v.T
         for i, s in enumerate(study.systems):
-            out["overview"].setdefault(s, {})[m] = {"value": 100 * float(point[i]),
-                                                   "ci": [100 * float(ci[0, i]), 100 * float(ci[1, i])]}
+            out["overview"].setdefault(s, {})[m] = {
+                "value": 100 * float(point[i]),
+                "ci": [100 * float(ci[0, i]), 100 * float(ci[1, i])],
+            }
     pairs = [(order[i], order[j]) for i, j in itertools.combinations(range(len(order)), 2)]
     if pairs:
         tests = pairwise_tests(d, metrics, w, pairs=pairs, n_permutations=n_permutations, seed=seed + 1, level=level)
@@ -78,12 +93,14 @@ def uncertainty(study: Study, *, n_draws: int = DEFAULT_DRAWS, n_permutations: i
         conds = {c for s, c in d.cells if s == source}
         if not {"none", "image"} <= conds:
             continue
-        effects = reference_effects(d, {"pa": metrics["pa"], "sr": metrics["sr"]}, source, n_draws=n_draws,
-                                    seed=seed + 2, level=level)
+        effects = reference_effects(
+            d, {"pa": metrics["pa"], "sr": metrics["sr"]}, source, n_draws=n_draws, seed=seed + 2, level=level
+        )
         rows: dict[str, dict[str, Any]] = {}
         for e in effects:
-            r = rows.setdefault(study.systems[e.system], {"system": study.systems[e.system], "source": source,
-                                                          "n_objects": e.n_objects})
+            r = rows.setdefault(
+                study.systems[e.system], {"system": study.systems[e.system], "source": source, "n_objects": e.n_objects}
+            )
             r[e.metric] = {"diff": 100 * e.diff, "ci": [100 * e.ci[0], 100 * e.ci[1]], "up": e.up, "down": e.down}
         out["reference"] += [rows[study.systems[i]] for i in order if study.systems[i] in rows]
     return out

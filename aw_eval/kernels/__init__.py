@@ -27,6 +27,20 @@ from aw_eval.kernels.fps import fps_batch
 from aw_eval.kernels.index import TaskIndex, mean_squared_norm
 from aw_eval.kernels.jax_icp import accelerator_present, icp_batch, part_cd_batch
 
-__all__ = ["FastSettings", "fast_settings", "ICPProblem", "ICPResult", "TaskIndex", "accelerator_present", "build_tree", "coarse_to_fine",
-           "compile_kernels", "fps_batch", "graph_for", "icp_batch", "mean_squared_norm", "part_cd_batch",
-           "same_basin"]
+__all__ = [
+    "FastSettings",
+    "fast_settings",
+    "ICPProblem",
+    "ICPResult",
+    "TaskIndex",
+    "accelerator_present",
+    "build_tree",
+    "coarse_to_fine",
+    "compile_kernels",
+    "fps_batch",
+    "graph_for",
+    "icp_batch",
+    "mean_squared_norm",
+    "part_cd_batch",
+    "same_basin",
+]

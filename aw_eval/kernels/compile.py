@@ -31,13 +31,17 @@ def compile_kernels() -> None:
     nearest_positions(ta, graph_for(ta), b)
     nearest_positions(ta, None, b)
     ICPProblem(a, b, tree_t=tb, tree_p=ta).run(np.eye(3), np.zeros(3), 3, 1e-9, stop_at=1e-4)
-    ICPProblem(a, b, tree_t=tb, tree_p=ta, graph_t=graph_for(tb), graph_p=graph_for(ta)).run(np.eye(3), np.zeros(3), 3, 1e-9)
+    ICPProblem(a, b, tree_t=tb, tree_p=ta, graph_t=graph_for(tb), graph_p=graph_for(ta)).run(
+        np.eye(3), np.zeros(3), 3, 1e-9
+    )
     parts = rng.normal(size=(2, 20, 3))
     trees = [build_tree(c) for c in parts]
     clouds = build_part_clouds([(tree, graph_for(tree)) for tree in trees])
     poses = np.array([[0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], [0.0, 0.2, 0.0, 0.0, 1.0, 0.0, 0.0]])
     turns = np.array([np.eye(3), np.diag([1.0, -1.0, -1.0])])  # the poses' rotations: identity, half turn about x
-    ICPProblem.for_assembly(parts, poses, 1.0, clouds, b, turns, tree_t=tb, graph_t=graph_for(tb)).run(np.eye(3), np.zeros(3), 3, 1e-9)
+    ICPProblem.for_assembly(parts, poses, 1.0, clouds, b, turns, tree_t=tb, graph_t=graph_for(tb)).run(
+        np.eye(3), np.zeros(3), 3, 1e-9
+    )
     coarse_icp(a.reshape(2, 20, 3), b[:20].reshape(2, 10, 3), np.eye(3)[None], np.zeros((1, 3)), 8, 3, 1e-9)
     fps_batch(rng.normal(size=(2, 50, 3)), 10)
     compile_search()

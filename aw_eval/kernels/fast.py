@@ -136,8 +136,9 @@ def _coarse_starts(p, t, r0, t0, max_iters, tol):
     return objs, rs, ts
 
 
-def coarse_icp(pred_parts: np.ndarray, target_parts: np.ndarray, r0: np.ndarray, t0: np.ndarray, m: int,
-               max_iters: int, tol: float):
+def coarse_icp(
+    pred_parts: np.ndarray, target_parts: np.ndarray, r0: np.ndarray, t0: np.ndarray, m: int, max_iters: int, tol: float
+):
     """Protocol ICP of every start on the first ``m`` samples of every part (compiled, brute-force
     neighbours: at ``8 P`` points a side that beats any tree).
 
@@ -182,16 +183,25 @@ def _distinct(order, r, t, keep: int, deg: float, dt: float) -> list[int]:
     return chosen
 
 
-def coarse_to_fine(index: TaskIndex, pred_parts: np.ndarray, full: ICPProblem, r0: np.ndarray, t0: np.ndarray,
-                   max_iters: int, tol: float, fast: FastSettings | None = None) -> tuple[ICPResult, int]:
+def coarse_to_fine(
+    index: TaskIndex,
+    pred_parts: np.ndarray,
+    full: ICPProblem,
+    r0: np.ndarray,
+    t0: np.ndarray,
+    max_iters: int,
+    tol: float,
+    fast: FastSettings | None = None,
+) -> tuple[ICPResult, int]:
     """Coarse-to-fine ICP of one checkpoint from the starts ``r0 (S, 3, 3)``, ``t0 (S, 3)`` (steps
     1-3 of the module docstring; no escalation): ``pred_parts (P, n, 3)`` normalized, ``full``
     its full-resolution problem, ``max_iters``/``tol`` the protocol's ICP budget and tolerance.
     Returns the full-resolution result and the index of the start it came from."""
     fast = fast or FAST
     uniq = _dedupe_starts(r0, t0, fast.same_start_tol)
-    c_obj, c_r, c_t = coarse_icp(pred_parts, index.target_parts, r0[uniq], t0[uniq], fast.coarse,
-                                 min(fast.coarse_iters, max_iters), tol)
+    c_obj, c_r, c_t = coarse_icp(
+        pred_parts, index.target_parts, r0[uniq], t0[uniq], fast.coarse, min(fast.coarse_iters, max_iters), tol
+    )
     order = np.lexsort((uniq, c_obj))  # by objective, ties to the earlier start
     chosen = _distinct(order, c_r, c_t, fast.keep, fast.distinct_deg, fast.distinct_t)
 

@@ -32,8 +32,14 @@ class TaskIndex:
     ``poses (P, 7)``, their ``rotations (P, 3, 3)`` and ``divisor`` with ``target_parts = (R
     clouds + t) / divisor`` (needed by :meth:`part_cd`)."""
 
-    def __init__(self, target_parts: np.ndarray, clouds: np.ndarray, poses: np.ndarray | None = None,
-                 divisor: float | None = None, rotations: np.ndarray | None = None):
+    def __init__(
+        self,
+        target_parts: np.ndarray,
+        clouds: np.ndarray,
+        poses: np.ndarray | None = None,
+        divisor: float | None = None,
+        rotations: np.ndarray | None = None,
+    ):
         self.target_parts = target_parts
         self.target = np.ascontiguousarray(target_parts.reshape(-1, 3))  # (P n, 3)
         self.tree_t = build_tree(self.target)
@@ -65,16 +71,25 @@ class TaskIndex:
         self.target_maps = None if self._poses is None else part_maps(self._poses, self._divisor, self._rotations)
         self._parts_built = True
 
-    def assembly_problem(self, poses: np.ndarray, rotations: np.ndarray, pred_parts: np.ndarray,
-                         divisor: float) -> ICPProblem:
+    def assembly_problem(
+        self, poses: np.ndarray, rotations: np.ndarray, pred_parts: np.ndarray, divisor: float
+    ) -> ICPProblem:
         """Full-resolution ICP of a checkpoint (``poses (P, 7)``, their ``rotations (P, 3, 3)``,
         ``pred_parts (P, n, 3)`` normalized) onto the target. The backward search walks the
         parts' baked clouds: nothing is built per checkpoint. Where a part has no Delaunay graph,
         the prediction gets its own tree and graph (same results, slower)."""
         self._build_parts()
         if self.part_clouds is not None:
-            return ICPProblem.for_assembly(pred_parts, poses, divisor, self.part_clouds, self.target, rotations,
-                                           tree_t=self.tree_t, graph_t=self.graph_t)
+            return ICPProblem.for_assembly(
+                pred_parts,
+                poses,
+                divisor,
+                self.part_clouds,
+                self.target,
+                rotations,
+                tree_t=self.tree_t,
+                graph_t=self.graph_t,
+            )
         return self.own_problem(pred_parts)[0]
 
     def own_problem(self, pred_parts: np.ndarray) -> tuple[ICPProblem, bool]:
@@ -82,7 +97,9 @@ class TaskIndex:
         (built here, per checkpoint); the flag says whether Qhull gave a graph."""
         tree_p = build_tree(pred_parts.reshape(-1, 3))
         graph_p = graph_for(tree_p)
-        prob = ICPProblem(tree_p.points, self.target, tree_t=self.tree_t, tree_p=tree_p, graph_t=self.graph_t, graph_p=graph_p)
+        prob = ICPProblem(
+            tree_p.points, self.target, tree_t=self.tree_t, tree_p=tree_p, graph_t=self.graph_t, graph_p=graph_p
+        )
         return prob, graph_p is not None
 
     def medium_problem(self, pred_parts: np.ndarray, m: int) -> ICPProblem:

@@ -26,14 +26,14 @@ the ``tol = 1e-9`` improvements need it.
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache, lru_cache
 
 import numpy as np
 
+from aw_eval.kernels.jaxcfg import jax_modules
 from aw_eval.kernels.leafbox import ABS as LEAF_ABS
 from aw_eval.kernels.leafbox import DEFAULT_CANDIDATES, LeafBoxes, build_leaf_boxes
 from aw_eval.kernels.leafbox import REL as LEAF_REL
-from aw_eval.kernels.jaxcfg import jax_modules
 
 __all__ = ["accelerator_present", "icp_batch", "nearest_in_leaves", "part_cd_batch", "fit_tile", "DEFAULT_TILE"]
 
@@ -68,8 +68,11 @@ def _nearest(jnp, lax, query, ref, tile: int):
     q = jnp.concatenate([query, jnp.zeros((pad, 3), query.dtype)]) if pad else query
 
     def one_tile(qt):  # (tile, 3) -> (tile,)
-        d = ((qt[:, None, 0] - ref[None, :, 0]) ** 2 + (qt[:, None, 1] - ref[None, :, 1]) ** 2
-             + (qt[:, None, 2] - ref[None, :, 2]) ** 2)
+        d = (
+            (qt[:, None, 0] - ref[None, :, 0]) ** 2
+            + (qt[:, None, 1] - ref[None, :, 1]) ** 2
+            + (qt[:, None, 2] - ref[None, :, 2]) ** 2
+        )
         return jnp.argmin(d, axis=1)
 
     idx = lax.map(one_tile, q.reshape(-1, tile, 3)).reshape(-1)[:n]
@@ -123,7 +126,9 @@ def _leaf_candidates(jnp, lax, leaves, y, x, ref, c: int):
     p, b, s = index.shape
     q = x.shape[0]
     if c >= p * b:  # every leaf read: plain brute force over ``ref`` (all certain; None known when tracing)
-        d = ((x[:, None, 0] - ref[None, :, 0]) ** 2 + (x[:, None, 1] - ref[None, :, 1]) ** 2) + (x[:, None, 2] - ref[None, :, 2]) ** 2
+        d = ((x[:, None, 0] - ref[None, :, 0]) ** 2 + (x[:, None, 1] - ref[None, :, 1]) ** 2) + (
+            x[:, None, 2] - ref[None, :, 2]
+        ) ** 2
         return jnp.argmin(d, axis=1).astype(jnp.int32), None
     g = jnp.maximum(jnp.maximum(lo[:, None] - y[:, :, None], y[:, :, None] - hi[:, None]), 0.0)  # (P, q, B, 3)
     lb = (g[..., 0] * g[..., 0] + g[..., 1] * g[..., 1]) + g[..., 2] * g[..., 2]
@@ -144,7 +149,9 @@ def _leaf_candidates(jnp, lax, leaves, y, x, ref, c: int):
     # whole leaves gathered (contiguous blocks), coordinates leaf-major: (P B, 3, S)
     sel = order[:, :c]
     yc, cand = jnp.swapaxes(ref[flat], 1, 2)[sel], flat[sel].reshape(q, c * s)  # (q, c, 3, S), (q, c S)
-    d = ((x[:, None, 0, None] - yc[:, :, 0]) ** 2 + (x[:, None, 1, None] - yc[:, :, 1]) ** 2) + (x[:, None, 2, None] - yc[:, :, 2]) ** 2
+    d = ((x[:, None, 0, None] - yc[:, :, 0]) ** 2 + (x[:, None, 1, None] - yc[:, :, 1]) ** 2) + (
+        x[:, None, 2, None] - yc[:, :, 2]
+    ) ** 2
     d = d.reshape(q, c * s)
     dmin = jnp.min(d, axis=1)
     idx = jnp.min(jnp.where(d == dmin[:, None], cand, jnp.iinfo(jnp.int32).max), axis=1)  # lowest index of the ties
@@ -200,8 +207,9 @@ def _brute_fix(jnp, lax, idx, answered, x, refs, lane_ref):
     flat = ~answered.reshape(-1)
     count = jnp.sum(flat)
     rows = min(FALLBACK_ROWS, flat.shape[0])
-    order = jnp.concatenate([jnp.nonzero(flat, size=flat.shape[0], fill_value=0)[0].astype(jnp.int32),
-                             jnp.zeros(rows, jnp.int32)])
+    order = jnp.concatenate(
+        [jnp.nonzero(flat, size=flat.shape[0], fill_value=0)[0].astype(jnp.int32), jnp.zeros(rows, jnp.int32)]
+    )
     xs = x.reshape(-1, 3)
 
     def body(c):
@@ -210,7 +218,9 @@ def _brute_fix(jnp, lax, idx, answered, x, refs, lane_ref):
         valid = s + jnp.arange(rows) < count
         ref = refs[lane_ref[pick // q]]  # (rows, M, 3)
         xq = xs[pick]
-        d = ((xq[:, None, 0] - ref[..., 0]) ** 2 + (xq[:, None, 1] - ref[..., 1]) ** 2) + (xq[:, None, 2] - ref[..., 2]) ** 2
+        d = ((xq[:, None, 0] - ref[..., 0]) ** 2 + (xq[:, None, 1] - ref[..., 1]) ** 2) + (
+            xq[:, None, 2] - ref[..., 2]
+        ) ** 2
         j = jnp.argmin(d, axis=1).astype(out.dtype)
         out = out.at[jnp.where(valid, pick, flat.shape[0])].set(j, mode="drop")
         return s + rows, out
@@ -219,31 +229,36 @@ def _brute_fix(jnp, lax, idx, answered, x, refs, lane_ref):
     return out.reshape(lanes, q), count
 
 
-@lru_cache(maxsize=None)
+@cache
 def _compiled_nearest(candidates: int):
     jax, jnp = jax_modules()
 
     def run(x, ref, leaves):
         n_parts = leaves[0].shape[0]
-        idx, ok = jax.vmap(lambda xl: _leaf_candidates(jnp, jax.lax, leaves, jnp.broadcast_to(xl[None], (n_parts,) + xl.shape),
-                                                       xl, ref, candidates))(x)
+        idx, ok = jax.vmap(
+            lambda xl: _leaf_candidates(
+                jnp, jax.lax, leaves, jnp.broadcast_to(xl[None], (n_parts,) + xl.shape), xl, ref, candidates
+            )
+        )(x)
         return _brute_fix(jnp, jax.lax, idx, ok, x, ref[None], jnp.zeros(x.shape[0], jnp.int32))
 
     return jax.jit(run)
 
 
-def nearest_in_leaves(x: np.ndarray, ref: np.ndarray, leaves: LeafBoxes,
-                      candidates: int | None = None) -> tuple[np.ndarray, int]:
+def nearest_in_leaves(
+    x: np.ndarray, ref: np.ndarray, leaves: LeafBoxes, candidates: int | None = None
+) -> tuple[np.ndarray, int]:
     """``(index (L, q), brute-forced)``: the nearest row of ``ref (M, 3)`` (first minimum) for
     every query ``x (L, q, 3)``, by the leaf boxes of ``ref``'s parts (:class:`LeafBoxes`, their
     frame ``ref``'s) and the brute-force path where they do not certify: the lookup ICP does."""
     _, jnp = jax_modules()
-    idx, count = _compiled_nearest(int(CANDIDATES if candidates is None else candidates))(jnp.asarray(x, dtype=jnp.float64), jnp.asarray(ref, dtype=jnp.float64),
-                                                    tuple(jnp.asarray(a) for a in leaves))
+    idx, count = _compiled_nearest(int(CANDIDATES if candidates is None else candidates))(
+        jnp.asarray(x, dtype=jnp.float64), jnp.asarray(ref, dtype=jnp.float64), tuple(jnp.asarray(a) for a in leaves)
+    )
     return np.asarray(idx), int(count)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _compiled_round(max_iters: int, tol: float, candidates: int, has_pred_leaves: bool):
     """``(init, round)``: every lane evaluated at its start; one round of the ICP of ``L``
     lanes (at most ROUND_ITERS iterations of every active lane)."""
@@ -254,10 +269,15 @@ def _compiled_round(max_iters: int, tol: float, candidates: int, has_pred_leaves
         """Both directions' neighbours and the objective of every lane at ``(r (L, 3, 3), t (L, 3))``."""
         p = preds[ck]  # (L, n, 3)
         x = jnp.einsum("lnk,ljk->lnj", p, r) + t[:, None, :]  # moved predictions
-        fwd, f_ok = _lanes(jax, lambda xl: _leaf_candidates(jnp, lax, tl, xl[None], xl, target, candidates),
-                           _group(x.shape[1], tl, candidates), x)
+        fwd, f_ok = _lanes(
+            jax,
+            lambda xl: _leaf_candidates(jnp, lax, tl, xl[None], xl, target, candidates),
+            _group(x.shape[1], tl, candidates),
+            x,
+        )
         fwd, nf = _brute_fix(jnp, lax, fwd, f_ok, x, target[None], jnp.zeros(x.shape[0], jnp.int32))
         if has_pred_leaves:
+
             def backward(rl, tl_, al, bl, xl):  # one lane: target points into each part's leaf frame
                 z = jnp.einsum("mk,kj->mj", target, rl) - (tl_ @ rl)[None, :]  # R^T (T - t), (m, 3)
                 y = jnp.einsum("mk,pjk->pmj", z, al) + bl[:, None, :]  # part maps after it, (P, m, 3)
@@ -316,10 +336,19 @@ def _bucket(n: int) -> int:
     return max(MIN_LANES, 1 << max(n - 1, 0).bit_length())
 
 
-def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float,
-              target_leaves: LeafBoxes | None = None, pred_leaves: LeafBoxes | None = None,
-              pred_maps: np.ndarray | None = None, stats: dict | None = None,
-              candidates: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def icp_batch(
+    preds: np.ndarray,
+    target: np.ndarray,
+    r0: np.ndarray,
+    t0: np.ndarray,
+    max_iters: int,
+    tol: float,
+    target_leaves: LeafBoxes | None = None,
+    pred_leaves: LeafBoxes | None = None,
+    pred_maps: np.ndarray | None = None,
+    stats: dict | None = None,
+    candidates: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The protocol's ICP of every checkpoint from every start.
 
     ``preds (C, n, 3)`` normalized predictions of one task, ``target (m, 3)``, starts
@@ -342,7 +371,9 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
         target_leaves = build_leaf_boxes(target)
     c, s = r0.shape[:2]
     has_pl = pred_leaves is not None
-    init, round_ = _compiled_round(int(max_iters), float(tol), int(CANDIDATES if candidates is None else candidates), has_pl)
+    init, round_ = _compiled_round(
+        int(max_iters), float(tol), int(CANDIDATES if candidates is None else candidates), has_pl
+    )
     dev = lambda a: jnp.asarray(a)  # noqa: E731
     tl = tuple(dev(a) for a in target_leaves)
     pl = tuple(dev(a) for a in pred_leaves) if has_pl else ()
@@ -365,19 +396,41 @@ def icp_batch(preds: np.ndarray, target: np.ndarray, r0: np.ndarray, t0: np.ndar
         counters["queries"] += len(pad) * per_lane
         obj = np.asarray(obj)[: len(ids)]
         best_obj[ids] = obj
-        live.append((ids, np.ones(len(ids), bool), np.zeros(len(ids), np.int64), obj, np.asarray(fwd)[: len(ids)],
-                     np.asarray(bwd)[: len(ids)], obj.copy(), r_all[ids], t_all[ids]))
+        live.append(
+            (
+                ids,
+                np.ones(len(ids), bool),
+                np.zeros(len(ids), np.int64),
+                obj,
+                np.asarray(fwd)[: len(ids)],
+                np.asarray(bwd)[: len(ids)],
+                obj.copy(),
+                r_all[ids],
+                t_all[ids],
+            )
+        )
     ids, active, its, prev, fwd, bwd, best, br, bt = (np.concatenate(z) for z in zip(*live))
     active &= max_iters > 0
     while active.any():
         keep = np.flatnonzero(active)
-        ids, active, its, prev, fwd, bwd, best, br, bt = (a[keep] for a in (ids, active, its, prev, fwd, bwd, best, br, bt))
+        ids, active, its, prev, fwd, bwd, best, br, bt = (
+            a[keep] for a in (ids, active, its, prev, fwd, bwd, best, br, bt)
+        )
         counters["rounds"] += 1
         for lo in range(0, len(ids), cap):  # the lanes still running, at most cap per call
             part = slice(lo, min(len(ids), lo + cap))
             n = part.stop - part.start
             pad = _pad(np.arange(part.start, part.stop))
-            state = (active[pad] & (pad < part.stop), its[pad], prev[pad], fwd[pad], bwd[pad], best[pad], br[pad], bt[pad])
+            state = (
+                active[pad] & (pad < part.stop),
+                its[pad],
+                prev[pad],
+                fwd[pad],
+                bwd[pad],
+                best[pad],
+                br[pad],
+                bt[pad],
+            )
             out, nflag = round_(pr, tgt, tl, pl, maps, dev(ck_all[ids[pad]]), tuple(dev(a) for a in state))
             new_its = np.asarray(out[1])[:n]
             iters = int((new_its - its[part]).max())  # every lane of the bucket computed that many
@@ -399,7 +452,7 @@ def _pad(ids: np.ndarray) -> np.ndarray:
     return np.concatenate([ids, np.full(size - len(ids), ids[-1] if len(ids) else 0, ids.dtype)])
 
 
-@lru_cache(maxsize=None)
+@cache
 def _compiled_part_cd(tile: int):
     jax, jnp = jax_modules()
     lax = jax.lax
@@ -413,8 +466,9 @@ def _compiled_part_cd(tile: int):
     return jax.jit(jax.vmap(listed, (0, None, None, None)))
 
 
-def part_cd_batch(moved_parts: np.ndarray, target_parts: np.ndarray, pairs: np.ndarray | None = None,
-                  tile: int = DEFAULT_TILE) -> np.ndarray:
+def part_cd_batch(
+    moved_parts: np.ndarray, target_parts: np.ndarray, pairs: np.ndarray | None = None, tile: int = DEFAULT_TILE
+) -> np.ndarray:
     """``C (C, P, P)``: ``C[c, i, j]`` = CD(registered pred part ``i`` of checkpoint ``c``, target
     part ``j``) for ``moved_parts (C, P, n, 3)`` and ``target_parts (P, n, 3)``, for the pairs
     ``(i, j)`` of ``pairs (Q, 2)`` (default: all; ``inf`` elsewhere). Brute force: a checkpoint
@@ -424,9 +478,12 @@ def part_cd_batch(moved_parts: np.ndarray, target_parts: np.ndarray, pairs: np.n
     if pairs is None:
         pairs = np.array([(i, j) for i in range(p) for j in range(p)])
     pairs = np.asarray(pairs, np.int64).reshape(-1, 2)
-    got = _compiled_part_cd(fit_tile(c * len(pairs), n, tile))(jnp.asarray(moved_parts, dtype=jnp.float64),
-                                                              jnp.asarray(target_parts, dtype=jnp.float64),
-                                                              jnp.asarray(pairs[:, 0]), jnp.asarray(pairs[:, 1]))
+    got = _compiled_part_cd(fit_tile(c * len(pairs), n, tile))(
+        jnp.asarray(moved_parts, dtype=jnp.float64),
+        jnp.asarray(target_parts, dtype=jnp.float64),
+        jnp.asarray(pairs[:, 0]),
+        jnp.asarray(pairs[:, 1]),
+    )
     out = np.full((c, p, p), np.inf)
     out[:, pairs[:, 0], pairs[:, 1]] = np.asarray(got)
     return out

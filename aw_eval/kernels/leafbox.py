@@ -29,8 +29,17 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["LeafBoxes", "DEFAULT_LEAF", "DEFAULT_CANDIDATES", "REL", "ABS", "build_leaf_boxes", "build_part_leaves",
-           "brute_first_min", "leaf_lookup"]
+__all__ = [
+    "LeafBoxes",
+    "DEFAULT_LEAF",
+    "DEFAULT_CANDIDATES",
+    "REL",
+    "ABS",
+    "build_leaf_boxes",
+    "build_part_leaves",
+    "brute_first_min",
+    "leaf_lookup",
+]
 
 DEFAULT_LEAF = 32  # S: points a leaf at most
 DEFAULT_CANDIDATES = 8  # C: leaves a query reads (8 x 32: under 5 % fallback in benchmarks/grid_coverage.py)
@@ -94,7 +103,9 @@ def build_part_leaves(parts: np.ndarray, leaf: int = DEFAULT_LEAF) -> LeafBoxes:
 def brute_first_min(x: np.ndarray, ref: np.ndarray) -> np.ndarray:
     """Brute-force nearest rows of ``ref (m, 3)`` for ``x (k, 3)``: first minimum of the squared
     distances summed as the protocol sums them (a reference for tests)."""
-    d = ((x[:, None, 0] - ref[None, :, 0]) ** 2 + (x[:, None, 1] - ref[None, :, 1]) ** 2) + (x[:, None, 2] - ref[None, :, 2]) ** 2
+    d = ((x[:, None, 0] - ref[None, :, 0]) ** 2 + (x[:, None, 1] - ref[None, :, 1]) ** 2) + (
+        x[:, None, 2] - ref[None, :, 2]
+    ) ** 2
     return np.argmin(d, axis=1)
 
 
@@ -104,8 +115,9 @@ def box_d2(lo: np.ndarray, hi: np.ndarray, y: np.ndarray) -> np.ndarray:
     return (g[..., 0] * g[..., 0] + g[..., 1] * g[..., 1]) + g[..., 2] * g[..., 2]
 
 
-def leaf_lookup(leaves: LeafBoxes, y: np.ndarray, x: np.ndarray, ref: np.ndarray,
-                candidates: int = DEFAULT_CANDIDATES) -> tuple[np.ndarray, np.ndarray]:
+def leaf_lookup(
+    leaves: LeafBoxes, y: np.ndarray, x: np.ndarray, ref: np.ndarray, candidates: int = DEFAULT_CANDIDATES
+) -> tuple[np.ndarray, np.ndarray]:
     """Host version of the XLA lookup (the same rule; boxes picked in float64 here, in float32
     there): ``(index (k,), answered (k,))`` for queries ``y (P, k, 3)``
     in every cloud's frame and ``x (k, 3)`` the same queries in ``ref``'s frame (``ref (P n, 3)``
@@ -122,5 +134,5 @@ def leaf_lookup(leaves: LeafBoxes, y: np.ndarray, x: np.ndarray, ref: np.ndarray
     idx = np.where(d == dmin[:, None], cand, np.iinfo(np.int32).max).min(axis=1)
     if c == p * b:
         return idx, np.ones(len(x), bool)
-    nxt = np.take_along_axis(lb, order[:, c:c + 1], 1)[:, 0]
+    nxt = np.take_along_axis(lb, order[:, c : c + 1], 1)[:, 0]
     return idx, nxt * (1 - REL) - ABS > dmin

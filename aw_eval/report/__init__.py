@@ -4,8 +4,9 @@ directory."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import orjson
 
@@ -16,8 +17,16 @@ from aw_eval.report.plots import write_plots
 from aw_eval.report.results import SCHEMA, SCHEMA_VERSION, AnalysisSettings, build_results
 from aw_eval.study.table import Study
 
-__all__ = ["SCHEMA", "SCHEMA_VERSION", "AnalysisSettings", "build_results", "render_markdown", "write_plots",
-           "write_outputs", "write_json"]
+__all__ = [
+    "SCHEMA",
+    "SCHEMA_VERSION",
+    "AnalysisSettings",
+    "build_results",
+    "render_markdown",
+    "write_plots",
+    "write_outputs",
+    "write_json",
+]
 
 
 def write_json(path: Path, doc: Any) -> None:
@@ -33,9 +42,19 @@ def _refinement(suite_dir: str, runs_dir: str) -> dict[str, Any] | None:
     return refinement_study(suite_dir, runs_dir)
 
 
-def write_outputs(study: Study, out_dir: str | Path, settings: AnalysisSettings, *, suite_dir: str = "",
-                  runs_dir: str = "", score_stats: dict[str, Any] | None = None, plots: bool = True,
-                  html: bool = True, log: Callable[[str], None] | None = None, jobs: int = 1) -> dict[str, Any]:
+def write_outputs(
+    study: Study,
+    out_dir: str | Path,
+    settings: AnalysisSettings,
+    *,
+    suite_dir: str = "",
+    runs_dir: str = "",
+    score_stats: dict[str, Any] | None = None,
+    plots: bool = True,
+    html: bool = True,
+    log: Callable[[str], None] | None = None,
+    jobs: int = 1,
+) -> dict[str, Any]:
     """Write every output; returns ``{"doc": scores document, "files": {name: path}}``. ``jobs``:
     processes that build report.html's cards."""
     out = Path(out_dir)
@@ -44,8 +63,12 @@ def write_outputs(study: Study, out_dir: str | Path, settings: AnalysisSettings,
     refinement = _refinement(suite_dir, runs_dir)  # only when RUNS/refinement_study.json exists
     if refinement is not None:
         doc["refinement"] = refinement
-    files = {"scores": out / "scores.json", "tasks_csv": out / "tasks.csv", "checkpoints_csv": out / "checkpoints.csv",
-             "report": out / "report.md"}
+    files = {
+        "scores": out / "scores.json",
+        "tasks_csv": out / "tasks.csv",
+        "checkpoints_csv": out / "checkpoints.csv",
+        "report": out / "report.md",
+    }
     write_task_csv(study, files["tasks_csv"])
     write_checkpoint_csv(study, files["checkpoints_csv"])
     made = write_plots(doc, out / "plots") if plots else {}

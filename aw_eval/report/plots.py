@@ -140,8 +140,11 @@ def _magnitudes(doc, path: Path) -> str | None:
     systems = [s for s in _systems(doc) if s in dy["systems"]]
     if not systems:
         return None
-    have = any(x is not None for s in systems for x in dy["systems"][s]["magnitudes"]["translation"] +
-               dy["systems"][s]["magnitudes"]["rotation_deg"])
+    have = any(
+        x is not None
+        for s in systems
+        for x in dy["systems"][s]["magnitudes"]["translation"] + dy["systems"][s]["magnitudes"]["rotation_deg"]
+    )
     if not have:
         return None
     centers = (np.arange(dy["n_bins"]) + 0.5) / dy["n_bins"]
@@ -170,7 +173,7 @@ def _reference(doc, path: Path) -> str | None:
     if not ref:
         return None
     fig, axes = plt.subplots(1, 2, figsize=(10, 0.55 * len(ref) + 1.8), sharey=True)
-    labels = [f"{r['system']} ({r['source']})" if len({x['source'] for x in ref}) > 1 else r["system"] for r in ref]
+    labels = [f"{r['system']} ({r['source']})" if len({x["source"] for x in ref}) > 1 else r["system"] for r in ref]
     y = np.arange(len(ref))[::-1]
     for ax, m, name in zip(axes, ("sr", "pa"), ("ΔSR (percentage points)", "ΔPA (percentage points)")):
         d = np.array([r[m]["diff"] for r in ref])
@@ -185,8 +188,10 @@ def _reference(doc, path: Path) -> str | None:
         ax.grid(alpha=0.3, axis="x")
         ax.set_title(f"{m.upper()} gain")
     axes[0].set_yticks(y, labels)
-    fig.suptitle("Reference-image effect (image minus no reference, same objects): mean and paired 95% bootstrap "
-                 "interval", fontsize=10)
+    fig.suptitle(
+        "Reference-image effect (image minus no reference, same objects): mean and paired 95% bootstrap interval",
+        fontsize=10,
+    )
     fig.tight_layout()
     return _save(fig, path)
 
@@ -196,9 +201,14 @@ def write_plots(doc: dict[str, Any], out_dir: Path) -> dict[str, str]:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     made = {}
-    for name, fn in (("quality_normalized", _quality_normalized), ("quality_budget", _quality_budget),
-                     ("thresholds", _thresholds), ("activity", _activity), ("magnitudes", _magnitudes),
-                     ("reference", _reference)):
+    for name, fn in (
+        ("quality_normalized", _quality_normalized),
+        ("quality_budget", _quality_budget),
+        ("thresholds", _thresholds),
+        ("activity", _activity),
+        ("magnitudes", _magnitudes),
+        ("reference", _reference),
+    ):
         p = fn(doc, out_dir / f"{name}.png")
         if p is not None:
             made[name] = p

@@ -60,27 +60,43 @@ def render_refinement(section: dict[str, Any], plot: str | None = None) -> str:
     if "error" in section:
         return "\n".join(out + [f"Not scored: {section['error']}", ""])
     n = len(section["matched"])
-    out.append(f"Agent `{section['agent']}`, refiner `{section['refiner']}`: fracture protocol (5000 shared "
-               f"area-weighted samples, at least 20 a part; anchor-aligned), over the {n} of {section['tasks']} tasks "
-               "where all four arms finished. Arrows give the order of execution.")
-    out += ["", "| Method | System | RE (deg) | TE (x100) | PA (%) | CD (x1000) | failed runs |",
-            "|---|---|---:|---:|---:|---:|---:|"]
+    out.append(
+        f"Agent `{section['agent']}`, refiner `{section['refiner']}`: fracture protocol (5000 shared "
+        f"area-weighted samples, at least 20 a part; anchor-aligned), over the {n} of {section['tasks']} tasks "
+        "where all four arms finished. Arrows give the order of execution."
+    )
+    out += [
+        "",
+        "| Method | System | RE (deg) | TE (x100) | PA (%) | CD (x1000) | failed runs |",
+        "|---|---|---:|---:|---:|---:|---:|",
+    ]
     for arm, row in section["table"].items():
-        out.append(f"| {section['arms'][arm]['label']} | `{row['system']}` | {_f(row.get('re'))} | {_f(row.get('te'), 100)} | "
-                   f"{_f(row.get('pa'), 100)} | {_f(row.get('cd'), 1000, 3)} | {row['failed']} |")
-    out += ["", f"Paired per-task changes (unchanged: a difference within {section['tolerance']:g}):", "",
-            "| Arm | Relative to | Metric | improved | degraded | unchanged |", "|---|---|---|---:|---:|---:|"]
+        out.append(
+            f"| {section['arms'][arm]['label']} | `{row['system']}` | {_f(row.get('re'))} | {_f(row.get('te'), 100)} | "
+            f"{_f(row.get('pa'), 100)} | {_f(row.get('cd'), 1000, 3)} | {row['failed']} |"
+        )
+    out += [
+        "",
+        f"Paired per-task changes (unchanged: a difference within {section['tolerance']:g}):",
+        "",
+        "| Arm | Relative to | Metric | improved | degraded | unchanged |",
+        "|---|---|---|---:|---:|---:|",
+    ]
     names = {"pa": "PA", "cd": "shape CD"}
     for p in section["pairs"]:
-        out.append(f"| {section['arms'][p['arm']]['label']} | {section['arms'][p['baseline']]['label']} | {names[p['metric']]} | "
-                   f"{p.get('improved', '-')} | {p.get('degraded', '-')} | {p.get('unchanged', '-')} |")
+        out.append(
+            f"| {section['arms'][p['arm']]['label']} | {section['arms'][p['baseline']]['label']} | {names[p['metric']]} | "
+            f"{p.get('improved', '-')} | {p.get('degraded', '-')} | {p.get('unchanged', '-')} |"
+        )
     failed = {a: f for a, f in section["failures"].items() if f}
     if failed:
         out += ["", "Failed runs (left out of the table):", ""]
         for arm, tasks in failed.items():
             first = next(iter(tasks.items()))
-            out.append(f"- {section['arms'][arm]['label']} (`{section['arms'][arm]['system']}`): {len(tasks)} "
-                       f"(first: {first[0]}: {first[1]})")
+            out.append(
+                f"- {section['arms'][arm]['label']} (`{section['arms'][arm]['system']}`): {len(tasks)} "
+                f"(first: {first[0]}: {first[1]})"
+            )
     if plot:
         out += ["", f"![Paired shape CD, log-log; points below the diagonal improve]({plot})"]
     return "\n".join(out) + "\n"

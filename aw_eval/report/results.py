@@ -40,16 +40,34 @@ def _run_entry(study: Study, system: str, task_id: str) -> dict[str, Any]:
     r = rec.score
     info = rec.info
     entry: dict[str, Any] = {
-        "system": system, "task_id": task_id, "status": r.status, "problems": list(r.problems),
-        "final_from": r.final_from, "end_reason": r.end_reason, "truncated": r.truncated,
-        "n_checkpoints": r.n_checkpoints, "n_calls": int(len(r.call_t)), "n_edits": int(len(r.edit_call)),
-        "final_mode": r.final_mode or None, "checkpoint_mode": r.checkpoint_mode or None,
-        "pa": 100 * r.pa, "sr": r.sr, "sra": r.sra, "scd": _f(r.scd),
-        "part_errors": [_f(e) for e in r.part_errors], "assignment": [int(a) for a in r.assignment],
-        "run_json": None if info is None else {
-            "ended": info.ended, "wall_seconds": info.wall_seconds, "mcp_calls": info.mcp_calls,
-            "tokens": None if info.tokens is None else info.tokens.model_dump(), "cost_usd": info.cost_usd,
-            "declared_complete": info.declared_complete},
+        "system": system,
+        "task_id": task_id,
+        "status": r.status,
+        "problems": list(r.problems),
+        "final_from": r.final_from,
+        "end_reason": r.end_reason,
+        "truncated": r.truncated,
+        "n_checkpoints": r.n_checkpoints,
+        "n_calls": int(len(r.call_t)),
+        "n_edits": int(len(r.edit_call)),
+        "final_mode": r.final_mode or None,
+        "checkpoint_mode": r.checkpoint_mode or None,
+        "pa": 100 * r.pa,
+        "sr": r.sr,
+        "sra": r.sra,
+        "scd": _f(r.scd),
+        "part_errors": [_f(e) for e in r.part_errors],
+        "assignment": [int(a) for a in r.assignment],
+        "run_json": None
+        if info is None
+        else {
+            "ended": info.ended,
+            "wall_seconds": info.wall_seconds,
+            "mcp_calls": info.mcp_calls,
+            "tokens": None if info.tokens is None else info.tokens.model_dump(),
+            "cost_usd": info.cost_usd,
+            "declared_complete": info.declared_complete,
+        },
         "run_json_problem": rec.info_problem,
     }
     if r.scored and r.n_parts:
@@ -74,31 +92,56 @@ def protocol_of(doc: dict[str, Any]) -> ProtocolSettings:
 PARTIAL_STATUSES = ("error", "task_error")
 
 
-def build_results(study: Study, settings: AnalysisSettings, *, suite_dir: str = "", runs_dir: str = "",
-                  score_stats: dict[str, Any] | None = None) -> dict[str, Any]:
+def build_results(
+    study: Study,
+    settings: AnalysisSettings,
+    *,
+    suite_dir: str = "",
+    runs_dir: str = "",
+    score_stats: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """Run every analysis; returns the ``scores.json`` document."""
     tasks = []
     for e in study.entries:
         f = study.facts.get(e.task_id)
-        tasks.append({"task_id": e.task_id, "source": e.source, "condition": e.condition, "object_id": e.object_id,
-                      "category": e.category, "variant": e.variant, "base_task_id": e.base_task_id,
-                      "weight": e.weight, "n_parts": study.n_parts(e.task_id),
-                      "part_size_ratio": _f(f.part_size_ratio) if f else None})
+        tasks.append(
+            {
+                "task_id": e.task_id,
+                "source": e.source,
+                "condition": e.condition,
+                "object_id": e.object_id,
+                "category": e.category,
+                "variant": e.variant,
+                "base_task_id": e.base_task_id,
+                "weight": e.weight,
+                "n_parts": study.n_parts(e.task_id),
+                "part_size_ratio": _f(f.part_size_ratio) if f else None,
+            }
+        )
     runs = [_run_entry(study, s, e.task_id) for s in study.systems for e in study.entries]
     by_status: dict[str, list[dict[str, str]]] = {}
     for r in runs:
         if r["status"] != "scored":
-            by_status.setdefault(r["status"], []).append({"system": r["system"], "task_id": r["task_id"],
-                                                          "problems": r["problems"]})
+            by_status.setdefault(r["status"], []).append(
+                {"system": r["system"], "task_id": r["task_id"], "problems": r["problems"]}
+            )
     doc: dict[str, Any] = {
         "format": SCHEMA,
         "format_version": SCHEMA_VERSION,
-        "generated_at": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "suite": {"name": study.suite_name, "dir": suite_dir, "n_tasks": len(study.entries),
-                  "n_original": len(study.original_ids)},
+        "generated_at": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "suite": {
+            "name": study.suite_name,
+            "dir": suite_dir,
+            "n_tasks": len(study.entries),
+            "n_original": len(study.original_ids),
+        },
         "runs_dir": runs_dir,
-        "settings": {**study.settings, "seed": settings.seed, "bootstrap_draws": settings.n_draws,
-                     "permutations": settings.n_permutations},
+        "settings": {
+            **study.settings,
+            "seed": settings.seed,
+            "bootstrap_draws": settings.n_draws,
+            "permutations": settings.n_permutations,
+        },
         "scoring": score_stats or {},
         "systems": list(study.systems),
         "roles": analyses.system_roles(study),
@@ -112,8 +155,9 @@ def build_results(study: Study, settings: AnalysisSettings, *, suite_dir: str = 
         "quality": analyses.quality(study),
         "resources": analyses.resources(study),
         "outcomes": analyses.outcomes(study),
-        "uncertainty": analyses.uncertainty(study, n_draws=settings.n_draws, n_permutations=settings.n_permutations,
-                                            seed=settings.seed),
+        "uncertainty": analyses.uncertainty(
+            study, n_draws=settings.n_draws, n_permutations=settings.n_permutations, seed=settings.seed
+        ),
         "thresholds": analyses.threshold_sweep(study),
         "failures": analyses.failure_analysis(study),
         "dynamics": analyses.dynamics(study),

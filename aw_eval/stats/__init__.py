@@ -11,7 +11,15 @@ from aw_eval.stats.bootstrap import (
     percentile_interval,
 )
 from aw_eval.stats.design import CONDITION_ORDER, SOURCE_ORDER, Design, TaskMeta, ordered_sources
-from aw_eval.stats.randomization import DEFAULT_PERMUTATIONS, PairTest, holm, object_contributions, pairwise_tests, randomization_pvalues, smallest_pvalue
+from aw_eval.stats.randomization import (
+    DEFAULT_PERMUTATIONS,
+    PairTest,
+    holm,
+    object_contributions,
+    pairwise_tests,
+    randomization_pvalues,
+    smallest_pvalue,
+)
 from aw_eval.stats.reference import ReferenceEffect, paired_objects, reference_effects
 from aw_eval.stats.weighted import weighted_mean, weighted_median
 

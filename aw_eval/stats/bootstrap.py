@@ -15,8 +15,14 @@ import numpy as np
 
 from aw_eval.stats.design import Design
 
-__all__ = ["object_counts", "draw_weights", "percentile_interval", "BootstrapResult", "bootstrap_overall",
-           "paired_object_bootstrap"]
+__all__ = [
+    "object_counts",
+    "draw_weights",
+    "percentile_interval",
+    "BootstrapResult",
+    "bootstrap_overall",
+    "paired_object_bootstrap",
+]
 
 DEFAULT_DRAWS = 10_000
 DEFAULT_LEVEL = 0.95
@@ -81,8 +87,15 @@ class BootstrapResult:
         return percentile_interval(self.draws[:, i] - self.draws[:, j], level)
 
 
-def bootstrap_overall(design: Design, values: np.ndarray, *, n_draws: int = DEFAULT_DRAWS, seed: int = 0,
-                      level: float = DEFAULT_LEVEL, weights: np.ndarray | None = None) -> BootstrapResult:
+def bootstrap_overall(
+    design: Design,
+    values: np.ndarray,
+    *,
+    n_draws: int = DEFAULT_DRAWS,
+    seed: int = 0,
+    level: float = DEFAULT_LEVEL,
+    weights: np.ndarray | None = None,
+) -> BootstrapResult:
     """Bootstrap of the eq.-3 Overall of ``values: (S, T)`` (one row per system).
 
     ``weights: (B, T)`` reuses draws already made (so that several metrics share resamples);
@@ -99,8 +112,9 @@ def bootstrap_overall(design: Design, values: np.ndarray, *, n_draws: int = DEFA
     return BootstrapResult(design.weights @ values.T, draws, percentile_interval(draws, level))
 
 
-def paired_object_bootstrap(diffs: np.ndarray, *, n_draws: int = DEFAULT_DRAWS, seed: int = 0,
-                            level: float = DEFAULT_LEVEL) -> tuple[np.ndarray, np.ndarray]:
+def paired_object_bootstrap(
+    diffs: np.ndarray, *, n_draws: int = DEFAULT_DRAWS, seed: int = 0, level: float = DEFAULT_LEVEL
+) -> tuple[np.ndarray, np.ndarray]:
     """Mean and interval of per-object differences ``diffs: (S, O)`` (NaN = object not paired
     for that system is not allowed). Every system uses the same object resamples.
 

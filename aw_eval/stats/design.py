@@ -75,7 +75,7 @@ class Design:
     weights: np.ndarray
 
     @classmethod
-    def from_tasks(cls, tasks: Sequence[TaskMeta]) -> "Design":
+    def from_tasks(cls, tasks: Sequence[TaskMeta]) -> Design:
         tasks = tuple(tasks)
         if not tasks:
             raise ValueError("a design needs at least one task")
@@ -105,8 +105,18 @@ class Design:
         object_source = np.array([src_idx[s] for s, _ in objects], dtype=np.int64)
         task_weight = np.array([t.weight for t in tasks], dtype=np.float64)
         weights = overall_weights(task_cell, cell_source, task_weight)
-        return cls(tasks, sources, tuple(cells), tuple(objects), task_cell, task_object, cell_source,
-                   object_source, task_weight, weights)
+        return cls(
+            tasks,
+            sources,
+            tuple(cells),
+            tuple(objects),
+            task_cell,
+            task_object,
+            cell_source,
+            object_source,
+            task_weight,
+            weights,
+        )
 
     @property
     def n_tasks(self) -> int:
@@ -131,7 +141,7 @@ class Design:
             out[k] = cw[cells].mean(axis=0)
         return out
 
-    def subset(self, mask: np.ndarray) -> "Design":
+    def subset(self, mask: np.ndarray) -> Design:
         """The design of the tasks where ``mask: (T,)`` is true (weights recomputed)."""
         return Design.from_tasks([t for t, m in zip(self.tasks, mask) if m])
 

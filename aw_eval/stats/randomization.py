@@ -33,7 +33,9 @@ def object_contributions(design: Design, diffs: np.ndarray) -> np.ndarray:
     return onehot.T @ (design.weights[:, None] * diffs.T)
 
 
-def randomization_pvalues(contrib: np.ndarray, *, n_permutations: int = DEFAULT_PERMUTATIONS, seed: int = 0) -> np.ndarray:
+def randomization_pvalues(
+    contrib: np.ndarray, *, n_permutations: int = DEFAULT_PERMUTATIONS, seed: int = 0
+) -> np.ndarray:
     """Two-sided add-one p-values ``(K,)`` of sign-flip tests on ``contrib: (O, K)``.
 
     Every test uses the same sign draws. Chunked so memory stays ``O(chunk * (O + K))``.
@@ -98,9 +100,16 @@ class PairTest:
     p_holm: float
 
 
-def pairwise_tests(design: Design, metrics: dict[str, np.ndarray], draw_w: np.ndarray, *,
-                   pairs: list[tuple[int, int]], n_permutations: int = DEFAULT_PERMUTATIONS, seed: int = 0,
-                   level: float = 0.95) -> list[PairTest]:
+def pairwise_tests(
+    design: Design,
+    metrics: dict[str, np.ndarray],
+    draw_w: np.ndarray,
+    *,
+    pairs: list[tuple[int, int]],
+    n_permutations: int = DEFAULT_PERMUTATIONS,
+    seed: int = 0,
+    level: float = 0.95,
+) -> list[PairTest]:
     """Paired differences, bootstrap intervals and Holm-corrected randomization p-values.
 
     ``metrics``: name -> ``(S, T)`` per-task values; ``draw_w: (B, T)`` shared bootstrap weights;
@@ -125,6 +134,8 @@ def pairwise_tests(design: Design, metrics: dict[str, np.ndarray], draw_w: np.nd
     i = 0
     for name in names:
         for a, b in pairs:
-            out.append(PairTest(a, b, name, float(point[i]), (float(ci[0, i]), float(ci[1, i])), float(p[i]), float(p_adj[i])))
+            out.append(
+                PairTest(a, b, name, float(point[i]), (float(ci[0, i]), float(ci[1, i])), float(p[i]), float(p_adj[i]))
+            )
             i += 1
     return out

@@ -16,7 +16,9 @@ __all__ = ["paired_objects", "ReferenceEffect", "reference_effects"]
 _TIE = 1e-12
 
 
-def paired_objects(design: Design, source: str, treated: str = "image", control: str = "none") -> tuple[list[str], np.ndarray, np.ndarray]:
+def paired_objects(
+    design: Design, source: str, treated: str = "image", control: str = "none"
+) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Objects of ``source`` that have both conditions: ``(object_ids, treated (O, T), control (O, T))``
     where row ``o`` averages the object's tasks of that condition."""
     ids: list[str] = []
@@ -48,9 +50,17 @@ class ReferenceEffect:
     down: int
 
 
-def reference_effects(design: Design, metrics: dict[str, np.ndarray], source: str = "partnet", *,
-                      treated: str = "image", control: str = "none", n_draws: int = DEFAULT_DRAWS,
-                      seed: int = 0, level: float = 0.95) -> list[ReferenceEffect]:
+def reference_effects(
+    design: Design,
+    metrics: dict[str, np.ndarray],
+    source: str = "partnet",
+    *,
+    treated: str = "image",
+    control: str = "none",
+    n_draws: int = DEFAULT_DRAWS,
+    seed: int = 0,
+    level: float = 0.95,
+) -> list[ReferenceEffect]:
     """Per system and metric (``(S, T)`` values) the paired treated-minus-control effect on the
     objects of ``source`` with both conditions. Empty when there are no such objects.
     All systems and metrics share the same object resamples (same seed)."""
@@ -63,6 +73,15 @@ def reference_effects(design: Design, metrics: dict[str, np.ndarray], source: st
         diffs = v @ mt.T - v @ mc.T  # (S, O)
         mean, ci = paired_object_bootstrap(diffs, n_draws=n_draws, seed=seed, level=level)
         for s in range(v.shape[0]):
-            out.append(ReferenceEffect(s, name, len(ids), float(mean[s]), (float(ci[0, s]), float(ci[1, s])),
-                                       int(np.sum(diffs[s] > _TIE)), int(np.sum(diffs[s] < -_TIE))))
+            out.append(
+                ReferenceEffect(
+                    s,
+                    name,
+                    len(ids),
+                    float(mean[s]),
+                    (float(ci[0, s]), float(ci[1, s])),
+                    int(np.sum(diffs[s] > _TIE)),
+                    int(np.sum(diffs[s] < -_TIE)),
+                )
+            )
     return out

@@ -50,8 +50,14 @@ def geometry_key(task_dir: Path, targets_path: Path) -> str:
 
 def run_key(geom_key: str, run_dir: Path, settings_key: str, evaluator_version: str) -> str:
     h = hashlib.sha256()
-    for part in (CACHE_VERSION, evaluator_version, settings_key, geom_key,
-                 file_digest(run_dir / "trajectory.jsonl"), file_digest(run_dir / "final.json")):
+    for part in (
+        CACHE_VERSION,
+        evaluator_version,
+        settings_key,
+        geom_key,
+        file_digest(run_dir / "trajectory.jsonl"),
+        file_digest(run_dir / "final.json"),
+    ):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()[:_KEY_LEN]

@@ -30,8 +30,14 @@ class Decreases:
     persist_both: np.ndarray
 
 
-def pa_decreases(geom, poses: np.ndarray, pa: np.ndarray, assignment: np.ndarray, reg_rotation: np.ndarray,
-                 reg_translation: np.ndarray) -> Decreases:
+def pa_decreases(
+    geom,
+    poses: np.ndarray,
+    pa: np.ndarray,
+    assignment: np.ndarray,
+    reg_rotation: np.ndarray,
+    reg_translation: np.ndarray,
+) -> Decreases:
     """Decreases of ``pa (N,)`` for checkpoints ``poses (N, P, 7)`` scored with ``assignment
     (N, P)``, ``reg_rotation (N, 3, 3)``, ``reg_translation (N, 3)`` on ``geom``."""
     from aw_eval import chamfer

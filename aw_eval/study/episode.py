@@ -107,7 +107,9 @@ def poses_array(poses: dict[str, Sequence[float]], part_ids: Sequence[str]) -> n
     return arr
 
 
-def edit_magnitudes(before: np.ndarray, after: np.ndarray, centroids: np.ndarray, divisor: float) -> tuple[np.ndarray, np.ndarray]:
+def edit_magnitudes(
+    before: np.ndarray, after: np.ndarray, centroids: np.ndarray, divisor: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Per-part centroid displacement (divided by ``divisor``) and rotation angle in degrees.
 
     ``before, after: (..., A, 7)``; ``centroids: (A, 3)`` baked-frame part centroids.
@@ -122,7 +124,9 @@ def edit_magnitudes(before: np.ndarray, after: np.ndarray, centroids: np.ndarray
     rel = np.einsum("...ij,...kj->...ik", ra, rb)
     cos = np.clip((np.trace(rel, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
     # for tiny angles the trace loses precision; use the antisymmetric part there
-    skew = np.stack([rel[..., 2, 1] - rel[..., 1, 2], rel[..., 0, 2] - rel[..., 2, 0], rel[..., 1, 0] - rel[..., 0, 1]], -1)
+    skew = np.stack(
+        [rel[..., 2, 1] - rel[..., 1, 2], rel[..., 0, 2] - rel[..., 2, 0], rel[..., 1, 0] - rel[..., 0, 1]], -1
+    )
     sin = np.linalg.norm(skew, axis=-1) / 2.0
     rot = np.degrees(np.arctan2(sin, cos))
     return trans, rot
@@ -151,8 +155,12 @@ def _read_final_state(run_dir: Path, task_id: str, all_part_ids: Sequence[str], 
     return final
 
 
-def contradicting_parts(final: dict[str, Sequence[float]], recorded: dict[str, Sequence[float]],
-                        part_ids: Sequence[str], tol: float = FINAL_MATCH_TOL) -> list[str]:
+def contradicting_parts(
+    final: dict[str, Sequence[float]],
+    recorded: dict[str, Sequence[float]],
+    part_ids: Sequence[str],
+    tol: float = FINAL_MATCH_TOL,
+) -> list[str]:
     """Parts whose ``final.json`` pose differs from the trajectory's last recorded pose (beyond
     ``tol`` per component; ``q`` and ``-q`` are the same rotation)."""
     out = []
@@ -164,9 +172,17 @@ def contradicting_parts(final: dict[str, Sequence[float]], recorded: dict[str, S
     return out
 
 
-def read_episode(run_dir: str | Path, task_id: str, all_part_ids: Sequence[str], scored_ids: Sequence[str],
-                 centroids: np.ndarray, divisor: float, *, final_only: bool = False,
-                 trust_final: bool = False) -> EpisodeArrays:
+def read_episode(
+    run_dir: str | Path,
+    task_id: str,
+    all_part_ids: Sequence[str],
+    scored_ids: Sequence[str],
+    centroids: np.ndarray,
+    divisor: float,
+    *,
+    final_only: bool = False,
+    trust_final: bool = False,
+) -> EpisodeArrays:
     """Read ``run_dir``'s trajectory and final.json for ``task_id``.
 
     ``all_part_ids``: the task's parts (distractors included) with ``centroids: (A, 3)`` in the
@@ -190,8 +206,10 @@ def read_episode(run_dir: str | Path, task_id: str, all_part_ids: Sequence[str],
                 problems.append(f"trajectory is for task {traj.header.task_id!r}, not {task_id!r}; ignored")
                 traj = None
             elif set(traj.header.part_ids) != set(all_part_ids):
-                problems.append(f"trajectory part ids {sorted(traj.header.part_ids)} differ from the task's "
-                                f"{sorted(all_part_ids)}; ignored")
+                problems.append(
+                    f"trajectory part ids {sorted(traj.header.part_ids)} differ from the task's "
+                    f"{sorted(all_part_ids)}; ignored"
+                )
                 traj = None
             else:
                 problems += [f"trajectory: {p}" for p in traj.problems]
@@ -237,14 +255,17 @@ def read_episode(run_dir: str | Path, task_id: str, all_part_ids: Sequence[str],
             # recorded state; a difference means edits were made that no call line records.
             gap = contradicting_parts(traj.end.poses, checkpoints[-1].poses, ids)
             if gap:
-                problems.append(f"trajectory: the end record's poses contradict the last recorded call's (parts "
-                                f"{gap}): edits were made that were not recorded")
+                problems.append(
+                    f"trajectory: the end record's poses contradict the last recorded call's (parts "
+                    f"{gap}): edits were made that were not recorded"
+                )
         if final is not None:
             differ = contradicting_parts(final.poses, traj.final_poses(), ids)
             if differ:
                 kept = "final.json (--trust-final)" if trust_final else "the trajectory's"
-                problems.append(f"final.json contradicts the trajectory's last recorded state (parts {differ}); "
-                                f"scored {kept}")
+                problems.append(
+                    f"final.json contradicts the trajectory's last recorded state (parts {differ}); scored {kept}"
+                )
                 if not trust_final:
                     final = None
         final_all = poses_array(final.poses, ids) if final is not None else poses_array(traj.final_poses(), ids)
@@ -258,12 +279,17 @@ def read_episode(run_dir: str | Path, task_id: str, all_part_ids: Sequence[str],
             final_poses=final_all[scored_idx],
             final_from="final.json" if final is not None else "trajectory",
             moved=moved[scored_idx],
-            call_t=call_t, call_kind=call_kind_arr, call_ok=call_ok,
+            call_t=call_t,
+            call_kind=call_kind_arr,
+            call_ok=call_ok,
             edit_call=np.array(edit_call, dtype=np.int64),
             edit_translation=np.array(edit_t, dtype=np.float64),
             edit_rotation_deg=np.array(edit_r, dtype=np.float64),
             edit_revisit=np.array(revisit, dtype=bool),
-            end_t=end_t, end_reason=end_reason, truncated=bool(traj.truncated), has_trajectory=True,
+            end_t=end_t,
+            end_reason=end_reason,
+            truncated=bool(traj.truncated),
+            has_trajectory=True,
             problems=problems,
         )
     # final.json alone: no checkpoints, no call log; "moved" relative to the identity initial pose
@@ -271,11 +297,22 @@ def read_episode(run_dir: str | Path, task_id: str, all_part_ids: Sequence[str],
     identity = np.array([0, 0, 0, 1, 0, 0, 0], dtype=np.float64)
     empty_f = np.zeros(0)
     return EpisodeArrays(
-        ck_seq=np.zeros(0, dtype=np.int64), ck_t=empty_f, ck_poses=np.zeros((0, len(scored_idx), 7)),
-        final_poses=final_all[scored_idx], final_from="final.json",
+        ck_seq=np.zeros(0, dtype=np.int64),
+        ck_t=empty_f,
+        ck_poses=np.zeros((0, len(scored_idx), 7)),
+        final_poses=final_all[scored_idx],
+        final_from="final.json",
         moved=np.any(np.abs(final_all - identity) > 1e-9, axis=-1)[scored_idx],
-        call_t=empty_f, call_kind=np.zeros(0, dtype=np.int8), call_ok=np.zeros(0, dtype=bool),
-        edit_call=np.zeros(0, dtype=np.int64), edit_translation=empty_f, edit_rotation_deg=empty_f,
-        edit_revisit=np.zeros(0, dtype=bool), end_t=0.0, end_reason=final.reason, truncated=False,
-        has_trajectory=False, problems=problems,
+        call_t=empty_f,
+        call_kind=np.zeros(0, dtype=np.int8),
+        call_ok=np.zeros(0, dtype=bool),
+        edit_call=np.zeros(0, dtype=np.int64),
+        edit_translation=empty_f,
+        edit_rotation_deg=empty_f,
+        edit_revisit=np.zeros(0, dtype=bool),
+        end_t=0.0,
+        end_reason=final.reason,
+        truncated=False,
+        has_trajectory=False,
+        problems=problems,
     )

@@ -14,8 +14,18 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["prepare_thread", "protocol_settings", "load_geometry", "batched_backend", "prescore", "score_states", "final_diagnostics", "evaluator_version", "MODES",
-           "BACKENDS"]
+__all__ = [
+    "prepare_thread",
+    "protocol_settings",
+    "load_geometry",
+    "batched_backend",
+    "prescore",
+    "score_states",
+    "final_diagnostics",
+    "evaluator_version",
+    "MODES",
+    "BACKENDS",
+]
 
 MODES = ("exact", "fast")
 BACKENDS = ("auto", "numba", "jax")  # aw_eval.registration.BACKENDS, without importing aw_eval here
@@ -97,7 +107,9 @@ def prescore(geom, poses: list[np.ndarray], mode: str, backend: str) -> dict[byt
     return {allp[i].tobytes(): b.row(i) for i in range(len(allp))}
 
 
-def score_states(geom, poses: np.ndarray, mode: str, backend: str = "auto", memo: dict | None = None) -> dict[str, np.ndarray]:
+def score_states(
+    geom, poses: np.ndarray, mode: str, backend: str = "auto", memo: dict | None = None
+) -> dict[str, np.ndarray]:
     """Scores of ``poses: (N, P, 7)``: ``part_errors (N, P)``, ``assignment (N, P)``, ``pa``,
     ``sr``, ``sra``, ``scd`` ``(N,)`` and the raw batch result under ``"batch"``. ``backend``
     applies to ``exact`` (``fast`` always runs on the CPU kernels). ``memo``: states already

@@ -47,8 +47,11 @@ from aw.pose import compose_poses, invert_pose, poses_to_matrices, quat_from_axi
 __all__ = ["BLOCKS", "box_suite", "write_scripted_run", "ScriptedRun"]
 
 BLOCKS: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("partnet", ("none", "image")), ("ikea_manual", ("manual",)), ("assemblybench", ("manual",)),
-    ("fantastic_breaks", ("none",)))
+    ("partnet", ("none", "image")),
+    ("ikea_manual", ("manual",)),
+    ("assemblybench", ("manual",)),
+    ("fantastic_breaks", ("none",)),
+)
 _PROMPT = "Assemble the supplied parts into a coherent object."
 IDENTITY = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
 
@@ -79,9 +82,20 @@ def _reference_png(path: Path, shade: int) -> None:
     Image.new("RGB", (64, 48), (shade, 120, 200)).save(path)
 
 
-def _write_task(root: Path, tid: str, source: str, cond: str, object_id: str, category: str,
-                assembled: list[trimesh.Trimesh], layout: np.ndarray, *, distractor: set[int] = frozenset(),
-                eval_divisor: float | None = None, variant: Variant | None = None) -> None:
+def _write_task(
+    root: Path,
+    tid: str,
+    source: str,
+    cond: str,
+    object_id: str,
+    category: str,
+    assembled: list[trimesh.Trimesh],
+    layout: np.ndarray,
+    *,
+    distractor: set[int] = frozenset(),
+    eval_divisor: float | None = None,
+    variant: Variant | None = None,
+) -> None:
     task_dir, targets_path = suite_paths(root, tid)
     (task_dir / "parts").mkdir(parents=True, exist_ok=True)
     parts, targets = [], {}
@@ -97,14 +111,36 @@ def _write_task(root: Path, tid: str, source: str, cond: str, object_id: str, ca
         for r in range(2 if cond == "manual" else 1):
             _reference_png(task_dir / "references" / f"{r + 1:02d}.png", 40 * r + 20)
             refs.append(f"references/{r + 1:02d}.png")
-    write_task(task_dir, Task(task_id=tid, source=source, dataset="boxes", category=category, object_id=object_id,
-                              condition=cond, prompt=_PROMPT, parts=parts, references=refs))
-    write_targets(targets_path, Targets(task_id=tid, parts=targets, scale=1.0, eval_divisor=eval_divisor,
-                                        variant=variant or Variant()))
+    write_task(
+        task_dir,
+        Task(
+            task_id=tid,
+            source=source,
+            dataset="boxes",
+            category=category,
+            object_id=object_id,
+            condition=cond,
+            prompt=_PROMPT,
+            parts=parts,
+            references=refs,
+        ),
+    )
+    write_targets(
+        targets_path,
+        Targets(task_id=tid, parts=targets, scale=1.0, eval_divisor=eval_divisor, variant=variant or Variant()),
+    )
 
 
-def box_suite(root: str | Path, *, objects_per_source: int = 1, n_parts: int | Sequence[int] = 3,
-              blocks=BLOCKS, variants: bool = False, seed: int = 0, name: str = "box-suite") -> Path:
+def box_suite(
+    root: str | Path,
+    *,
+    objects_per_source: int = 1,
+    n_parts: int | Sequence[int] = 3,
+    blocks=BLOCKS,
+    variants: bool = False,
+    seed: int = 0,
+    name: str = "box-suite",
+) -> Path:
     """Write a suite under ``root``; returns ``root``. ``n_parts`` may cycle over objects.
 
     ``variants`` adds, for the first object of the first block (every condition), the Appendix E
@@ -132,21 +168,46 @@ def box_suite(root: str | Path, *, objects_per_source: int = 1, n_parts: int | S
                 spare = trimesh.creation.box(extents=[0.12, 0.12, 0.12])
                 spare.apply_translation([2.0, 2.0, 0.06])
                 baked = [m.copy().apply_transform(poses_to_matrices(layout[i])) for i, m in enumerate(assembled)]
-                extra = [("layout", "-layout_a", assembled, _layout(p, rng), set(), None),
-                         ("distractor", "-distractor", assembled + [spare], _layout(p + 1, rng), {p}, None),
-                         ("missing", "-missing", assembled[:-1], layout[:-1], set(), _eval_divisor(baked))]
+                extra = [
+                    ("layout", "-layout_a", assembled, _layout(p, rng), set(), None),
+                    ("distractor", "-distractor", assembled + [spare], _layout(p + 1, rng), {p}, None),
+                    ("missing", "-missing", assembled[:-1], layout[:-1], set(), _eval_divisor(baked)),
+                ]
             for cond in conditions:
                 base = f"{source}-{object_id}-{cond}"
                 _write_task(root, base, source, cond, object_id, category, assembled, layout)
-                entries.append(SuiteEntry(task_id=base, source=source, condition=cond, object_id=object_id,
-                                          category=category, n_parts=p))
+                entries.append(
+                    SuiteEntry(
+                        task_id=base, source=source, condition=cond, object_id=object_id, category=category, n_parts=p
+                    )
+                )
                 for kind, suffix, parts, lay, distractor, divisor in extra:
                     tid = base + suffix
-                    _write_task(root, tid, source, cond, object_id, category, parts, lay, distractor=distractor,
-                                eval_divisor=divisor, variant=Variant(kind=kind, base_task_id=base))
-                    entries.append(SuiteEntry(task_id=tid, source=source, condition=cond, object_id=object_id,
-                                              category=category, n_parts=len(parts) - len(distractor), variant=kind,
-                                              base_task_id=base))
+                    _write_task(
+                        root,
+                        tid,
+                        source,
+                        cond,
+                        object_id,
+                        category,
+                        parts,
+                        lay,
+                        distractor=distractor,
+                        eval_divisor=divisor,
+                        variant=Variant(kind=kind, base_task_id=base),
+                    )
+                    entries.append(
+                        SuiteEntry(
+                            task_id=tid,
+                            source=source,
+                            condition=cond,
+                            object_id=object_id,
+                            category=category,
+                            n_parts=len(parts) - len(distractor),
+                            variant=kind,
+                            base_task_id=base,
+                        )
+                    )
     write_manifest(root, SuiteManifest(name=name, generator="aw_eval.study.fixtures", seed=seed, tasks=entries))
     return root
 
@@ -159,11 +220,24 @@ class ScriptedRun:
     final_poses: dict[str, list[float]]
 
 
-def write_scripted_run(run_dir: str | Path, suite_dir: str | Path, task_id: str, *, system: str,
-                       correct: Sequence[str] | None = None, wrong_offset: float = 0.3, jitter_edits: int = 0,
-                       dt: float = 2.0, end_reason: str | None = "finished", write_final_json: bool = True,
-                       cut_last_line: bool = False, run_info: dict | None = None, seed: int = 0,
-                       inspect_moves: bool = True, jitter_scale: float = 1e-3) -> ScriptedRun:
+def write_scripted_run(
+    run_dir: str | Path,
+    suite_dir: str | Path,
+    task_id: str,
+    *,
+    system: str,
+    correct: Sequence[str] | None = None,
+    wrong_offset: float = 0.3,
+    jitter_edits: int = 0,
+    dt: float = 2.0,
+    end_reason: str | None = "finished",
+    write_final_json: bool = True,
+    cut_last_line: bool = False,
+    run_info: dict | None = None,
+    seed: int = 0,
+    inspect_moves: bool = True,
+    jitter_scale: float = 1e-3,
+) -> ScriptedRun:
     """Record one scripted episode of ``task_id`` into ``run_dir``.
 
     Parts in ``correct`` (default: all) end at their target pose; the others at the target
@@ -180,8 +254,13 @@ def write_scripted_run(run_dir: str | Path, suite_dir: str | Path, task_id: str,
     correct_set = set(ids if correct is None else correct)
     rng = np.random.default_rng(seed)
     poses = {p: list(IDENTITY) for p in ids}
-    header = TrajectoryHeader(task_id=task_id, system=system, started_at="2025-01-01T00:00:00Z", part_ids=ids,
-                              initial_poses={p: list(IDENTITY) for p in ids})
+    header = TrajectoryHeader(
+        task_id=task_id,
+        system=system,
+        started_at="2025-01-01T00:00:00Z",
+        part_ids=ids,
+        initial_poses={p: list(IDENTITY) for p in ids},
+    )
     w = TrajectoryWriter(run_dir / "trajectory.jsonl", header)
     seq, t, n_ck = 0, 0.0, 1
 
@@ -189,8 +268,15 @@ def write_scripted_run(run_dir: str | Path, suite_dir: str | Path, task_id: str,
         nonlocal seq, t, n_ck
         seq += 1
         t += dt
-        rec = TrajectoryCall(seq=seq, t=t, tool=tool, args=args, ok=True, changed=list(changed),
-                             poses={p: list(v) for p, v in poses.items()} if changed else None)
+        rec = TrajectoryCall(
+            seq=seq,
+            t=t,
+            tool=tool,
+            args=args,
+            ok=True,
+            changed=list(changed),
+            poses={p: list(v) for p, v in poses.items()} if changed else None,
+        )
         w.call(rec)
         n_ck += bool(changed)
 

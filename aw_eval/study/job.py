@@ -26,8 +26,16 @@ from aw_eval.study.decreases import pa_decreases
 from aw_eval.study.episode import RunUnreadable, read_episode
 from aw_eval.study.model import STATUS_SCORED, STATUS_UNREADABLE, RunScore, TaskFacts
 
-__all__ = ["ScoreSettings", "RunRequest", "TaskJob", "TaskOutput", "score_task", "surface_centroids",
-           "STATUS_ERROR", "STATUS_TASK_ERROR"]
+__all__ = [
+    "ScoreSettings",
+    "RunRequest",
+    "TaskJob",
+    "TaskOutput",
+    "score_task",
+    "surface_centroids",
+    "STATUS_ERROR",
+    "STATUS_TASK_ERROR",
+]
 
 STATUS_ERROR = "error"  # the evaluator raised on this run (not cached; listed in the report)
 STATUS_TASK_ERROR = "task_error"  # the task's geometry could not be loaded
@@ -62,8 +70,10 @@ class ScoreSettings:
     def key(self) -> str:
         proto = ",".join(f"{k}={v!r}" for k, v in self.protocol)
         trust = ";trust_final=1" if self.trust_final else ""
-        return (f"ck={self.checkpoint_mode};final={self.final_mode};final_only={int(self.final_only)}{trust};"
-                f"protocol={proto}")
+        return (
+            f"ck={self.checkpoint_mode};final={self.final_mode};final_only={int(self.final_only)}{trust};"
+            f"protocol={proto}"
+        )
 
 
 @dataclass(frozen=True)
@@ -99,26 +109,62 @@ def surface_centroids(meshes) -> np.ndarray:
     return np.array(out).reshape(-1, 3)
 
 
-def _score_run(req: RunRequest, task_id: str, geom, all_ids: list[str], centroids: np.ndarray,
-               settings: ScoreSettings, memo: dict | None = None) -> RunScore:
+def _score_run(
+    req: RunRequest,
+    task_id: str,
+    geom,
+    all_ids: list[str],
+    centroids: np.ndarray,
+    settings: ScoreSettings,
+    memo: dict | None = None,
+) -> RunScore:
     scored_ids = list(geom.part_ids)
     try:
-        ep = read_episode(req.run_dir, task_id, all_ids, scored_ids, centroids, float(geom.divisor),
-                          final_only=settings.final_only, trust_final=settings.trust_final)
+        ep = read_episode(
+            req.run_dir,
+            task_id,
+            all_ids,
+            scored_ids,
+            centroids,
+            float(geom.divisor),
+            final_only=settings.final_only,
+            trust_final=settings.trust_final,
+        )
     except RunUnreadable as exc:
         return RunScore.unscored(req.system, task_id, STATUS_UNREADABLE, [str(exc)])
-    r = RunScore(system=req.system, task_id=task_id, status=STATUS_SCORED, problems=list(ep.problems),
-                 final_from=ep.final_from, end_reason=ep.end_reason, truncated=ep.truncated,
-                 has_trajectory=ep.has_trajectory, end_t=ep.end_t, final_mode=settings.final_mode,
-                 checkpoint_mode="" if settings.final_only else settings.checkpoint_mode, moved=ep.moved,
-                 call_t=ep.call_t, call_kind=ep.call_kind, call_ok=ep.call_ok, edit_call=ep.edit_call,
-                 edit_translation=ep.edit_translation, edit_rotation_deg=ep.edit_rotation_deg,
-                 edit_revisit=ep.edit_revisit, ck_seq=ep.ck_seq, ck_t=ep.ck_t)
+    r = RunScore(
+        system=req.system,
+        task_id=task_id,
+        status=STATUS_SCORED,
+        problems=list(ep.problems),
+        final_from=ep.final_from,
+        end_reason=ep.end_reason,
+        truncated=ep.truncated,
+        has_trajectory=ep.has_trajectory,
+        end_t=ep.end_t,
+        final_mode=settings.final_mode,
+        checkpoint_mode="" if settings.final_only else settings.checkpoint_mode,
+        moved=ep.moved,
+        call_t=ep.call_t,
+        call_kind=ep.call_kind,
+        call_ok=ep.call_ok,
+        edit_call=ep.edit_call,
+        edit_translation=ep.edit_translation,
+        edit_rotation_deg=ep.edit_rotation_deg,
+        edit_revisit=ep.edit_revisit,
+        ck_seq=ep.ck_seq,
+        ck_t=ep.ck_t,
+    )
     ck = None
     t0 = time.perf_counter()
     if len(ep.ck_poses):
-        ck = evaluator.score_states(geom, ep.ck_poses, settings.checkpoint_mode, settings.backend,
-                                    memo if settings.checkpoint_mode == "exact" else None)
+        ck = evaluator.score_states(
+            geom,
+            ep.ck_poses,
+            settings.checkpoint_mode,
+            settings.backend,
+            memo if settings.checkpoint_mode == "exact" else None,
+        )
         r.ck_pa, r.ck_sr, r.ck_sra, r.ck_scd = ck["pa"], ck["sr"], ck["sra"], ck["scd"]
         r.ck_part_errors, r.ck_assignment = ck["part_errors"], ck["assignment"]
         r.ck_reg_rotation, r.ck_reg_translation = ck["reg_rotation"], ck["reg_translation"]
@@ -128,12 +174,20 @@ def _score_run(req: RunRequest, task_id: str, geom, all_ids: list[str], centroid
     r.seconds_checkpoints = time.perf_counter() - t0
     t0 = time.perf_counter()
     # the final state: reuse the last checkpoint when it is the same state in the same mode
-    if ck is not None and settings.final_mode == settings.checkpoint_mode and np.array_equal(ep.final_poses, ep.ck_poses[-1]):
+    if (
+        ck is not None
+        and settings.final_mode == settings.checkpoint_mode
+        and np.array_equal(ep.final_poses, ep.ck_poses[-1])
+    ):
         fin, row, poses = ck, len(ep.ck_poses) - 1, ep.ck_poses
     else:
         poses = ep.final_poses[None]
-        fin, row = evaluator.score_states(geom, poses, settings.final_mode, settings.backend,
-                                          memo if settings.final_mode == "exact" else None), 0
+        fin, row = (
+            evaluator.score_states(
+                geom, poses, settings.final_mode, settings.backend, memo if settings.final_mode == "exact" else None
+            ),
+            0,
+        )
     r.pa, r.sr, r.sra, r.scd = (float(fin[k][row]) for k in ("pa", "sr", "sra", "scd"))
     r.part_errors, r.assignment = fin["part_errors"][row], fin["assignment"][row]
     r.reg_rotation, r.reg_translation = fin["reg_rotation"][row], fin["reg_translation"][row]
@@ -146,14 +200,19 @@ def _load_native(job: TaskJob, t0: float):
     """Geometry, all part ids, centroids and facts of a task read from its task directory."""
     task = read_task(job.task_dir)
     read_targets(job.targets_path)  # fail early with a clear message
-    geom = evaluator.load_geometry(Path(job.task_dir), Path(job.targets_path),
-                                   Path(job.geometry_cache) if job.geometry_cache else None, job.settings.protocol)
+    geom = evaluator.load_geometry(
+        Path(job.task_dir),
+        Path(job.targets_path),
+        Path(job.geometry_cache) if job.geometry_cache else None,
+        job.settings.protocol,
+    )
     meshes = load_task_meshes(task)
     all_ids = task.part_ids
     scored = set(geom.part_ids)
     ratio = part_size_ratio([m for pid, m in zip(all_ids, meshes) if pid in scored])
-    facts = TaskFacts(job.task_id, int(geom.n_parts), float(ratio), float(geom.divisor), list(geom.part_ids),
-                      time.perf_counter() - t0)
+    facts = TaskFacts(
+        job.task_id, int(geom.n_parts), float(ratio), float(geom.divisor), list(geom.part_ids), time.perf_counter() - t0
+    )
     return geom, all_ids, surface_centroids(meshes), facts
 
 
@@ -162,8 +221,14 @@ def _load_official(job: TaskJob, inputs, t0: float):
     the package's own evaluation points; there is no task directory."""
     read_targets(job.targets_path)
     geom = TaskGeometry.from_points(inputs.part_ids, inputs.points, inputs.target_poses, inputs.divisor, inputs.groups)
-    facts = TaskFacts(job.task_id, int(geom.n_parts), float(inputs.size_ratio()), float(geom.divisor),
-                      list(geom.part_ids), time.perf_counter() - t0)
+    facts = TaskFacts(
+        job.task_id,
+        int(geom.n_parts),
+        float(inputs.size_ratio()),
+        float(geom.divisor),
+        list(geom.part_ids),
+        time.perf_counter() - t0,
+    )
     return geom, list(inputs.part_ids), inputs.centroids(), facts
 
 
@@ -177,8 +242,16 @@ def _prescore_runs(job: TaskJob, geom, all_ids: list[str], centroids: np.ndarray
     poses = []
     for req in job.runs:
         try:
-            ep = read_episode(req.run_dir, job.task_id, all_ids, list(geom.part_ids), centroids, float(geom.divisor),
-                              final_only=st.final_only, trust_final=st.trust_final)
+            ep = read_episode(
+                req.run_dir,
+                job.task_id,
+                all_ids,
+                list(geom.part_ids),
+                centroids,
+                float(geom.divisor),
+                final_only=st.final_only,
+                trust_final=st.trust_final,
+            )
         except Exception:  # noqa: BLE001 - unreadable here is reported by the run's own scoring
             continue
         if st.checkpoint_mode == "exact" and len(ep.ck_poses):
@@ -202,8 +275,12 @@ def score_task(job: TaskJob) -> TaskOutput:
         if isinstance(exc, OSError) and exc.errno in _WRITE_FAULTS:
             raise  # the geometry cache cannot be written (a full disk): the tool fails, not the task
         msg = f"task geometry could not be loaded: {exc}"
-        return TaskOutput(job.task_id, None, [RunScore.unscored(r.system, job.task_id, STATUS_TASK_ERROR, [msg])
-                                              for r in job.runs], error=msg)
+        return TaskOutput(
+            job.task_id,
+            None,
+            [RunScore.unscored(r.system, job.task_id, STATUS_TASK_ERROR, [msg]) for r in job.runs],
+            error=msg,
+        )
     geom, all_ids, centroids, facts = loaded
     out = TaskOutput(job.task_id, facts)
     memo = _prescore_runs(job, geom, all_ids, centroids)

@@ -110,7 +110,7 @@ class RunScore:
         return int(len(self.ck_seq))
 
     @classmethod
-    def unscored(cls, system: str, task_id: str, status: str, problems: list[str]) -> "RunScore":
+    def unscored(cls, system: str, task_id: str, status: str, problems: list[str]) -> RunScore:
         """A missing or unreadable run: PA = SR = SR^a = 0, SCD undefined."""
         return cls(system=system, task_id=task_id, status=status, problems=list(problems))
 

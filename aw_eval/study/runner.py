@@ -98,7 +98,9 @@ def _attempt_dirs(system_dir: Path) -> list[Path]:
     return sorted(dirs, key=lambda p: int(p.name.split("-")[1]))
 
 
-def discover_runs(runs_dir: Path, task_ids: set[str]) -> tuple[list[str], dict[tuple[str, str], Path], list[dict[str, Any]]]:
+def discover_runs(
+    runs_dir: Path, task_ids: set[str]
+) -> tuple[list[str], dict[tuple[str, str], Path], list[dict[str, Any]]]:
     """``(systems, {(system, task_id): run_dir}, unknown)`` where ``unknown`` lists run
     directories of tasks not in the suite. Hidden directories are skipped.
 
@@ -110,9 +112,11 @@ def discover_runs(runs_dir: Path, task_ids: set[str]) -> tuple[list[str], dict[t
     as_tasks = [s for s in top if s in task_ids and _is_run_dir(runs_dir / s)]
     if as_tasks:
         shown = ", ".join(as_tasks[:3]) + (", ..." if len(as_tasks) > 3 else "")
-        raise StudyError(f"{runs_dir} looks like one system's folder: its subdirectories {shown} are runs of suite "
-                         f"tasks; pass the runs root that holds it ({runs_dir.parent}), laid out as "
-                         "RUNS_DIR/<system>/<task_id>/")
+        raise StudyError(
+            f"{runs_dir} looks like one system's folder: its subdirectories {shown} are runs of suite "
+            f"tasks; pass the runs root that holds it ({runs_dir.parent}), laid out as "
+            "RUNS_DIR/<system>/<task_id>/"
+        )
     folders: dict[str, Path] = {}
     for name in top:
         attempts = _attempt_dirs(runs_dir / name)
@@ -144,8 +148,9 @@ class Coverage:
     unknown: int
 
     @classmethod
-    def of(cls, systems: list[str], found: dict[tuple[str, str], Path], unknown: list[dict[str, Any]],
-           n_tasks: int) -> "Coverage":
+    def of(
+        cls, systems: list[str], found: dict[tuple[str, str], Path], unknown: list[dict[str, Any]], n_tasks: int
+    ) -> Coverage:
         runs = {s: 0 for s in systems}
         for (s, _), p in found.items():
             runs[s] += _is_run_dir(p)
@@ -157,19 +162,22 @@ class Coverage:
 
     def numbers(self) -> str:
         """Runs found, suite tasks, unknown runs, in one phrase."""
-        return (f"{plural(self.matched + self.unknown, 'run')} found: {self.matched} for the suite's "
-                f"{plural(self.n_tasks, 'task')}, {self.unknown} for tasks not in the suite")
+        return (
+            f"{plural(self.matched + self.unknown, 'run')} found: {self.matched} for the suite's "
+            f"{plural(self.n_tasks, 'task')}, {self.unknown} for tasks not in the suite"
+        )
 
     def warnings(self, suite_name: str) -> list[str]:
         """One line per system that lacks runs, and one for runs of tasks outside the suite."""
         out = []
         for s, k in self.runs.items():
             if k < self.n_tasks:
-                out.append(f"system {s} has runs for {k} of the {plural(self.n_tasks, 'task')}; the other "
-                           f"{self.n_tasks - k} count as missing (PA = SR = 0)")
+                out.append(
+                    f"system {s} has runs for {k} of the {plural(self.n_tasks, 'task')}; the other "
+                    f"{self.n_tasks - k} count as missing (PA = SR = 0)"
+                )
         if self.unknown:
-            out.append(f"{plural(self.unknown, 'run')} for tasks not in suite {suite_name} ignored "
-                       f"({self.numbers()})")
+            out.append(f"{plural(self.unknown, 'run')} for tasks not in suite {suite_name} ignored ({self.numbers()})")
         return out
 
 
@@ -192,12 +200,16 @@ def _failed(job: TaskJob, exc: BaseException, where: str) -> ScoringFailed:
     if isinstance(exc, OSError) and exc.filename:  # e.g. a full disk under the geometry cache
         msg = f"scoring failed: {exc.filename}: {exc.strerror or exc} (while scoring task {job.task_id})"
     if isinstance(exc, BrokenProcessPool):
-        msg += ("; if score_study is called from a script, put the call under `if __name__ == \"__main__\":` "
-                "(worker processes import the script)")
+        msg += (
+            '; if score_study is called from a script, put the call under `if __name__ == "__main__":` '
+            "(worker processes import the script)"
+        )
     return ScoringFailed(msg + "; tasks scored before it are cached, and a rerun resumes from them")
 
 
-def _run_jobs(jobs: list[TaskJob], *, scheduler: str | None, n_jobs: int) -> tuple[Iterator[TaskOutput], str, Callable[[bool], None]]:
+def _run_jobs(
+    jobs: list[TaskJob], *, scheduler: str | None, n_jobs: int
+) -> tuple[Iterator[TaskOutput], str, Callable[[bool], None]]:
     """Yield outputs as they complete; returns (iterator, executor name, closer). ``closer(True)``
     abandons the work (an interrupt or a failure): local workers are terminated at once."""
     if not jobs:
@@ -225,6 +237,7 @@ def _run_jobs(jobs: list[TaskJob], *, scheduler: str | None, n_jobs: int) -> tup
 
         return gen_dask(), f"dask:{scheduler}", lambda abort: client.close()
     if n_jobs <= 1 or len(jobs) == 1:
+
         def gen_inline() -> Iterator[TaskOutput]:
             for j in jobs:
                 try:
@@ -234,8 +247,12 @@ def _run_jobs(jobs: list[TaskJob], *, scheduler: str | None, n_jobs: int) -> tup
                 yield out
 
         return gen_inline(), "in-process", lambda abort: None
-    pool = ProcessPoolExecutor(max_workers=min(n_jobs, len(jobs)), mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_worker_init, initargs=(os.getpid(),))
+    pool = ProcessPoolExecutor(
+        max_workers=min(n_jobs, len(jobs)),
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_worker_init,
+        initargs=(os.getpid(),),
+    )
     futs = {pool.submit(score_task, j): j for j in jobs}
 
     def gen_pool() -> Iterator[TaskOutput]:
@@ -264,10 +281,18 @@ def _read_info(run_dir: Path | None) -> tuple[Any, str | None]:
         return None, f"run.json unreadable: {exc.problem}"
 
 
-def score_study(suite_dir: str | Path, runs_dir: str | Path, out_dir: str | Path, settings: ScoreSettings, *,
-                scheduler: str | None = None, n_jobs: int | None = None, progress: bool = True,
-                log: Callable[[str], None] | None = None,
-                geometry_cache: str | Path | None = None) -> tuple[Study, ScoreStats]:
+def score_study(
+    suite_dir: str | Path,
+    runs_dir: str | Path,
+    out_dir: str | Path,
+    settings: ScoreSettings,
+    *,
+    scheduler: str | None = None,
+    n_jobs: int | None = None,
+    progress: bool = True,
+    log: Callable[[str], None] | None = None,
+    geometry_cache: str | Path | None = None,
+) -> tuple[Study, ScoreStats]:
     """Score every run of every system on every suite task (resuming from ``out_dir/cache``).
 
     ``geometry_cache``: the evaluator's per-task geometry cache (default ``out_dir/cache/geometry``).
@@ -285,15 +310,19 @@ def score_study(suite_dir: str | Path, runs_dir: str | Path, out_dir: str | Path
     coverage = Coverage.of(systems, found, unknown, len(entries))
     if coverage.matched == 0:  # a table of zeros would look like a result
         example = f" (e.g. {unknown[0]['system']}/{unknown[0]['task_id']})" if unknown else ""
-        raise StudyError(f"{runs_dir}: no run matches a task of suite {manifest.name} ({coverage.numbers()}{example}); "
-                         "are these runs of another suite? Runs are RUNS_DIR/<system>/<task_id>/ with "
-                         "trajectory.jsonl or final.json")
+        raise StudyError(
+            f"{runs_dir}: no run matches a task of suite {manifest.name} ({coverage.numbers()}{example}); "
+            "are these runs of another suite? Runs are RUNS_DIR/<system>/<task_id>/ with "
+            "trajectory.jsonl or final.json"
+        )
     if log:
         recorded = sorted({s.split("/")[0] for s in systems if "/" in s})
         for name in recorded:
             mine = [s for s in systems if s.startswith(name + "/")]
-            log(f"{runs_dir / name} holds aw-serve --record-under recordings: scored as "
-                f"{plural(len(mine), 'system')}, one per attempt ({', '.join(mine)})")
+            log(
+                f"{runs_dir / name} holds aw-serve --record-under recordings: scored as "
+                f"{plural(len(mine), 'system')}, one per attempt ({', '.join(mine)})"
+            )
         for line in coverage.warnings(manifest.name):
             log(f"warning: {line}")
     cache = Cache(out_dir / "cache")
@@ -328,14 +357,24 @@ def score_study(suite_dir: str | Path, runs_dir: str | Path, out_dir: str | Path
             else:
                 todo.append(RunRequest(s, str(run_dir)))
         if todo or f is None:
-            jobs.append(TaskJob(e.task_id, str(task_dir), str(targets), tuple(todo), settings,
-                                str(geometry_cache or cache.geometry_dir)))
+            jobs.append(
+                TaskJob(
+                    e.task_id,
+                    str(task_dir),
+                    str(targets),
+                    tuple(todo),
+                    settings,
+                    str(geometry_cache or cache.geometry_dir),
+                )
+            )
     jobs = schedule_jobs(jobs, {e.task_id: e.n_parts for e in entries})
     stats.tasks_dispatched = len(jobs)
     outputs, stats.executor, close = _run_jobs(jobs, scheduler=scheduler, n_jobs=n_jobs or default_jobs())
     if log and jobs:
-        log(f"scoring {plural(sum(len(j.runs) for j in jobs), 'run')} of {plural(len(jobs), 'task')} ({stats.executor}); "
-            f"{plural(stats.cached, 'run')} from the cache")
+        log(
+            f"scoring {plural(sum(len(j.runs) for j in jobs), 'run')} of {plural(len(jobs), 'task')} ({stats.executor}); "
+            f"{plural(stats.cached, 'run')} from the cache"
+        )
     aborted = True
     try:
         with _progress(len(jobs), progress and len(jobs) > 0, "scoring") as bar:
@@ -362,9 +401,20 @@ def score_study(suite_dir: str | Path, runs_dir: str | Path, out_dir: str | Path
         run_dir = found.get((s, t))
         info, problem = _read_info(run_dir)
         runs[(s, t)] = RunRecord(sc, info, problem, run_dir)
-    study = Study(manifest.name, entries, systems, runs, facts, unknown,
-                  settings={"checkpoint_mode": settings.checkpoint_mode, "final_mode": settings.final_mode,
-                            "final_only": settings.final_only, "trust_final": settings.trust_final,
-                            "evaluator_version": ev_version,
-                            "protocol_overrides": {k: v for k, v in settings.protocol}})
+    study = Study(
+        manifest.name,
+        entries,
+        systems,
+        runs,
+        facts,
+        unknown,
+        settings={
+            "checkpoint_mode": settings.checkpoint_mode,
+            "final_mode": settings.final_mode,
+            "final_only": settings.final_only,
+            "trust_final": settings.trust_final,
+            "evaluator_version": ev_version,
+            "protocol_overrides": {k: v for k, v in settings.protocol},
+        },
+    )
     return study, stats

@@ -28,8 +28,14 @@ class Clock:
 
 def _task() -> tuple[Task, list[trimesh.Trimesh]]:
     ids = ["p01", "p02"]
-    task = Task(task_id="ep", source="custom", dataset="test", object_id="ep", prompt=task_prompt("none"),
-                parts=[TaskPart(id=i, mesh=f"parts/{i}.obj") for i in ids])
+    task = Task(
+        task_id="ep",
+        source="custom",
+        dataset="test",
+        object_id="ep",
+        prompt=task_prompt("none"),
+        parts=[TaskPart(id=i, mesh=f"parts/{i}.obj") for i in ids],
+    )
     meshes = [trimesh.creation.box([0.4, 0.2, 0.1]), trimesh.creation.box([0.1, 0.1, 0.3])]
     meshes[1].apply_translation([0.6, 0, 0])
     return task, meshes
@@ -54,7 +60,9 @@ def test_recording_and_clock(episode):
     assert "budget is 1 minutes" in ep.call("start_episode", {"task": "x"})["message"]
     clock.now += 2.5
     assert ep.call("translate_objects", {"ids": ["p01"], "delta": [0, 0, 1], "space": None}) == {
-        "status": "ok", "changed": ["p01"]}
+        "status": "ok",
+        "changed": ["p01"],
+    }
     clock.now += 1
     assert ep.call("start_episode")["message"].startswith("the episode was already started 3.5 s ago")
     with pytest.raises(EpisodeError, match="unknown id 'zz'"):
@@ -236,8 +244,12 @@ def test_huge_integers_are_recorded_not_fatal(episode):
     episode.reject("get_object", {"id": 2**64}, "invalid")
     episode.close()
     traj = read_trajectory(episode.run_dir / "trajectory.jsonl")
-    assert [c.args for c in traj.calls] == [{"x": str(10**30)}, {"x": str(-(10**30))}, {"x": "<integer of 16610 bits>"},
-                                            {"id": str(2**64)}]
+    assert [c.args for c in traj.calls] == [
+        {"x": str(10**30)},
+        {"x": str(-(10**30))},
+        {"x": "<integer of 16610 bits>"},
+        {"id": str(2**64)},
+    ]
 
 
 def test_unrecordable_text_and_depth_are_recorded_escaped(episode):
@@ -268,15 +280,18 @@ def _fail_trajectory_writes(ep: Episode) -> None:
     os.close(full)
 
 
-@pytest.mark.parametrize("tool, args", [
-    ("translate_objects", {"ids": ["p01"], "delta": [1, 0, 0]}),
-    ("rotate_objects", {"ids": ["p01", "p02"], "angles": [0, 0, 90]}),
-    ("set_object_pose", {"id": "p02", "position": [0, 1, 0]}),
-    ("group_objects", {"ids": ["p01", "p02"], "name": "pair"}),
-    ("ungroup_objects", {"ids": ["g1"]}),
-    ("move_camera", {"yaw": 30}),
-    ("capture_scene", {}),
-])
+@pytest.mark.parametrize(
+    "tool, args",
+    [
+        ("translate_objects", {"ids": ["p01"], "delta": [1, 0, 0]}),
+        ("rotate_objects", {"ids": ["p01", "p02"], "angles": [0, 0, 90]}),
+        ("set_object_pose", {"id": "p02", "position": [0, 1, 0]}),
+        ("group_objects", {"ids": ["p01", "p02"], "name": "pair"}),
+        ("ungroup_objects", {"ids": ["g1"]}),
+        ("move_camera", {"yaw": 30}),
+        ("capture_scene", {}),
+    ],
+)
 def test_a_call_whose_recording_fails_changes_nothing(episode, tool, args, caplog):
     """Record first, or undo: the reply says recording failed, the scene, groups and camera are
     as before, no capture file is left, and the episode takes no further calls."""
@@ -290,8 +305,10 @@ def test_a_call_whose_recording_fails_changes_nothing(episode, tool, args, caplo
     message = str(info.value)
     assert message.startswith("recording failed (No space left on device)") and "\n" not in message
     assert "Errno" not in message
-    assert episode.scene.pose_dict() == {p: [float(v) for v in before["poses"][p]["position"]
-                                             + before["poses"][p]["quaternion"]] for p in episode.part_ids}
+    assert episode.scene.pose_dict() == {
+        p: [float(v) for v in before["poses"][p]["position"] + before["poses"][p]["quaternion"]]
+        for p in episode.part_ids
+    }
     assert episode.scene.groups_list() == before["groups"]
     assert episode.scene.camera.describe() == before["camera"]
     assert len(list((episode.run_dir / "captures").iterdir())) == n_captures

@@ -5,7 +5,7 @@ import pytest
 import trimesh
 
 from aw.assembly import AssembledObject, SourcePart, y_up_to_z_up
-from aw.formats import FormatError, Task, TaskPart, write_task, read_task
+from aw.formats import FormatError, Task, TaskPart, read_task, write_task
 from aw.meshes import load_mesh, load_task_meshes
 
 
@@ -38,7 +38,9 @@ def test_load_mesh_errors_name_the_file(tmp_path, content, problem):
 def test_load_mesh_with_a_latin1_comment(tmp_path):
     """A non-UTF-8 byte in a comment (exporters write Latin-1) is decoded, not refused."""
     path = tmp_path / "part.obj"
-    path.write_bytes("# Exportiert von Bl\u00e9nder, Gr\u00f6\u00dfe 1\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".encode("latin-1"))
+    path.write_bytes(
+        "# Exportiert von Bl\u00e9nder, Gr\u00f6\u00dfe 1\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".encode("latin-1")
+    )
     with pytest.raises(UnicodeDecodeError):
         path.read_bytes().decode("utf-8")
     m = load_mesh(path)
@@ -50,8 +52,17 @@ def test_load_task_meshes_in_part_order(tmp_path):
     (d / "parts").mkdir(parents=True)
     trimesh.creation.box([1, 1, 1]).export(d / "parts" / "a.obj")
     trimesh.creation.box([2, 2, 2]).export(d / "parts" / "b.obj")
-    write_task(d, Task(task_id="t", source="s", dataset="d", object_id="o", prompt="x",
-                       parts=[TaskPart(id="p02", mesh="parts/b.obj"), TaskPart(id="p01", mesh="parts/a.obj")]))
+    write_task(
+        d,
+        Task(
+            task_id="t",
+            source="s",
+            dataset="d",
+            object_id="o",
+            prompt="x",
+            parts=[TaskPart(id="p02", mesh="parts/b.obj"), TaskPart(id="p01", mesh="parts/a.obj")],
+        ),
+    )
     meshes = load_task_meshes(read_task(d))
     assert [round(float(m.extents[0])) for m in meshes] == [2, 1]
 

@@ -166,8 +166,12 @@ def test_the_estimate_expects_a_group_of_identical_parts_to_form_fast(monkeypatc
     n = 100
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        got = components(n, candidate_pairs(np.zeros((n, n)), 1e-4), lambda i, j: clock.register(identical),
-                         what=f"groups of {n} parts")
+        got = components(
+            n,
+            candidate_pairs(np.zeros((n, n)), 1e-4),
+            lambda i, j: clock.register(identical),
+            what=f"groups of {n} parts",
+        )
     assert got == ([list(range(n))] if identical else [[k] for k in range(n)])
     slow = [str(w.message) for w in caught if issubclass(w.category, LongWorkWarning)]
     assert len(slow) == int(warns), slow
@@ -185,9 +189,14 @@ def test_registration_groups_ask_fewer_registrations_with_the_same_groups():
     from aw.shape_bounds import cloud_bounds, lower_bounds
 
     rng = np.random.default_rng(2)
-    parts = [np.asarray(trimesh.sample.sample_surface(trimesh.creation.box(extents=e), 300, seed=k)[0])
-             for k, e in enumerate([(0.6, 0.4, 0.2), (0.5, 0.5, 0.2), (0.6, 0.3, 0.25), (0.45, 0.45, 0.3), (0.1, 0.1, 0.3)])]
-    clouds = [parts[k] @ Rotation.random(random_state=rng).as_matrix().T + rng.normal(size=3) for k in (0, 1, 2, 3, 0, 1, 4, 4)]
+    parts = [
+        np.asarray(trimesh.sample.sample_surface(trimesh.creation.box(extents=e), 300, seed=k)[0])
+        for k, e in enumerate([(0.6, 0.4, 0.2), (0.5, 0.5, 0.2), (0.6, 0.3, 0.25), (0.45, 0.45, 0.3), (0.1, 0.1, 0.3)])
+    ]
+    clouds = [
+        parts[k] @ Rotation.random(random_state=rng).as_matrix().T + rng.normal(size=3)
+        for k in (0, 1, 2, 3, 0, 1, 4, 4)
+    ]
     threshold = 1e-4
     asked = []
 

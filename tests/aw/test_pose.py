@@ -57,11 +57,14 @@ def test_quat_to_matrix_is_the_textbook_formula_bitwise():
         q = rng.normal(size=shape) * 10.0 ** rng.uniform(-4, 4, size=shape[:-1] + (1,))
         u = q / np.linalg.norm(q, axis=-1, keepdims=True)
         w, x, y, z = np.moveaxis(u, -1, 0)
-        want = np.stack([
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-        ], axis=-2)
+        want = np.stack(
+            [
+                np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+                np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+                np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+            ],
+            axis=-2,
+        )
         got = quat_to_matrix(q)
         assert got.shape == shape[:-1] + (3, 3) and np.array_equal(got, want)
 
@@ -157,9 +160,7 @@ def test_euler_xyz_is_intrinsic_rx_ry_rz():
     np.testing.assert_allclose(matrix_from_euler_xyz([a, b, c]), rx @ ry @ rz, atol=1e-15)
     np.testing.assert_allclose(euler_xyz_from_matrix(rx @ ry @ rz), [a, b, c], atol=1e-14)
     # X then Y then Z about fixed axes is the reverse product.
-    np.testing.assert_allclose(
-        matrix_from_xyz_sequence(np.degrees([a, b, c])), rz @ ry @ rx, atol=1e-15
-    )
+    np.testing.assert_allclose(matrix_from_xyz_sequence(np.degrees([a, b, c])), rz @ ry @ rx, atol=1e-15)
     np.testing.assert_allclose(rotation_about_axis(2, math.pi / 2), RZ90, atol=1e-15)
 
 
@@ -218,7 +219,9 @@ def test_pose_functions_batched_and_consistent_with_matrices():
     assert out.shape == (4, 30, 3)
     np.testing.assert_allclose(out[2], apply_pose(poses[0, 2], shared), atol=1e-14)
     other = np.concatenate([rng.normal(size=(5, 4, 3)), random_quats(rng, 20).reshape(5, 4, 4)], axis=-1)
-    np.testing.assert_allclose(poses_to_matrices(compose_poses(poses, other)), mats @ poses_to_matrices(other), atol=1e-13)
+    np.testing.assert_allclose(
+        poses_to_matrices(compose_poses(poses, other)), mats @ poses_to_matrices(other), atol=1e-13
+    )
     np.testing.assert_allclose(poses_to_matrices(invert_pose(poses)), np.linalg.inv(mats), atol=1e-12)
     back = matrices_to_poses(mats)
     np.testing.assert_allclose(poses_to_matrices(back), mats, atol=1e-13)

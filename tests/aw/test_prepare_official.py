@@ -229,12 +229,22 @@ def ell_prism():
     meshes do), so that which ear the ear-clipping cuts first turns on the last bits of the
     part frame; turned off the axes. Two polygon faces of 13 vertices, 13 quads."""
     xs = np.linspace(0.0, 1.0, 6)
-    outline = [(x, 0.0) for x in xs] + [(1.0, 0.2), (0.8, 0.2), (0.6, 0.2), (0.4, 0.2), (0.4, 0.6), (0.0, 0.6), (0.0, 0.3)]
+    outline = [(x, 0.0) for x in xs] + [
+        (1.0, 0.2),
+        (0.8, 0.2),
+        (0.6, 0.2),
+        (0.4, 0.2),
+        (0.4, 0.6),
+        (0.0, 0.6),
+        (0.0, 0.3),
+    ]
     n = len(outline)
     flat = np.array(outline)
     v = np.vstack([np.c_[flat, np.zeros(n)], np.c_[flat, np.full(n, 0.07)]])
     v = v @ Rotation.from_euler("zyx", [0.41, -0.73, 1.9]).as_matrix().T + [0.2, -0.3, 0.15]
-    faces = [tuple(range(n))[::-1], tuple(range(n, 2 * n))] + [(i, (i + 1) % n, n + (i + 1) % n, n + i) for i in range(n)]
+    faces = [tuple(range(n))[::-1], tuple(range(n, 2 * n))] + [
+        (i, (i + 1) % n, n + (i + 1) % n, n + i) for i in range(n)
+    ]
     return v, tuple(faces)
 
 
@@ -244,17 +254,21 @@ def sample_parts():
     c = wedge()
     turn = -1.3 * matrix_quat(Rotation.from_euler("xyz", [0.3, -0.2, 1.1]).as_matrix())  # neither unit nor w >= 0
     post = slab(0.1, 0.1, 0.4, quads=False)  # square section: two equal eigenvalues
-    return [("post", post[0], post[1], (np.array([0.3, -0.1, 0.0]), np.array([1.0, 0, 0, 0]))),
-            ("seat", a[0], a[1], (np.zeros(3), np.array([1.0, 0, 0, 0]))),
-            ("back", b[0], b[1], (np.array([0.1, 0.2, -0.05]), turn)),
-            ("arm_2", c[0], c[1], (np.array([-0.2, 0.0, 0.3]), np.array([1.0, 0, 0, 0]))),
-            ("ell", *ell_prism(), (np.array([0.0, 0.4, 0.1]), np.array([1.0, 0, 0, 0])))]
+    return [
+        ("post", post[0], post[1], (np.array([0.3, -0.1, 0.0]), np.array([1.0, 0, 0, 0]))),
+        ("seat", a[0], a[1], (np.zeros(3), np.array([1.0, 0, 0, 0]))),
+        ("back", b[0], b[1], (np.array([0.1, 0.2, -0.05]), turn)),
+        ("arm_2", c[0], c[1], (np.array([-0.2, 0.0, 0.3]), np.array([1.0, 0, 0, 0]))),
+        ("ell", *ell_prism(), (np.array([0.0, 0.4, 0.1]), np.array([1.0, 0, 0, 0]))),
+    ]
 
 
 @pytest.mark.parametrize("seed", [7])
 def test_prepare_official_equals_the_procedure_bit_for_bit(seed):
     raw = sample_parts()
-    sample = OfficialSample(DATASET, "chair-0042", tuple(OfficialPart(p, v, f, (*t, *q)) for p, v, f, (t, q) in raw), Y_UP)
+    sample = OfficialSample(
+        DATASET, "chair-0042", tuple(OfficialPart(p, v, f, (*t, *q)) for p, v, f, (t, q) in raw), Y_UP
+    )
     got = prepare_official(sample, seed, groups=False)
     ids, points, targets, divisor, baked = official_by_hand(raw, "chair-0042", seed, Y_UP)
     assert got.part_ids == ids == ["arm_2", "back", "ell", "post", "seat"]
@@ -276,10 +290,14 @@ def test_streams_are_per_identity_and_order_free():
     assert not np.array_equal(a, stream(1, DATASET, "s", "p1", "surface").random(4))
     # a part's points do not depend on which other parts the object has
     raw = sample_parts()
-    whole = prepare_official(OfficialSample(DATASET, "x", tuple(OfficialPart(p, v, f, (*t, *q)) for p, v, f, (t, q) in raw), Y_UP),
-                             groups=False)
-    fewer = prepare_official(OfficialSample(DATASET, "x", tuple(OfficialPart(p, v, f, (*t, *q)) for p, v, f, (t, q) in raw[:2]), Y_UP),
-                             groups=False)
+    whole = prepare_official(
+        OfficialSample(DATASET, "x", tuple(OfficialPart(p, v, f, (*t, *q)) for p, v, f, (t, q) in raw), Y_UP),
+        groups=False,
+    )
+    fewer = prepare_official(
+        OfficialSample(DATASET, "x", tuple(OfficialPart(p, v, f, (*t, *q)) for p, v, f, (t, q) in raw[:2]), Y_UP),
+        groups=False,
+    )
     k, j = whole.part_ids.index("seat"), fewer.part_ids.index("seat")
     # same local samples up to the (different) layout: same shape of cloud
     d1 = np.linalg.norm(whole.points[k] - whole.points[k][0], axis=1)
@@ -358,8 +376,15 @@ def test_geometry_groups_equal_registering_every_pair(monkeypatch):
     rng = np.random.default_rng(8)
     objects = {
         "pegs": [(3.0, 3.0, 0.05)] + [(0.1, 0.1, 0.3)] * 9,  # many identical small parts
-        "near": [(4.0, 4.0, 0.05), (0.6, 0.2, 0.1), (0.63, 0.2, 0.1), (0.66, 0.21, 0.1), (0.7, 0.2, 0.1),
-                 (0.6, 0.2, 0.14), (0.75, 0.25, 0.1)],  # pairs on both sides of 1e-4
+        "near": [
+            (4.0, 4.0, 0.05),
+            (0.6, 0.2, 0.1),
+            (0.63, 0.2, 0.1),
+            (0.66, 0.21, 0.1),
+            (0.7, 0.2, 0.1),
+            (0.6, 0.2, 0.14),
+            (0.75, 0.25, 0.1),
+        ],  # pairs on both sides of 1e-4
         "distinct": [tuple(sorted(rng.uniform(0.05, 1.0, 3), reverse=True)) for _ in range(8)],
     }
     calls = []

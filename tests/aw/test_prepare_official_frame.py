@@ -18,8 +18,19 @@ from tests.aw.test_prepare_official import ell_prism, frame, slab
 def _nearly_cancelling(offset: float) -> np.ndarray:
     """Eight points whose second axis comes from a projection that nearly cancels (the case
     the official ``tests/test_pca_precision.py`` checks), turned off the axes."""
-    pts = np.array([[offset, 1, 0], [-offset, 1, 0], [offset, -1, 0], [-offset, -1, 0],
-                    [3, 0, 0], [-3, 0, 0], [0, 0, 0.5], [0, 0, -0.5]], dtype=np.float64)
+    pts = np.array(
+        [
+            [offset, 1, 0],
+            [-offset, 1, 0],
+            [offset, -1, 0],
+            [-offset, -1, 0],
+            [3, 0, 0],
+            [-3, 0, 0],
+            [0, 0, 0.5],
+            [0, 0, -0.5],
+        ],
+        dtype=np.float64,
+    )
     return pts @ Rotation.from_euler("xyz", [17, 29, 43], degrees=True).as_matrix().T
 
 
@@ -27,9 +38,14 @@ def _point_sets() -> list[np.ndarray]:
     rng = np.random.default_rng(11)
     post = slab(0.1, 0.1, 0.4, quads=False)[0]  # two equal eigenvalues
     cube = slab(0.2, 0.2, 0.2)[0]  # three
-    return [*(_nearly_cancelling(o) for o in (3.1e-8, 4.1e-8, 1e-7)), ell_prism()[0], post, cube,
-            post @ Rotation.from_euler("xyz", [0.3, 1.2, -0.5]).as_matrix().T,
-            *(rng.normal(size=(n, 3)) * [3, 2, 1] + rng.normal(size=3) for n in (4, 50, 1000))]
+    return [
+        *(_nearly_cancelling(o) for o in (3.1e-8, 4.1e-8, 1e-7)),
+        ell_prism()[0],
+        post,
+        cube,
+        post @ Rotation.from_euler("xyz", [0.3, 1.2, -0.5]).as_matrix().T,
+        *(rng.normal(size=(n, 3)) * [3, 2, 1] + rng.normal(size=3) for n in (4, 50, 1000)),
+    ]
 
 
 @pytest.mark.parametrize("k", range(10))

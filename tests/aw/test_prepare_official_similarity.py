@@ -15,8 +15,13 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from aw.prepare.official_frame import pca_frame
-from aw.prepare.official_similarity import (IMPROVEMENT_TOLERANCE, MAX_ITERATIONS, official_starts, register,
-                                            search_structures)
+from aw.prepare.official_similarity import (
+    IMPROVEMENT_TOLERANCE,
+    MAX_ITERATIONS,
+    official_starts,
+    register,
+    search_structures,
+)
 
 
 def _numpy_register(moving: np.ndarray, fixed: np.ndarray) -> float:
@@ -77,8 +82,10 @@ def _pairs():
         "an L and a box": (ell, box),
         "an L turned": (ell @ turn.T, ell[::-1]),
         # slow to converge (runs of 50-100 fits): the stopping rule decides the value
-        "cylinders": (_surface(trimesh.creation.cylinder(0.1, 0.6), 300, 7),
-                      _surface(trimesh.creation.cylinder(0.11, 0.55), 300, 8)),
+        "cylinders": (
+            _surface(trimesh.creation.cylinder(0.1, 0.6), 300, 7),
+            _surface(trimesh.creation.cylinder(0.11, 0.55), 300, 8),
+        ),
         "boxes sliding": (_box((0.6, 0.25, 0.1), 400, 9), _box((0.5, 0.3, 0.12), 400, 10)),
         "normal blobs": (rng.normal(size=(150, 3)) * [0.3, 0.2, 0.1], rng.normal(size=(150, 3)) * [0.3, 0.2, 0.1]),
     }

@@ -33,8 +33,10 @@ def test_official_suite_holds_the_official_numbers_of_the_published_row(row_file
     manifest, _ = build_suite([spec], tmp_path / "suite", name="t", seed=0, jobs=1, progress=False, protocol="official")
     tid = manifest.tasks[0].task_id
     # the official adapter's reading of the same row: source-frame vertices, quads, Y up
-    parts = tuple(OfficialPart(p["part_id"], np.asarray(p["vertices"], dtype=np.float64),
-                               tuple(tuple(f) for f in p["faces"])) for p in row["parts"])
+    parts = tuple(
+        OfficialPart(p["part_id"], np.asarray(p["vertices"], dtype=np.float64), tuple(tuple(f) for f in p["faces"]))
+        for p in row["parts"]
+    )
     expected = prepare_official(OfficialSample("AssemblyWorld/partnet-manualpa", "chair_9", parts, Y_UP), 0)
 
     got = suite_eval_inputs(tmp_path / "suite", tid)
@@ -57,13 +59,46 @@ def test_official_suite_holds_the_official_numbers_of_the_published_row(row_file
 def test_cli_defaults_and_refusals(row_file, tmp_path, capsys):
     path, _ = row_file
     out = tmp_path / "s"
-    assert prepare_main(["compose", "--rehosted", str(path), "--per-source", "1", "--out", str(out),
-                         "--variants", "1", "--no-progress"]) == 2  # a usage error
+    assert (
+        prepare_main(
+            [
+                "compose",
+                "--rehosted",
+                str(path),
+                "--per-source",
+                "1",
+                "--out",
+                str(out),
+                "--variants",
+                "1",
+                "--no-progress",
+            ]
+        )
+        == 2
+    )  # a usage error
     assert "--variants needs --protocol native" in capsys.readouterr().err
-    assert prepare_main(["compose", "--rehosted", str(path), "--per-source", "1", "--out", str(out), "--no-progress"]) == 0
+    assert (
+        prepare_main(["compose", "--rehosted", str(path), "--per-source", "1", "--out", str(out), "--no-progress"]) == 0
+    )
     assert len(list((out / "eval_points").glob("*.npz"))) == 2  # official by default: one per condition
-    assert prepare_main(["compose", "--rehosted", str(path), "--per-source", "1", "--out", str(out), "--no-progress",
-                         "--protocol", "native", "--overwrite"]) == 0
+    assert (
+        prepare_main(
+            [
+                "compose",
+                "--rehosted",
+                str(path),
+                "--per-source",
+                "1",
+                "--out",
+                str(out),
+                "--no-progress",
+                "--protocol",
+                "native",
+                "--overwrite",
+            ]
+        )
+        == 0
+    )
     assert not (out / "eval_points").exists()  # a replaced suite keeps no stale evaluation points
 
 

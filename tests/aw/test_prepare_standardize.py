@@ -7,6 +7,7 @@ import itertools
 import numpy as np
 import pytest
 import trimesh
+from prepare_helpers import box, brute_force_scale, normalized_source, reassembled, stool
 
 from aw.assembly import AssembledObject, SourcePart
 from aw.formats import read_targets, read_task
@@ -16,14 +17,18 @@ from aw.pose import IDENTITY_POSE, pca_frame, rotation_about_axis
 from aw.prepare import MIN_GAP, box_gap, prepare_object, standardize, unique_vertices
 from aw.scene import scene_from_meshes
 from aw.sources.synthetic import generate_object
-from prepare_helpers import box, brute_force_scale, normalized_source, reassembled, stool
 
 
 @pytest.fixture(scope="module")
 def objects():
     # a hand-made stool (degenerate cylinder spectra, one equivalence group), a synthetic
     # 16-part storage unit, an industrial assembly with fasteners and a fracture
-    return [stool(), generate_object("partnet", 2), generate_object("assemblybench", 2), generate_object("fantastic_breaks", 0)]
+    return [
+        stool(),
+        generate_object("partnet", 2),
+        generate_object("assemblybench", 2),
+        generate_object("fantastic_breaks", 0),
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -115,14 +120,21 @@ def test_duplicate_and_unreferenced_vertices_do_not_change_frames_or_scale():
     soup = np.asarray(seat.vertices)[np.asarray(seat.faces).ravel()]
     verts = np.vstack([soup, [[50.0, 50.0, 50.0]]])
     faces = np.arange(len(soup)).reshape(-1, 3)
-    noisy = AssembledObject(obj.object_id, obj.source, obj.dataset, obj.category,
-                            [SourcePart("seat", trimesh.Trimesh(verts, faces, process=False)), *obj.parts[1:]],
-                            equivalence=obj.equivalence)
+    noisy = AssembledObject(
+        obj.object_id,
+        obj.source,
+        obj.dataset,
+        obj.category,
+        [SourcePart("seat", trimesh.Trimesh(verts, faces, process=False)), *obj.parts[1:]],
+        equivalence=obj.equivalence,
+    )
     prep = standardize(noisy)
     assert prep.scale == pytest.approx(base.scale, rel=1e-12)
     a = {p.source_name: p for p in base.parts}["seat"]
     b = {p.source_name: p for p in prep.parts}["seat"]
-    np.testing.assert_allclose(np.unique(np.round(b.mesh.vertices, 9), axis=0), np.unique(np.round(a.mesh.vertices, 9), axis=0), atol=1e-9)
+    np.testing.assert_allclose(
+        np.unique(np.round(b.mesh.vertices, 9), axis=0), np.unique(np.round(a.mesh.vertices, 9), axis=0), atol=1e-9
+    )
     assert len(b.mesh.vertices) == len(soup)  # the unreferenced vertex is gone
 
 
@@ -175,7 +187,9 @@ def test_parts_already_assembled_in_the_layout_are_found_and_refused(tmp_path):
     a, b, *rest = prep.parts
     # re-bake b so that the motion that assembles a also assembles b: the two stay together
     v = apply_pose(invert_pose(a.target), apply_pose(b.target, np.asarray(b.mesh.vertices)))
-    glued = prep.with_parts([a, replace(b, mesh=trimesh.Trimesh(v, b.mesh.faces, process=False), target=a.target.copy()), *rest])
+    glued = prep.with_parts(
+        [a, replace(b, mesh=trimesh.Trimesh(v, b.mesh.faces, process=False), target=a.target.copy()), *rest]
+    )
     assert assembled_at_start(glued) == [a.part_id, b.part_id]
     from aw.prepare.build import _check_assessable
 
@@ -201,9 +215,15 @@ def test_assembled_parts_are_those_of_checking_every_pair_on_every_vertex():
     def every_pair(prep) -> list[str]:  # the plain statement
         best: list[str] = []
         for a in prep.scored_parts:
-            group = [b.part_id for b in prep.scored_parts
-                     if all(np.abs(apply_pose(a.target, m.vertices) - apply_pose(b.target, m.vertices)).max() <= ASSEMBLED_TOLERANCE
-                            for m in (a.mesh, b.mesh))]
+            group = [
+                b.part_id
+                for b in prep.scored_parts
+                if all(
+                    np.abs(apply_pose(a.target, m.vertices) - apply_pose(b.target, m.vertices)).max()
+                    <= ASSEMBLED_TOLERANCE
+                    for m in (a.mesh, b.mesh)
+                )
+            ]
             best = group if len(group) > len(best) else best
         return best if len(best) >= 2 else []
 

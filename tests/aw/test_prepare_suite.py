@@ -52,7 +52,9 @@ def test_summary_figures_hand_computed():
         ObjectResult(3, "3", "a", "x", 20, 10.0),
         ObjectResult(4, "4", "b", "z", 2, 1.5),
     ]
-    manifest = SuiteManifest(name="t", tasks=[entry(i, "a") for i in range(4)] + [entry(0, "a", "image"), entry(4, "b")])
+    manifest = SuiteManifest(
+        name="t", tasks=[entry(i, "a") for i in range(4)] + [entry(0, "a", "image"), entry(4, "b")]
+    )
     s = summarize(manifest, results)
     a = s["a"]
     assert (a["objects"], a["tasks"], a["conditions"]) == (4, 5, {"none": 4, "image": 1})

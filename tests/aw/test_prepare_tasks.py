@@ -7,6 +7,7 @@ import orjson
 import pytest
 import trimesh
 from PIL import Image
+from prepare_helpers import stool
 
 from aw.formats import read_targets, read_task
 from aw.formats.suite import suite_paths
@@ -17,7 +18,6 @@ from aw.prepare.references import manual_steps
 from aw.prompt import task_prompt
 from aw.render import BACKGROUND_COLOR
 from aw.sources.synthetic import generate_object
-from prepare_helpers import stool
 
 
 def _tree(root) -> dict[str, bytes]:

@@ -6,6 +6,7 @@ import itertools
 
 import numpy as np
 import pytest
+from prepare_helpers import stool
 
 from aw.formats import read_manifest, read_targets, read_task
 from aw.formats.suite import suite_paths
@@ -24,7 +25,6 @@ from aw.prepare import (
 )
 from aw.prepare.suite import ObjectSpec, build_suite
 from aw.sources.synthetic import generate_object
-from prepare_helpers import stool
 
 
 def _assembled(prep) -> dict[str, np.ndarray]:
@@ -104,7 +104,9 @@ def test_prepare_object_writes_paired_variants(tmp_path):
     obj, donor = stool(source="partnet"), generate_object("partnet", 0)
     entries = prepare_object(obj, tmp_path, ["none", "image"], variants=VariantPlan.appendix_e(0), donor=donor)
     kinds = [(e.condition, e.variant) for e in entries]
-    assert kinds == [(c, v) for c in ("none", "image") for v in ("original", "layout", "layout", "missing", "distractor")]
+    assert kinds == [
+        (c, v) for c in ("none", "image") for v in ("original", "layout", "layout", "missing", "distractor")
+    ]
     for e in entries:
         task_dir, targets_path = suite_paths(tmp_path, e.task_id)
         targets = read_targets(targets_path)
@@ -125,14 +127,28 @@ def test_prepare_object_writes_paired_variants(tmp_path):
         assert read_targets(none_t).parts == read_targets(img_t).parts
         assert read_task(img_dir).references == ["references/01.png"]
         # every image-condition variant shows the same reference
-        assert (img_dir / "references" / "01.png").read_bytes() == (suite_paths(tmp_path, "partnet-stool-image")[0] / "references" / "01.png").read_bytes()
+        assert (img_dir / "references" / "01.png").read_bytes() == (
+            suite_paths(tmp_path, "partnet-stool-image")[0] / "references" / "01.png"
+        ).read_bytes()
 
 
 def test_build_suite_with_variants_reads_back(tmp_path):
-    specs = [ObjectSpec("aw.sources.synthetic:generate_object", ("fantastic_breaks", i, 0), ("none",),
-                        ObjectSpec("aw.sources.synthetic:generate_object", ("fantastic_breaks", (i + 1) % 2, 0))) for i in range(2)]
+    specs = [
+        ObjectSpec(
+            "aw.sources.synthetic:generate_object",
+            ("fantastic_breaks", i, 0),
+            ("none",),
+            ObjectSpec("aw.sources.synthetic:generate_object", ("fantastic_breaks", (i + 1) % 2, 0)),
+        )
+        for i in range(2)
+    ]
     manifest, _ = build_suite(specs, tmp_path, name="t", variants=VariantPlan.appendix_e(0), jobs=1, progress=False)
-    assert [t.variant for t in manifest.tasks] == ["original", "layout", "layout", "distractor"] * 2  # no missing for 2 parts
+    assert [t.variant for t in manifest.tasks] == [
+        "original",
+        "layout",
+        "layout",
+        "distractor",
+    ] * 2  # no missing for 2 parts
     assert read_manifest(tmp_path) == manifest
     for t in manifest.tasks:
         task_dir, _ = suite_paths(tmp_path, t.task_id)

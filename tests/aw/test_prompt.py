@@ -29,17 +29,31 @@ def test_exact_text():
         "Assemble the parts so that the result matches that image."
     )
     manual = task_text("manual").splitlines()
-    assert manual[1] == "The attached images are the pages of the assembly manual, in order. Read them in order and follow them."
+    assert (
+        manual[1]
+        == "The attached images are the pages of the assembly manual, in order. Read them in order and follow them."
+    )
     for cond in ("none", "image", "manual"):
         lines = task_text(cond).splitlines()
-        assert len(lines) == 4 and lines[0] == EXPECTED_NONE.splitlines()[0] and lines[2:] == EXPECTED_NONE.splitlines()[2:]
+        assert (
+            len(lines) == 4
+            and lines[0] == EXPECTED_NONE.splitlines()[0]
+            and lines[2:] == EXPECTED_NONE.splitlines()[2:]
+        )
         assert task_prompt(cond) == task_text(cond) + "\n\n" + EXECUTION_INSTRUCTION
 
 
 def test_execution_instruction_covers_the_paper():
     text = EXECUTION_INSTRUCTION.lower()
-    for phrase in ("only through the supplied", "source geometry", "ground truth", "other experiments",
-                   "do not reset the scene", "do not spawn other agents", "reread the supplied references"):
+    for phrase in (
+        "only through the supplied",
+        "source geometry",
+        "ground truth",
+        "other experiments",
+        "do not reset the scene",
+        "do not spawn other agents",
+        "reread the supplied references",
+    ):
         assert phrase in text
 
 

@@ -157,7 +157,11 @@ def test_picture_changes_when_a_part_moves_or_the_camera_orbits(renderer):
     # A rotation of the part changes its silhouette.
     turned = poses.copy()
     turned[0, 3:] = [np.cos(np.pi / 8), 0.0, 0.0, np.sin(np.pi / 8)]
-    turned[0, :3] = [-0.5, 0.0, 0.0] - trimesh.transformations.quaternion_matrix(turned[0, 3:])[:3, :3] @ [-0.5, 0.0, 0.0]
+    turned[0, :3] = [-0.5, 0.0, 0.0] - trimesh.transformations.quaternion_matrix(turned[0, 3:])[:3, :3] @ [
+        -0.5,
+        0.0,
+        0.0,
+    ]
     assert (renderer.render_segmentation(turned, cam) != seg).sum() > 100
     # Orbit.
     orbit = cam.copy()
@@ -217,7 +221,9 @@ def test_part_colors_distinct_stable_and_off_background():
             part_colors(bad)
 
 
-@pytest.mark.parametrize("extent,step", [(1.0, 0.1), (2.4, 0.2), (5.0, 0.5), (0.03, 0.002), (8.0, 1.0), (14.0, 1.0), (16.0, 2.0)])
+@pytest.mark.parametrize(
+    "extent,step", [(1.0, 0.1), (2.4, 0.2), (5.0, 0.5), (0.03, 0.002), (8.0, 1.0), (14.0, 1.0), (16.0, 2.0)]
+)
 def test_grid_spacing(extent, step):
     assert grid_spacing(extent) == pytest.approx(step)
 
@@ -332,7 +338,10 @@ def test_visible_and_color_overrides_apply_to_one_picture_only(renderer):
     seg1 = renderer.render_segmentation(poses, cam)
     px = img[interior(seg1 == 1)].astype(float).mean(axis=0)
     assert px[2] > 2 * px[0] and px[2] > 2 * px[1]  # drawn in the override colour
-    assert ((np.abs(img.astype(int) - np.asarray(BACKGROUND_COLOR) * 255).sum(axis=2) > 60)[interior(seg1 == 0)]).mean() < 0.2
+    assert (
+        ((np.abs(img.astype(int) - np.asarray(BACKGROUND_COLOR) * 255).sum(axis=2) > 60)[interior(seg1 == 0)]).mean()
+        < 0.2
+    )
     # The next ordinary picture is the original one again.
     assert renderer.render(poses, cam).tobytes() == full
     with pytest.raises(ValueError, match="visible"):

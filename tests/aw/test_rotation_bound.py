@@ -8,15 +8,30 @@ import itertools
 import numpy as np
 import pytest
 import trimesh
-from scipy.spatial import cKDTree
 from scipy.optimize import minimize
+from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from aw.pose import cube_rotations
 from aw.prepare.official_similarity import register
-from aw.rotation_bound import (LAZY_LEVELS, START_CUBES, TABLE_LEVELS, TABLE_PAIRS, SearchLimits, _cell_geometry,
-                               _cell_of, _cell_table, _fixed, _level_delta, _rotation, _tables, at_rotation, box_frame,
-                               rules_out, search)
+from aw.rotation_bound import (
+    LAZY_LEVELS,
+    START_CUBES,
+    TABLE_LEVELS,
+    TABLE_PAIRS,
+    SearchLimits,
+    _cell_geometry,
+    _cell_of,
+    _cell_table,
+    _fixed,
+    _level_delta,
+    _rotation,
+    _tables,
+    at_rotation,
+    box_frame,
+    rules_out,
+    search,
+)
 
 
 def _surface(mesh: trimesh.Trimesh, n: int, seed: int) -> np.ndarray:
@@ -40,19 +55,29 @@ def _l_prism(a: float, b: float, t: float, h: float) -> trimesh.Trimesh:
 
 
 def _shapes() -> list[trimesh.Trimesh]:
-    return [trimesh.creation.box(extents=(0.6, 0.4, 0.2)), trimesh.creation.box(extents=(0.55, 0.45, 0.2)),
-            trimesh.creation.box(extents=(0.6, 0.42, 0.19)), trimesh.creation.box(extents=(0.5, 0.5, 0.5)),
-            trimesh.creation.box(extents=(0.5, 0.5, 0.02)), trimesh.creation.cylinder(radius=0.2, height=0.5),
-            trimesh.creation.icosphere(subdivisions=2, radius=0.3), _l_prism(0.5, 0.4, 0.1, 0.1),
-            _l_prism(0.5, 0.45, 0.1, 0.1), trimesh.creation.capsule(height=0.4, radius=0.1)]
+    return [
+        trimesh.creation.box(extents=(0.6, 0.4, 0.2)),
+        trimesh.creation.box(extents=(0.55, 0.45, 0.2)),
+        trimesh.creation.box(extents=(0.6, 0.42, 0.19)),
+        trimesh.creation.box(extents=(0.5, 0.5, 0.5)),
+        trimesh.creation.box(extents=(0.5, 0.5, 0.02)),
+        trimesh.creation.cylinder(radius=0.2, height=0.5),
+        trimesh.creation.icosphere(subdivisions=2, radius=0.3),
+        _l_prism(0.5, 0.4, 0.1, 0.1),
+        _l_prism(0.5, 0.45, 0.1, 0.1),
+        trimesh.creation.capsule(height=0.4, radius=0.1),
+    ]
 
 
 def _limits() -> list[SearchLimits]:
     # the default; and without the aligned rotations first (so that the cubes are searched), with
     # the tables alone, or every cube evaluated directly from depth 0
-    return [SearchLimits(), SearchLimits(aligned_first=False, max_cubes=20000),
-            SearchLimits(aligned_first=False, direct_from=99, max_cubes=20000),
-            SearchLimits(aligned_first=False, direct_from=0, max_cubes=20000)]
+    return [
+        SearchLimits(),
+        SearchLimits(aligned_first=False, max_cubes=20000),
+        SearchLimits(aligned_first=False, direct_from=99, max_cubes=20000),
+        SearchLimits(aligned_first=False, direct_from=0, max_cubes=20000),
+    ]
 
 
 def test_the_grid_gives_each_cube_the_cells_of_its_centres_directions():
@@ -61,17 +86,20 @@ def test_the_grid_gives_each_cube_the_cells_of_its_centres_directions():
     cube's centre, sub-cube ``d`` of cube ``c`` at row ``8 c + d`` of the next depth."""
     grid, cells = _fixed()
     h0 = np.pi / START_CUBES
-    first = START_CUBES ** 3
+    first = START_CUBES**3
     assert grid.shape == (first * 9, 6)
     rng = np.random.default_rng(5)
     for c in rng.choice(first, 40, replace=False):
-        i, j, k = c // START_CUBES ** 2, (c // START_CUBES) % START_CUBES, c % START_CUBES
+        i, j, k = c // START_CUBES**2, (c // START_CUBES) % START_CUBES, c % START_CUBES
         centre = -np.pi + (2 * np.array([i, j, k]) + 1) * h0
         for row, where, level in [(c, centre, TABLE_LEVELS[0])] + [
-                (first + 8 * c + d, centre + np.where([d & 1, d & 2, d & 4], 0.5, -0.5) * h0, TABLE_LEVELS[1])
-                for d in range(8)]:
+            (first + 8 * c + d, centre + np.where([d & 1, d & 2, d & 4], 0.5, -0.5) * h0, TABLE_LEVELS[1])
+            for d in range(8)
+        ]:
             rot = _rotation(*where)
-            want = [_cell_of(*rot[axis], level) for axis in range(3)] + [_cell_of(*rot[:, axis], level) for axis in range(3)]
+            want = [_cell_of(*rot[axis], level) for axis in range(3)] + [
+                _cell_of(*rot[:, axis], level) for axis in range(3)
+            ]
             assert grid[row].tolist() == want
     lazy = sum(3 << (2 * level) for level in LAZY_LEVELS)
     assert cells.shape == (lazy, 4)
@@ -107,7 +135,7 @@ def test_every_direction_lies_in_its_cell_within_the_cell_radius(level):
     # and the awkward ones: axes, face and body diagonals, cell edges and corners
     edges = np.linspace(-1.0, 1.0, (1 << level) + 1)
     special = [v for v in itertools.product((-1.0, 0.0, 1.0), repeat=3) if any(v)]
-    special += [(1.0, s, t) for s in edges[::max(1, len(edges) // 5)] for t in edges[::max(1, len(edges) // 5)]]
+    special += [(1.0, s, t) for s in edges[:: max(1, len(edges) // 5)] for t in edges[:: max(1, len(edges) // 5)]]
     dirs = np.concatenate([dirs, np.array(special), -np.array(special)])
     dirs /= np.linalg.norm(dirs, axis=1)[:, None]
     for u in dirs:
@@ -212,12 +240,15 @@ def test_two_samplings_of_one_part_are_left_to_the_registration():
     assert search(a, b, 1e-4) == (False, 1)  # given up at once: the aligned boxes are within it
 
 
-@pytest.mark.parametrize("cloud", [
-    np.zeros((10, 3)),  # one point repeated
-    np.c_[np.linspace(0, 1, 20), np.zeros(20), np.zeros(20)],  # a segment
-    np.c_[np.random.default_rng(0).uniform(size=(50, 2)), np.zeros(50)],  # a flat patch
-    np.array([[0.0, 0.0, 0.0], [0.1, 0.2, 0.3]]),  # two points
-])
+@pytest.mark.parametrize(
+    "cloud",
+    [
+        np.zeros((10, 3)),  # one point repeated
+        np.c_[np.linspace(0, 1, 20), np.zeros(20), np.zeros(20)],  # a segment
+        np.c_[np.random.default_rng(0).uniform(size=(50, 2)), np.zeros(50)],  # a flat patch
+        np.array([[0.0, 0.0, 0.0], [0.1, 0.2, 0.3]]),  # two points
+    ],
+)
 def test_degenerate_clouds_are_searched_safely(cloud):
     frame = box_frame(cloud)
     other = box_frame(cloud + 0.01)
@@ -228,6 +259,7 @@ def test_degenerate_clouds_are_searched_safely(cloud):
 def _lowest_bound(a, b) -> tuple[float, np.ndarray]:
     """The bound's smallest value over rotations, searched (aligned rotations, random ones, then
     Nelder-Mead from the best): an upper estimate of its minimum, attained at the rotation returned."""
+
     def f(rotvec: np.ndarray) -> float:
         return at_rotation(a, b, Rotation.from_rotvec(rotvec).as_matrix())
 
@@ -264,10 +296,14 @@ def test_the_search_stops_short_of_the_bounds_own_minimum(pair):
     # just above the bound's least value (reached at a rotation the search must not rule out) the
     # pair is not ruled out, with every way of searching; well below it, it is. The minima: at
     # aligned boxes, at 10 degrees, and near a half turn (|r| = pi, the edge of the searched ball).
-    meshes = {"boxes": (trimesh.creation.box(extents=(0.6, 0.4, 0.2)), trimesh.creation.box(extents=(0.5, 0.5, 0.2))),
-              "l-prisms": (_l_prism(0.5, 0.3, 0.08, 0.12), _l_prism(0.45, 0.35, 0.1, 0.1)),
-              "l-prisms, half a turn": (_l_prism(0.5, 0.3, 0.08, 0.12),
-                                        _l_prism(0.45, 0.35, 0.1, 0.1).apply_transform(_half_turn_about_y()))}[pair]
+    meshes = {
+        "boxes": (trimesh.creation.box(extents=(0.6, 0.4, 0.2)), trimesh.creation.box(extents=(0.5, 0.5, 0.2))),
+        "l-prisms": (_l_prism(0.5, 0.3, 0.08, 0.12), _l_prism(0.45, 0.35, 0.1, 0.1)),
+        "l-prisms, half a turn": (
+            _l_prism(0.5, 0.3, 0.08, 0.12),
+            _l_prism(0.45, 0.35, 0.1, 0.1).apply_transform(_half_turn_about_y()),
+        ),
+    }[pair]
     fa, fb = (box_frame(_surface(m, 300, k + 1)) for k, m in enumerate(meshes))
     lowest, _ = _lowest_bound(fa, fb)
     assert lowest > 0.0

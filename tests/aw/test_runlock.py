@@ -30,8 +30,12 @@ HOLD = textwrap.dedent("""
 def holder(tmp_path):
     """A separate process holding ``tmp_path / 'run'``'s lock: (run_dir, Popen)."""
     run = tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, "-c", HOLD, str(run)], stdout=subprocess.PIPE, text=True,
-                            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    proc = subprocess.Popen(
+        [sys.executable, "-c", HOLD, str(run)],
+        stdout=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+    )
     assert proc.stdout.readline().strip() == "locked"
     yield run, proc
     proc.kill()
@@ -40,8 +44,14 @@ def holder(tmp_path):
 
 
 def _task():
-    task = Task(task_id="lk", source="custom", dataset="test", object_id="lk", prompt=task_prompt("none"),
-                parts=[TaskPart(id="p01", mesh="parts/p01.obj")])
+    task = Task(
+        task_id="lk",
+        source="custom",
+        dataset="test",
+        object_id="lk",
+        prompt=task_prompt("none"),
+        parts=[TaskPart(id="p01", mesh="parts/p01.obj")],
+    )
     return task, [trimesh.creation.box([0.3, 0.2, 0.1])]
 
 
@@ -88,5 +98,7 @@ def test_the_lock_file_names_its_holder_during_and_after(tmp_path):
     during = json.loads((tmp_path / "run" / LOCK_FILE).read_text())
     lock.release()
     after = json.loads((tmp_path / "run" / LOCK_FILE).read_text())
-    assert during == after == {"pid": os.getpid(), "host": socket.gethostname(), "command": "aw-score suite runs --out x"}
+    assert (
+        during == after == {"pid": os.getpid(), "host": socket.gethostname(), "command": "aw-score suite runs --out x"}
+    )
     assert holder_of(tmp_path / "run") is None  # the record of an ended holder holds nothing

@@ -18,7 +18,10 @@ RZ90 = np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]])
 
 
 def make_scene(camera: Camera | None = None) -> Scene:
-    parts = [PartInfo(pid, f"part {pid}", np.array([-0.1, -0.2, -0.3]), np.array([0.1, 0.2, 0.3])) for pid in ("p1", "p2", "p3")]
+    parts = [
+        PartInfo(pid, f"part {pid}", np.array([-0.1, -0.2, -0.3]), np.array([0.1, 0.2, 0.3]))
+        for pid in ("p1", "p2", "p3")
+    ]
     poses = {"p1": [1, 0, 0, 1, 0, 0, 0], "p2": [0, 1, 0, 1, 0, 0, 0], "p3": [0, 0, 1, 1, 0, 0, 0]}
     return Scene(parts, poses, camera=camera)
 
@@ -126,7 +129,11 @@ def test_rotate_x_then_y_then_z_world_hand_matrix():
     s.rotate(["p3"], [90, 0, 90], pivot=[0, 0, 0])
     np.testing.assert_allclose(rot(s, "p3"), m_xz, atol=1e-15)
     np.testing.assert_allclose(pos(s, "p3"), m_xz @ [0, 0, 1], atol=1e-15)
-    np.testing.assert_allclose(s.rotation_matrix([30, -45, 60]), s.rotation_matrix([0, 0, 60]) @ s.rotation_matrix([0, -45, 0]) @ s.rotation_matrix([30, 0, 0]), atol=1e-15)
+    np.testing.assert_allclose(
+        s.rotation_matrix([30, -45, 60]),
+        s.rotation_matrix([0, 0, 60]) @ s.rotation_matrix([0, -45, 0]) @ s.rotation_matrix([30, 0, 0]),
+        atol=1e-15,
+    )
 
 
 def test_rotate_premultiplies_existing_orientation():

@@ -22,8 +22,16 @@ def _box(extents, n: int, seed: int) -> np.ndarray:
     return np.asarray(pts, dtype=np.float64)
 
 
-SHAPES = [(0.6, 0.1, 0.05), (0.6, 0.1, 0.08), (0.5, 0.12, 0.05), (0.3, 0.3, 0.02), (0.2, 0.2, 0.2),
-          (0.62, 0.1, 0.05), (0.9, 0.3, 0.3), (0.6, 0.1, 0.05)]
+SHAPES = [
+    (0.6, 0.1, 0.05),
+    (0.6, 0.1, 0.08),
+    (0.5, 0.12, 0.05),
+    (0.3, 0.3, 0.02),
+    (0.2, 0.2, 0.2),
+    (0.62, 0.1, 0.05),
+    (0.9, 0.3, 0.3),
+    (0.6, 0.1, 0.05),
+]
 
 
 def test_bound_is_below_the_distance_after_random_and_aligning_motions():
@@ -33,7 +41,9 @@ def test_bound_is_below_the_distance_after_random_and_aligning_motions():
     assert np.allclose(bound, bound.T) and (bound >= 0).all()
     for i in range(len(clouds)):
         for j in range(len(clouds)):
-            motions = [(Rotation.random(random_state=rng).as_matrix(), rng.normal(scale=0.05, size=3)) for _ in range(15)]
+            motions = [
+                (Rotation.random(random_state=rng).as_matrix(), rng.normal(scale=0.05, size=3)) for _ in range(15)
+            ]
             motions.append((np.eye(3), clouds[j].mean(0) - clouds[i].mean(0)))  # centroids together, as built
             for r, t in motions:
                 assert bound[i, j] <= _cd(clouds[i] @ r.T + t, clouds[j]) * (1 + 1e-12) + 1e-15, (i, j)

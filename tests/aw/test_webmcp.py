@@ -10,8 +10,17 @@ import trimesh
 from aw.episode import Episode
 from aw.formats import Task, TaskPart, read_trajectory
 from aw.prompt import task_prompt
-from aw.webmcp import (ENABLED_TOOLS, PAGE_TOOLS, BadInput, NotRegistered, WebMcpPage, check_arguments, mesh_geom_sizes,
-                       parse_tool_input, registered_tools)
+from aw.webmcp import (
+    ENABLED_TOOLS,
+    PAGE_TOOLS,
+    BadInput,
+    NotRegistered,
+    WebMcpPage,
+    check_arguments,
+    mesh_geom_sizes,
+    parse_tool_input,
+    registered_tools,
+)
 
 
 class Clock:
@@ -26,10 +35,19 @@ class Clock:
 def page(tmp_path):
     # Part ids deliberately out of order: the catalogue follows the sorted ids.
     ids = ["z9", "a1", "m5"]
-    task = Task(task_id="t1", source="custom", dataset="test", object_id="t1", prompt=task_prompt("none"),
-                parts=[TaskPart(id=i, mesh=f"parts/{i}.obj") for i in ids])
-    meshes = [trimesh.creation.box([0.4, 0.2, 0.1]), trimesh.creation.box([0.2, 0.2, 0.2]),
-              trimesh.creation.box([0.1, 0.1, 0.3])]
+    task = Task(
+        task_id="t1",
+        source="custom",
+        dataset="test",
+        object_id="t1",
+        prompt=task_prompt("none"),
+        parts=[TaskPart(id=i, mesh=f"parts/{i}.obj") for i in ids],
+    )
+    meshes = [
+        trimesh.creation.box([0.4, 0.2, 0.1]),
+        trimesh.creation.box([0.2, 0.2, 0.2]),
+        trimesh.creation.box([0.1, 0.1, 0.3]),
+    ]
     clock = Clock()
     ep = Episode(task, meshes, tmp_path / "run", budget_minutes=1.0, clock=clock)
     ep.clock = clock
@@ -42,46 +60,57 @@ def test_registered_tools_follow_enabled_tools():
     tools = registered_tools()
     assert tools == [n for n in ENABLED_TOOLS if n != "end_episode"] and len(tools) == 12
     assert "apply_force" not in tools and "advance_simulation" not in tools
-    assert registered_tools(("advance_simulation", "list_objects", "list_objects")) == ["advance_simulation",
-                                                                                         "list_objects"]
+    assert registered_tools(("advance_simulation", "list_objects", "list_objects")) == [
+        "advance_simulation",
+        "list_objects",
+    ]
     for t in PAGE_TOOLS.values():
         assert t.input_schema["additionalProperties"] is False
 
 
-@pytest.mark.parametrize(("tool", "args", "expected"), [
-    ("list_objects", {"x": 1}, "unexpected argument 'x'"),
-    ("get_object", {}, "id is required"),
-    ("get_object", {"id": ""}, "id must not be empty"),
-    ("translate_objects", {"ids": ["a"], "delta": [1, 2]}, "delta must have exactly 3 items, got 2"),
-    ("translate_objects", {"ids": ["a"], "delta": "[1, 2, 3]"}, "delta must be an array, got a string"),
-    ("translate_objects", {"ids": [], "delta": [1, 2, 3]}, "ids must have at least 1 item, got 0"),
-    ("translate_objects", {"ids": ["a", "a"], "delta": [1, 2, 3]}, "ids must not repeat an item"),
-    ("translate_objects", {"ids": ["a"], "delta": [1, True, 3]}, "delta[1] must be a number, got a boolean"),
-    ("translate_objects", {"ids": ["a"], "delta": [1, float("inf"), 3]}, "delta[1] must be a finite number"),
-    ("translate_objects", {"ids": ["a"], "delta": [1, 2, 3], "space": "local"}, "space must be one of"),
-    ("rotate_objects", {"ids": ["a"], "angles": [1, 2, 3], "pivot": [0, 0]}, "pivot must have exactly 3 items"),
-    ("set_object_pose", {"id": "a"}, "give at least one of position or quaternion"),
-    ("set_object_pose", {"id": "a", "quaternion": [1, 0, 0]}, "quaternion must have exactly 4 items"),
-    ("group_objects", {"ids": ["a"], "name": "n" * 201}, "name must have at most 200 characters, got 201"),
-    ("move_camera", {"yaw": 180.5}, "yaw must be <= 180, got 180.5"),
-    ("move_camera", {"pitch": -86}, "pitch must be >= -85, got -86"),
-    ("move_camera", {"zoom": 0.2}, "zoom must be >= 0.25, got 0.2"),
-    ("move_camera", {"zoom": 4.5}, "zoom must be <= 4, got 4.5"),
-    ("apply_force", {"id": "a", "force": [1, 2]}, "force must have exactly 3 items"),
-    ("advance_simulation", {"duration": 0}, "duration must be > 0, got 0"),
-    ("advance_simulation", {"duration": 61}, "duration must be <= 60, got 61"),
-    ("start_episode", {"task": 3}, "task must be a string, got a number"),
-])
+@pytest.mark.parametrize(
+    ("tool", "args", "expected"),
+    [
+        ("list_objects", {"x": 1}, "unexpected argument 'x'"),
+        ("get_object", {}, "id is required"),
+        ("get_object", {"id": ""}, "id must not be empty"),
+        ("translate_objects", {"ids": ["a"], "delta": [1, 2]}, "delta must have exactly 3 items, got 2"),
+        ("translate_objects", {"ids": ["a"], "delta": "[1, 2, 3]"}, "delta must be an array, got a string"),
+        ("translate_objects", {"ids": [], "delta": [1, 2, 3]}, "ids must have at least 1 item, got 0"),
+        ("translate_objects", {"ids": ["a", "a"], "delta": [1, 2, 3]}, "ids must not repeat an item"),
+        ("translate_objects", {"ids": ["a"], "delta": [1, True, 3]}, "delta[1] must be a number, got a boolean"),
+        ("translate_objects", {"ids": ["a"], "delta": [1, float("inf"), 3]}, "delta[1] must be a finite number"),
+        ("translate_objects", {"ids": ["a"], "delta": [1, 2, 3], "space": "local"}, "space must be one of"),
+        ("rotate_objects", {"ids": ["a"], "angles": [1, 2, 3], "pivot": [0, 0]}, "pivot must have exactly 3 items"),
+        ("set_object_pose", {"id": "a"}, "give at least one of position or quaternion"),
+        ("set_object_pose", {"id": "a", "quaternion": [1, 0, 0]}, "quaternion must have exactly 4 items"),
+        ("group_objects", {"ids": ["a"], "name": "n" * 201}, "name must have at most 200 characters, got 201"),
+        ("move_camera", {"yaw": 180.5}, "yaw must be <= 180, got 180.5"),
+        ("move_camera", {"pitch": -86}, "pitch must be >= -85, got -86"),
+        ("move_camera", {"zoom": 0.2}, "zoom must be >= 0.25, got 0.2"),
+        ("move_camera", {"zoom": 4.5}, "zoom must be <= 4, got 4.5"),
+        ("apply_force", {"id": "a", "force": [1, 2]}, "force must have exactly 3 items"),
+        ("advance_simulation", {"duration": 0}, "duration must be > 0, got 0"),
+        ("advance_simulation", {"duration": 61}, "duration must be <= 60, got 61"),
+        ("start_episode", {"task": 3}, "task must be a string, got a number"),
+    ],
+)
 def test_schema_errors_name_the_argument(tool, args, expected):
     problems = check_arguments(PAGE_TOOLS[tool].input_schema, args)
     assert any(expected in p for p in problems), problems
 
 
-@pytest.mark.parametrize(("tool", "args"), [
-    ("move_camera", {}), ("move_camera", {"yaw": -180, "pitch": 85, "zoom": 0.25, "right": 1e3, "up": -2}),
-    ("set_object_pose", {"id": "a", "quaternion": [1, 0, 0, 0]}), ("advance_simulation", {"duration": 60}),
-    ("group_objects", {"ids": ["a", "b"], "name": "n" * 200}), ("start_episode", {"task": "x"}),
-])
+@pytest.mark.parametrize(
+    ("tool", "args"),
+    [
+        ("move_camera", {}),
+        ("move_camera", {"yaw": -180, "pitch": 85, "zoom": 0.25, "right": 1e3, "up": -2}),
+        ("set_object_pose", {"id": "a", "quaternion": [1, 0, 0, 0]}),
+        ("advance_simulation", {"duration": 60}),
+        ("group_objects", {"ids": ["a", "b"], "name": "n" * 200}),
+        ("start_episode", {"task": "x"}),
+    ],
+)
 def test_schema_accepts_the_bounds(tool, args):
     assert check_arguments(PAGE_TOOLS[tool].input_schema, args) == []
 
@@ -89,9 +118,13 @@ def test_schema_accepts_the_bounds(tool, args):
 def test_catalogue_ids_and_recording(page):
     ep = page.episode
     out = page.execute("list_objects", {}).output
-    assert out == {"objects": [{"id": f"part-000{k}", "name": f"Part {pid}", "type": "rigid",
-                                "collisionEnabled": False} for k, pid in ((1, "a1"), (2, "m5"), (3, "z9"))],
-                   "groups": []}
+    assert out == {
+        "objects": [
+            {"id": f"part-000{k}", "name": f"Part {pid}", "type": "rigid", "collisionEnabled": False}
+            for k, pid in ((1, "a1"), (2, "m5"), (3, "z9"))
+        ],
+        "groups": [],
+    }
     # The first page-tool call started the episode (as the official runtime does).
     assert ep.started
     r = page.execute("translate_objects", {"ids": ["part-0003"], "delta": [0.5, 0, 0]})
@@ -144,8 +177,11 @@ def test_refusals_are_error_objects_and_recorded(page):
 
 def test_groups_follow_the_official_rule(page):
     g1 = page.execute("group_objects", {"ids": ["part-0001", "part-0002"]}).output
-    assert g1 == {"status": "completed", "result": {"id": "group-t1-1", "name": "Group",
-                                                    "members": ["part-0001", "part-0002"]}, "index": 1}
+    assert g1 == {
+        "status": "completed",
+        "result": {"id": "group-t1-1", "name": "Group", "members": ["part-0001", "part-0002"]},
+        "index": 1,
+    }
     # A new group sharing a member replaces the old one.
     g2 = page.execute("group_objects", {"ids": ["part-0002", "part-0003"], "name": "pair"}).output
     assert g2["result"] == {"id": "group-t1-2", "name": "pair", "members": ["part-0002", "part-0003"]}
@@ -186,8 +222,16 @@ def test_geom_sizes_do_not_depend_on_the_placement():
 
     part = trimesh.creation.box([0.3, 0.12, 0.05])
     baked = part.copy()
-    baked.apply_transform(np.vstack([np.hstack([Rotation.from_euler("xyz", [20, -50, 75], degrees=True).as_matrix(),
-                                                [[1.0], [-2.0], [0.5]]]), [0, 0, 0, 1]]))
+    baked.apply_transform(
+        np.vstack(
+            [
+                np.hstack(
+                    [Rotation.from_euler("xyz", [20, -50, 75], degrees=True).as_matrix(), [[1.0], [-2.0], [0.5]]]
+                ),
+                [0, 0, 0, 1],
+            ]
+        )
+    )
     a, b = mesh_geom_sizes([part, baked])
     assert a == pytest.approx([0.025, 0.06, 0.15], abs=1e-6) and b == pytest.approx(a, abs=1e-6)
     # A mesh MuJoCo refuses (a single triangle) still gets a size: half its bounding box.
@@ -195,16 +239,19 @@ def test_geom_sizes_do_not_depend_on_the_placement():
     assert mesh_geom_sizes([tri]) == [[0.5, 1.0, 0.0]]
 
 
-@pytest.mark.parametrize("text, message", [
-    ('{"a": ' + "[" * 40 + "]" * 40 + "}", "input is nested more than 32 levels deep"),
-    ('{"a": ' + "[" * 5000 + "]" * 5000 + "}", "input is nested more than 32 levels deep"),
-    ('{"name": "x\\ud800"}', "input holds a lone UTF-16 surrogate (\\ud800); strings must be valid Unicode text"),
-    ('{"\\udfff": 1}', "input holds a lone UTF-16 surrogate (\\udfff)"),
-    ('{"yaw": ' + "9" * 5000 + "}", "input holds a number with more than 4300 digits; numbers must be finite"),
-    ('{"yaw": NaN}', "NaN is not a JSON number"),
-    ("[1]", "input must encode a JSON object, got an array"),
-    ("{", "input is not valid JSON"),
-])
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ('{"a": ' + "[" * 40 + "]" * 40 + "}", "input is nested more than 32 levels deep"),
+        ('{"a": ' + "[" * 5000 + "]" * 5000 + "}", "input is nested more than 32 levels deep"),
+        ('{"name": "x\\ud800"}', "input holds a lone UTF-16 surrogate (\\ud800); strings must be valid Unicode text"),
+        ('{"\\udfff": 1}', "input holds a lone UTF-16 surrogate (\\udfff)"),
+        ('{"yaw": ' + "9" * 5000 + "}", "input holds a number with more than 4300 digits; numbers must be finite"),
+        ('{"yaw": NaN}', "NaN is not a JSON number"),
+        ("[1]", "input must encode a JSON object, got an array"),
+        ("{", "input is not valid JSON"),
+    ],
+)
 def test_tool_input_that_no_record_could_hold_is_refused_by_name(text, message):
     with pytest.raises(BadInput) as info:
         parse_tool_input(text)
@@ -212,7 +259,7 @@ def test_tool_input_that_no_record_could_hold_is_refused_by_name(text, message):
 
 
 def test_tool_input_within_limits_passes():
-    assert parse_tool_input('{"a": ' + "[" * 30 + "]" * 30 + ', "b": "\\ud83d\\ude00"}')["b"] == "\U0001F600"
+    assert parse_tool_input('{"a": ' + "[" * 30 + "]" * 30 + ', "b": "\\ud83d\\ude00"}')["b"] == "\U0001f600"
     # integers beyond float range pass the decoding and are refused by the argument check, by name
     big = parse_tool_input('{"ids": ["part-0001"], "delta": [%s, 0, 0]}' % ("9" * 400))
     problems = check_arguments(PAGE_TOOLS["translate_objects"].input_schema, big)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -14,7 +14,7 @@ def small_settings(n_points: int, max_iters: int = 25) -> ProtocolSettings:
     return ProtocolSettings(n_surface=4 * n_points, n_fps=n_points, max_iters=max_iters)
 
 
-@lru_cache(maxsize=None)
+@cache
 def small_task(n_parts: int, n_points: int = 12, seed: int = 0, max_iters: int = 25):
     """``(geometry, object)`` of a synthetic table with ``n_parts`` parts (cached per session)."""
     return make_points_geometry(n_parts, n_points, seed, small_settings(n_points, max_iters))

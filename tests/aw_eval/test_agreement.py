@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from eval_helpers import close, small_task
 
 import aw_eval
 from aw_eval import reference as ref
 from aw_eval.fixtures import random_checkpoints, swap_identical
-from eval_helpers import close, small_task
 
 # (parts, checkpoints): 200 checkpoints in all
 CASES = [(2, 50), (3, 45), (5, 40), (8, 30), (12, 20), (20, 15)]

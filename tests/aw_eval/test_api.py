@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from eval_helpers import small_task
 
 import aw_eval
 from aw.pose import IDENTITY_POSE, compose_poses
 from aw_eval.fixtures import random_checkpoints
-from eval_helpers import small_task
 
 
 @pytest.fixture(scope="module")
@@ -54,8 +54,11 @@ def test_a_batch_that_will_take_long_warns_once_with_its_estimate(task, monkeypa
         warnings.simplefilter("always")
         aw_eval.score_batch(geom, random_checkpoints(obj, 3, seed=2), backend="numba")
     slow = [str(w.message) for w in caught if issubclass(w.category, LongWorkWarning)]
-    assert slow == (["scoring 3 states of a 4-part task (exact, numba): 2 left, about 7 min on this machine "
-                     "(200.0 s a state)"] if warns else [])
+    assert slow == (
+        ["scoring 3 states of a 4-part task (exact, numba): 2 left, about 7 min on this machine (200.0 s a state)"]
+        if warns
+        else []
+    )
 
 
 def test_registration_is_returned_and_reusable(task):

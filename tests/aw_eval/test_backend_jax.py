@@ -3,16 +3,16 @@ identical PA/SR, SCD within 1e-9 relative, on the CPU at small sizes."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
-
-import dataclasses
+from eval_helpers import small_settings, small_task
 
 import aw_eval
 from aw_eval.fixtures import make_points_geometry, random_checkpoints, swap_identical
 from aw_eval.kernels import accelerator_present, jax_icp
 from aw_eval.registration import resolve_backend
-from eval_helpers import small_settings, small_task
 
 
 def _agree(a, b):
@@ -65,8 +65,11 @@ def test_knife_edge_thresholds_decide_alike(monkeypatch):
     scds = base.scd[base.scd > 1e-12]
     assert len(errors) and len(scds)
     for sign in (-1.0, 1.0):
-        st = dataclasses.replace(small_settings(16), threshold=float(np.sort(errors)[len(errors) // 2]) * (1 + sign * 1e-7),
-                                 sra_threshold=float(np.sort(scds)[len(scds) // 2]) * (1 + sign * 1e-7))
+        st = dataclasses.replace(
+            small_settings(16),
+            threshold=float(np.sort(errors)[len(errors) // 2]) * (1 + sign * 1e-7),
+            sra_threshold=float(np.sort(scds)[len(scds) // 2]) * (1 + sign * 1e-7),
+        )
         g, _ = make_points_geometry(3, 16, 0, st)
         numba = aw_eval.score_batch(g, cks, mode="exact", backend="numba")
         jax = aw_eval.score_batch(g, cks, mode="exact", backend="jax")

@@ -21,13 +21,23 @@ from aw_eval.study.fixtures import box_suite, write_scripted_run
 CK_MODE = "fast"
 PROTO = ["--protocol-setting", "n_surface=256", "--protocol-setting", "n_fps=64", "--checkpoint-mode", CK_MODE]
 FAST = ["--bootstrap", "200", "--permutations", "500", "--no-progress"]
-ORIGINALS = ["partnet-box000-none", "partnet-box000-image", "ikea_manual-box000-manual", "assemblybench-box000-manual",
-             "fantastic_breaks-box000-none"]
+ORIGINALS = [
+    "partnet-box000-none",
+    "partnet-box000-image",
+    "ikea_manual-box000-manual",
+    "assemblybench-box000-manual",
+    "fantastic_breaks-box000-none",
+]
 
 
 def _info(**kw):
-    base = {"wall_seconds": 300.0, "mcp_calls": 20, "cost_usd": 1.5, "declared_complete": True,
-            "tokens": {"input": 1_000_000, "output": 200_000}}
+    base = {
+        "wall_seconds": 300.0,
+        "mcp_calls": 20,
+        "cost_usd": 1.5,
+        "declared_complete": True,
+        "tokens": {"input": 1_000_000, "output": 200_000},
+    }
     base.update(kw)
     return base
 
@@ -42,12 +52,13 @@ def study(tmp_path_factory):
     alpha_tasks = ORIGINALS + [f"partnet-box000-none-{v}" for v in ("layout_a", "distractor", "missing")]
     for t in alpha_tasks:  # alpha: everything right except one AssemblyBench part
         correct = ["p02", "p03"] if t.startswith("assemblybench") else None
-        ck[("alpha", t)] = write_scripted_run(runs / "alpha" / t, suite, t, system="alpha", correct=correct,
-                                              run_info=_info(), inspect_moves=False).n_checkpoints
+        ck[("alpha", t)] = write_scripted_run(
+            runs / "alpha" / t, suite, t, system="alpha", correct=correct, run_info=_info(), inspect_moves=False
+        ).n_checkpoints
     b = runs / "beta"
     ck[("beta", "partnet-box000-none")] = write_scripted_run(
-        b / "partnet-box000-none", suite, "partnet-box000-none", system="beta", end_reason=None,
-        cut_last_line=True).n_checkpoints  # truncated, no final.json
+        b / "partnet-box000-none", suite, "partnet-box000-none", system="beta", end_reason=None, cut_last_line=True
+    ).n_checkpoints  # truncated, no final.json
     # partnet-box000-image: missing
     (b / "ikea_manual-box000-manual").mkdir(parents=True)
     (b / "ikea_manual-box000-manual" / "trajectory.jsonl").write_text("{ not a trajectory\n")
@@ -55,19 +66,49 @@ def study(tmp_path_factory):
     (b / "assemblybench-box000-manual").mkdir()
     shutil.copy(root / "tmp_ab" / "final.json", b / "assemblybench-box000-manual" / "final.json")  # final.json only
     ck[("beta", "fantastic_breaks-box000-none")] = write_scripted_run(
-        b / "fantastic_breaks-box000-none", suite, "fantastic_breaks-box000-none", system="beta", end_reason="timeout",
-        run_info=_info(ended="timeout", declared_complete=None), inspect_moves=False).n_checkpoints
+        b / "fantastic_breaks-box000-none",
+        suite,
+        "fantastic_breaks-box000-none",
+        system="beta",
+        end_reason="timeout",
+        run_info=_info(ended="timeout", declared_complete=None),
+        inspect_moves=False,
+    ).n_checkpoints
     ck[("beta", "partnet-box000-none-layout_a")] = write_scripted_run(
-        b / "partnet-box000-none-layout_a", suite, "partnet-box000-none-layout_a", system="beta",
-        inspect_moves=False).n_checkpoints
+        b / "partnet-box000-none-layout_a", suite, "partnet-box000-none-layout_a", system="beta", inspect_moves=False
+    ).n_checkpoints
     shutil.copytree(runs / "alpha" / "ikea_manual-box000-manual", b / "not-a-task")
     out = root / "out"
-    rc = main([str(suite), str(runs), "--out", str(out), "--jobs", "1", "--seed", "3", *PROTO, *FAST,
-               "--geometry-cache", str(root / "geometry")])
+    rc = main(
+        [
+            str(suite),
+            str(runs),
+            "--out",
+            str(out),
+            "--jobs",
+            "1",
+            "--seed",
+            "3",
+            *PROTO,
+            *FAST,
+            "--geometry-cache",
+            str(root / "geometry"),
+        ]
+    )
     assert rc == 0
     doc = json.loads((out / "scores.json").read_text())
     opts = [*PROTO, "--geometry-cache", str(root / "geometry")]  # later runs share the geometry
-    return {"root": root, "suite": suite, "opts": opts, "alpha_tasks": alpha_tasks, "runs": runs, "out": out, "doc": doc, "ck": ck, "tasks": tasks}
+    return {
+        "root": root,
+        "suite": suite,
+        "opts": opts,
+        "alpha_tasks": alpha_tasks,
+        "runs": runs,
+        "out": out,
+        "doc": doc,
+        "ck": ck,
+        "tasks": tasks,
+    }
 
 
 def _run(doc, system, task):
@@ -91,8 +132,9 @@ def test_scores_json_statuses_and_final_sources(study):
     only = _run(doc, "beta", "assemblybench-box000-manual")
     assert only["status"] == "scored" and only["final_from"] == "final.json" and only["n_checkpoints"] == 0
     assert only["sr"] == 1.0
-    assert doc["unknown_runs"] == [{"system": "beta", "task_id": "not-a-task",
-                                    "path": str(study["runs"] / "beta" / "not-a-task")}]
+    assert doc["unknown_runs"] == [
+        {"system": "beta", "task_id": "not-a-task", "path": str(study["runs"] / "beta" / "not-a-task")}
+    ]
     n_missing = (len(study["tasks"]) - len(study["alpha_tasks"])) + (len(study["tasks"]) - 5)
     assert {k: len(v) for k, v in doc["unscored_runs"].items()} == {"missing": n_missing, "unreadable": 1}
     # variants: the distractor is outside the scored parts, the missing-part task scores retained parts
@@ -101,7 +143,9 @@ def test_scores_json_statuses_and_final_sources(study):
     mis = _run(doc, "alpha", "partnet-box000-none-missing")
     assert mis["sr"] == 1.0 and len(mis["part_errors"]) == 2
     tasks = {t["task_id"]: t for t in doc["tasks"]}
-    assert tasks["partnet-box000-none-distractor"]["n_parts"] == 3 and tasks["partnet-box000-none-missing"]["n_parts"] == 2
+    assert (
+        tasks["partnet-box000-none-distractor"]["n_parts"] == 3 and tasks["partnet-box000-none-missing"]["n_parts"] == 2
+    )
 
 
 def test_final_scores_match_the_evaluator_directly(study):
@@ -178,8 +222,20 @@ def test_report_and_plots(study):
     assert "75.00" in alpha
     beta = next(line for line in table1.splitlines() if line.startswith("| beta"))
     assert "62.50" in beta
-    for heading in ("Table A-3", "Table A-4", "Table A-5", "Table A-6", "Table A-7", "Table A-8", "Table A-9",
-                    "Table A-10", "Table A-11", "Table A-12", "Quality over time", "Completion reports"):
+    for heading in (
+        "Table A-3",
+        "Table A-4",
+        "Table A-5",
+        "Table A-6",
+        "Table A-7",
+        "Table A-8",
+        "Table A-9",
+        "Table A-10",
+        "Table A-11",
+        "Table A-12",
+        "Quality over time",
+        "Completion reports",
+    ):
         assert f"## {heading}" in md
     runs = md.split("## Runs")[1].split("\n## ")[0]
     assert "beta / partnet-box000-image" in runs and "**missing**" in runs
@@ -188,9 +244,16 @@ def test_report_and_plots(study):
     assert "final state from trajectory" in runs
     assert "Protocol overrides" in md
     doc = study["doc"]
-    assert set(doc["plots"]) == {"quality_normalized", "quality_budget", "thresholds", "activity", "magnitudes", "reference"}
+    assert set(doc["plots"]) == {
+        "quality_normalized",
+        "quality_budget",
+        "thresholds",
+        "activity",
+        "magnitudes",
+        "reference",
+    }
     page = (out / "report.html").read_text()  # the same report as a page (tests/aw_eval/report/)
-    assert 'Table 1: benchmark results</h2>' in page and "beta / partnet-box000-image" in page
+    assert "Table 1: benchmark results</h2>" in page and "beta / partnet-box000-image" in page
     for rel in doc["plots"].values():
         assert f"]({rel})" in md and f'<img src="{rel}"' in page
         with Image.open(out / rel) as im:
@@ -199,8 +262,19 @@ def test_report_and_plots(study):
 
 def test_second_run_recomputes_nothing_and_a_changed_run_only_that(study):
     out = study["out"]
-    args = [str(study["suite"]), str(study["runs"]), "--out", str(out), "--jobs", "1", "--seed", "3", *study["opts"],
-            *FAST, "--no-plots"]
+    args = [
+        str(study["suite"]),
+        str(study["runs"]),
+        "--out",
+        str(out),
+        "--jobs",
+        "1",
+        "--seed",
+        "3",
+        *study["opts"],
+        *FAST,
+        "--no-plots",
+    ]
     assert main(args) == 0
     doc = json.loads((out / "scores.json").read_text())
     assert doc["scoring"]["scored_runs"] == 0
@@ -209,8 +283,9 @@ def test_second_run_recomputes_nothing_and_a_changed_run_only_that(study):
     # fix alpha's AssemblyBench run: only that run is rescored
     t = "assemblybench-box000-manual"
     shutil.rmtree(study["runs"] / "alpha" / t)
-    write_scripted_run(study["runs"] / "alpha" / t, study["suite"], t, system="alpha", run_info=_info(),
-                       inspect_moves=False)
+    write_scripted_run(
+        study["runs"] / "alpha" / t, study["suite"], t, system="alpha", run_info=_info(), inspect_moves=False
+    )
     assert main(args) == 0
     doc = json.loads((out / "scores.json").read_text())
     assert doc["scoring"]["scored_runs"] == 1 and doc["scoring"]["cached_runs"] == 12
@@ -218,8 +293,10 @@ def test_second_run_recomputes_nothing_and_a_changed_run_only_that(study):
 
 
 def _comparable(doc):
-    return {(r["system"], r["task_id"]): (r["status"], r["pa"], r["sr"], r["scd"], r["part_errors"], r["n_checkpoints"])
-            for r in doc["runs"]}
+    return {
+        (r["system"], r["task_id"]): (r["status"], r["pa"], r["sr"], r["scd"], r["part_errors"], r["n_checkpoints"])
+        for r in doc["runs"]
+    }
 
 
 def test_dask_local_cluster_gives_identical_results(study, tmp_path):
@@ -227,8 +304,22 @@ def test_dask_local_cluster_gives_identical_results(study, tmp_path):
 
     ref = json.loads((study["out"] / "scores.json").read_text())  # after the resumption test, if it ran
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as cluster:
-        rc = main([str(study["suite"]), str(study["runs"]), "--out", str(tmp_path / "dask"), "--scheduler",
-                   cluster.scheduler_address, *study["opts"], *FAST, "--seed", "3", "--no-plots", "--no-html"])
+        rc = main(
+            [
+                str(study["suite"]),
+                str(study["runs"]),
+                "--out",
+                str(tmp_path / "dask"),
+                "--scheduler",
+                cluster.scheduler_address,
+                *study["opts"],
+                *FAST,
+                "--seed",
+                "3",
+                "--no-plots",
+                "--no-html",
+            ]
+        )
     assert rc == 0
     doc = json.loads((tmp_path / "dask" / "scores.json").read_text())
     assert doc["scoring"]["executor"].startswith("dask:")
@@ -239,8 +330,20 @@ def test_dask_local_cluster_gives_identical_results(study, tmp_path):
 
 
 def test_final_only(study, tmp_path):
-    rc = main([str(study["suite"]), str(study["runs"]), "--out", str(tmp_path / "fo"), "--final-only", "--jobs", "1",
-               *study["opts"], *FAST, "--no-plots"])
+    rc = main(
+        [
+            str(study["suite"]),
+            str(study["runs"]),
+            "--out",
+            str(tmp_path / "fo"),
+            "--final-only",
+            "--jobs",
+            "1",
+            *study["opts"],
+            *FAST,
+            "--no-plots",
+        ]
+    )
     assert rc == 0
     doc = json.loads((tmp_path / "fo" / "scores.json").read_text())
     ref = json.loads((study["out"] / "scores.json").read_text())
@@ -253,8 +356,7 @@ def test_final_only(study, tmp_path):
 def test_bad_inputs(tmp_path, capsys):
     assert main([str(tmp_path / "nope"), str(tmp_path), "--out", str(tmp_path / "o")]) == 2
     assert "suite directory not found" in capsys.readouterr().err
-    suite = box_suite(tmp_path / "suite", objects_per_source=1, n_parts=2,
-                      blocks=(("fantastic_breaks", ("none",)),))
+    suite = box_suite(tmp_path / "suite", objects_per_source=1, n_parts=2, blocks=(("fantastic_breaks", ("none",)),))
     assert main([str(suite), str(tmp_path / "runs"), "--out", str(tmp_path / "o")]) == 2
     assert "runs directory not found" in capsys.readouterr().err
     (tmp_path / "runs").mkdir()
@@ -267,7 +369,17 @@ def test_bad_inputs(tmp_path, capsys):
 
 
 def test_unreachable_scheduler_is_a_clear_error(study, tmp_path, capsys):
-    rc = main([str(study["suite"]), str(study["runs"]), "--out", str(tmp_path / "x"), "--scheduler", "bogus://nowhere",
-               *study["opts"], *FAST])
+    rc = main(
+        [
+            str(study["suite"]),
+            str(study["runs"]),
+            "--out",
+            str(tmp_path / "x"),
+            "--scheduler",
+            "bogus://nowhere",
+            *study["opts"],
+            *FAST,
+        ]
+    )
     assert rc == 2
     assert "cannot connect to the Dask scheduler at bogus://nowhere" in capsys.readouterr().err

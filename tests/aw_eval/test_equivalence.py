@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from eval_helpers import small_task
 
 from aw.pose import quat_to_matrix
 from aw_eval import reference as ref
 from aw_eval.equivalence import equivalence_groups
 from aw_eval.fixtures import random_rotation_quat
 from aw_eval.settings import ProtocolSettings
-from eval_helpers import small_task
 
 
 def test_groups_equal_reference_and_join_identical_legs():
@@ -82,7 +82,14 @@ def test_cd_lower_bound_holds_for_every_rigid_motion_and_the_registration():
 
     rng = np.random.default_rng(11)
     st = ProtocolSettings(n_surface=200, n_fps=200, max_iters=30)
-    shapes = [(0.6, 0.1, 0.05), (0.6, 0.1, 0.08), (0.5, 0.12, 0.05), (0.3, 0.3, 0.02), (0.2, 0.2, 0.2), (0.62, 0.1, 0.05)]
+    shapes = [
+        (0.6, 0.1, 0.05),
+        (0.6, 0.1, 0.08),
+        (0.5, 0.12, 0.05),
+        (0.3, 0.3, 0.02),
+        (0.2, 0.2, 0.2),
+        (0.62, 0.1, 0.05),
+    ]
     clouds = [_in_frame(_box_cloud(e, 200, k)) for k, e in enumerate(shapes)]
     bound = lower_bounds(cloud_bounds(np.stack(clouds)))
     excluded = 0
@@ -105,7 +112,12 @@ def test_cd_lower_bound_holds_for_every_rigid_motion_and_the_registration():
 
 def test_bounded_groups_equal_reference_on_near_identical_boxes():
     # boxes close in size: the bound must not cut a true edge (0 ~ 5), and the groups equal the reference
-    clouds = np.stack([_box_cloud(e, 64, 0) for e in [(0.6, 0.1, 0.05), (0.6, 0.1, 0.08), (0.3, 0.3, 0.02), (0.2, 0.2, 0.2), (0.6, 0.1, 0.05)]])
+    clouds = np.stack(
+        [
+            _box_cloud(e, 64, 0)
+            for e in [(0.6, 0.1, 0.05), (0.6, 0.1, 0.08), (0.3, 0.3, 0.02), (0.2, 0.2, 0.2), (0.6, 0.1, 0.05)]
+        ]
+    )
     st = ProtocolSettings(n_surface=64, n_fps=64, max_iters=30)
     got = equivalence_groups(clouds, 1.0, st)
     assert got == ref.equivalence_groups(clouds, 1.0, st)
@@ -127,8 +139,14 @@ def _objects():
     # a base and many identical small parts (small next to the base: two samplings of one are
     # within 1e-4), then boxes a few percent apart next to a base (pairs on both sides of 1e-4)
     pegs = [(3.0, 3.0, 0.05)] + [(0.1, 0.1, 0.3)] * 14
-    near = [(4.0, 4.0, 0.05)] + [(0.6, 0.2, 0.1), (0.63, 0.2, 0.1), (0.66, 0.21, 0.1), (0.7, 0.2, 0.1), (0.6, 0.2, 0.14),
-                                 (0.75, 0.25, 0.1)]
+    near = [(4.0, 4.0, 0.05)] + [
+        (0.6, 0.2, 0.1),
+        (0.63, 0.2, 0.1),
+        (0.66, 0.21, 0.1),
+        (0.7, 0.2, 0.1),
+        (0.6, 0.2, 0.14),
+        (0.75, 0.25, 0.1),
+    ]
     distinct = [tuple(sorted(rng.uniform(0.05, 1.0, 3), reverse=True)) for _ in range(14)]
     mixed = pegs[:6] + near[:4] + distinct[:4] + [(0.1, 0.1, 0.3)] * 3
     return {"pegs": pegs, "near": near, "distinct": distinct, "mixed": mixed}
@@ -170,5 +188,8 @@ def test_near_threshold_chain_is_joined_as_by_every_pair(workers):
     clouds = np.stack([c, far, a, b])
     from aw_eval.equivalence import equivalence_groups_all_pairs
 
-    assert equivalence_groups(clouds, 1.0, st, show_progress=False, workers=workers) == [[0, 2, 3], [1]] == \
-        equivalence_groups_all_pairs(clouds, 1.0, st)
+    assert (
+        equivalence_groups(clouds, 1.0, st, show_progress=False, workers=workers)
+        == [[0, 2, 3], [1]]
+        == equivalence_groups_all_pairs(clouds, 1.0, st)
+    )

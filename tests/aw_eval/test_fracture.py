@@ -12,7 +12,13 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from aw.pose import compose_poses, matrix_from_euler_xyz, matrix_to_quat
-from aw_eval.fracture import allocate_samples, fracture_divisor, fracture_metrics, fracture_metrics_from_samples, wrapped_euler_error
+from aw_eval.fracture import (
+    allocate_samples,
+    fracture_divisor,
+    fracture_metrics,
+    fracture_metrics_from_samples,
+    wrapped_euler_error,
+)
 
 
 def _pose(pos, euler_deg=(0.0, 0.0, 0.0)):
@@ -156,8 +162,10 @@ def _restored(pred):
     poses ``pred (P, 7)``, after ``mj_forward``: what the official ``final_poses`` reads."""
     import mujoco
 
-    bodies = "".join(f'<body name="part-{k + 1:04d}"><freejoint/><geom type="box" size="0.1 0.1 0.1"/></body>'
-                     for k in range(len(pred)))
+    bodies = "".join(
+        f'<body name="part-{k + 1:04d}"><freejoint/><geom type="box" size="0.1 0.1 0.1"/></body>'
+        for k in range(len(pred))
+    )
     model = mujoco.MjModel.from_xml_string(f"<mujoco><worldbody>{bodies}</worldbody></mujoco>")
     data = mujoco.MjData(model)
     data.qpos[:] = np.asarray(pred, dtype=np.float64).reshape(-1)
@@ -197,12 +205,21 @@ def _by_hand(meshes, ids, pred, target, dataset, sample_id, divisor):
     allp, allt = np.concatenate(P), np.concatenate(T)
     rows = []
     for x, y, (ra, ta), (rt, tt) in zip(P, T, al, tp):
-        d = np.abs(Rotation.from_matrix(ra).as_euler("XYZ", degrees=True) - Rotation.from_matrix(rt).as_euler("XYZ", degrees=True))
+        d = np.abs(
+            Rotation.from_matrix(ra).as_euler("XYZ", degrees=True)
+            - Rotation.from_matrix(rt).as_euler("XYZ", degrees=True)
+        )
         d = np.minimum(d, 360 - d)
         xy, yx = cKDTree(y).query(x)[0], cKDTree(x).query(y)[0]
         cd = float(np.mean(xy * xy) + np.mean(yx * yx))
-        rows.append((np.sqrt(np.mean(d ** 2)), np.sqrt(np.mean((ta - tt) ** 2)), float(cd < 0.01),
-                     np.mean(cKDTree(allt).query(x)[0] ** 2) + np.mean(cKDTree(allp).query(y)[0] ** 2)))
+        rows.append(
+            (
+                np.sqrt(np.mean(d**2)),
+                np.sqrt(np.mean((ta - tt) ** 2)),
+                float(cd < 0.01),
+                np.mean(cKDTree(allt).query(x)[0] ** 2) + np.mean(cKDTree(allp).query(y)[0] ** 2),
+            )
+        )
     return counts, [float(np.mean([row[k] for row in rows])) for k in range(4)]
 
 
@@ -214,7 +231,9 @@ def test_fracture_metrics_equal_the_official_procedure_number_for_number():
     mid = _box([0.4, 0.5, 0.2], (0.65, 0, 0.1))
     small = _box([0.2, 0.2, 0.1], (0, 0.4, 0.35))
     meshes, ids = [big, mid, small], ["f0", "f1", "f2"]
-    target = np.stack([_pose([0.1, 0, 0], (10, 20, 30)), _pose([0, 0.2, 0], (-5, 0, 90)), _pose([0, 0, 0.3], (170, -30, 5))])
+    target = np.stack(
+        [_pose([0.1, 0, 0], (10, 20, 30)), _pose([0, 0.2, 0], (-5, 0, 90)), _pose([0, 0, 0.3], (170, -30, 5))]
+    )
     pred = np.stack([_pose(rng.normal(size=3), rng.uniform(-180, 180, 3)) for _ in range(3)])
     pred[2] = target[2] + [0.001, 0, 0, 0, 0, 0, 0]
     pred[1, 3:] *= 1 + 4e-16  # a stored quaternion a few bits off unit length, as states hold them

@@ -25,11 +25,15 @@ def _write_task(root, n_parts=4, distractor=None, eval_divisor=None, seed=0, tas
     for pid, mesh in zip(obj.part_ids, obj.meshes):
         mesh.export(task_dir / "parts" / f"{pid}.obj")
         parts.append(TaskPart(id=pid, mesh=f"parts/{pid}.obj"))
-    write_task(task_dir, Task(task_id=task_id, source="custom", dataset="test", object_id="o1", prompt="assemble", parts=parts))
+    write_task(
+        task_dir, Task(task_id=task_id, source="custom", dataset="test", object_id="o1", prompt="assemble", parts=parts)
+    )
     targets = Targets(
         task_id=task_id,
-        parts={pid: PartTarget(pose=list(map(float, t)), distractor=(pid == distractor))
-               for pid, t in zip(obj.part_ids, obj.target_poses)},
+        parts={
+            pid: PartTarget(pose=list(map(float, t)), distractor=(pid == distractor))
+            for pid, t in zip(obj.part_ids, obj.target_poses)
+        },
         scale=1.0,
         eval_divisor=eval_divisor,
         equivalence_hint=[obj.part_ids[1:3]] if n_parts >= 3 else None,
@@ -49,12 +53,16 @@ def test_cache_miss_then_hit(tmp_path):
     assert g1.clouds.shape == (4, 48, 3) and g1.part_ids == tuple(obj.part_ids)
     assert g1.equivalence_hint == (tuple(obj.part_ids[1:3]),)
     # A hit reads the cache: plant a recognisable cloud under the same key and get it back.
-    planted = aw_eval.TaskGeometry(g1.part_ids, g1.clouds + 1.0, g1.target_poses, g1.divisor, g1.groups, SETTINGS, key=g1.key)
+    planted = aw_eval.TaskGeometry(
+        g1.part_ids, g1.clouds + 1.0, g1.target_poses, g1.divisor, g1.groups, SETTINGS, key=g1.key
+    )
     planted.save(files[0])
     g2 = aw_eval.load_task_geometry(task_dir, tpath, cache_dir=cache, settings=SETTINGS)
     assert np.array_equal(g2.clouds, g1.clouds + 1.0) and g2.groups == g1.groups
     # other settings, or a changed target, are other entries
-    aw_eval.load_task_geometry(task_dir, tpath, cache_dir=cache, settings=aw_eval.ProtocolSettings(n_surface=256, n_fps=40))
+    aw_eval.load_task_geometry(
+        task_dir, tpath, cache_dir=cache, settings=aw_eval.ProtocolSettings(n_surface=256, n_fps=40)
+    )
     assert len(list(cache.glob("*.npz"))) == 2
     t = Targets.model_validate_json(tpath.read_text())
     t.parts[obj.part_ids[0]].pose[0] += 0.5

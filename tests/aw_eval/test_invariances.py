@@ -6,11 +6,11 @@ import dataclasses
 
 import numpy as np
 import pytest
+from eval_helpers import close, small_task
 
 import aw_eval
 from aw.pose import IDENTITY_POSE, apply_pose, compose_poses
 from aw_eval.fixtures import random_checkpoints, random_rotation_quat, swap_identical
-from eval_helpers import close, small_task
 
 
 @pytest.fixture(scope="module")
@@ -90,9 +90,13 @@ def test_mirrored_prediction_is_not_rescued(task):
     assert r.pa < 1.0 and not r.sr
     # and at point level: a chiral cloud against its mirror image stays far apart
     rng = np.random.default_rng(0)
-    chiral = np.concatenate([rng.normal(size=(60, 3)) * [1.0, 0.3, 0.1] + [0, 0, 0],
-                             rng.normal(size=(30, 3)) * 0.1 + [0.8, 0.5, 0.0],
-                             rng.normal(size=(20, 3)) * 0.1 + [-0.6, 0.0, 0.4]])
+    chiral = np.concatenate(
+        [
+            rng.normal(size=(60, 3)) * [1.0, 0.3, 0.1] + [0, 0, 0],
+            rng.normal(size=(30, 3)) * 0.1 + [0.8, 0.5, 0.0],
+            rng.normal(size=(20, 3)) * 0.1 + [-0.6, 0.0, 0.4],
+        ]
+    )
     settings = aw_eval.ProtocolSettings(n_surface=110, n_fps=110)
     assert aw_eval.register(chiral @ np.diag([-1.0, 1.0, 1.0]), chiral, settings=settings).scd > 1e-2
     rot = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
@@ -105,7 +109,9 @@ def test_threshold_is_inclusive_at_the_exact_boundary(task):
     poses[1] = compose_poses(np.array([0.0, 0.02 * geom.divisor, 0.0, 1.0, 0, 0, 0]), poses[1])
     e = aw_eval.score(geom, poses).part_errors[1]
     at = dataclasses.replace(geom, settings=dataclasses.replace(geom.settings, threshold=float(e)), _derived={})
-    below = dataclasses.replace(geom, settings=dataclasses.replace(geom.settings, threshold=float(np.nextafter(e, 0))), _derived={})
+    below = dataclasses.replace(
+        geom, settings=dataclasses.replace(geom.settings, threshold=float(np.nextafter(e, 0))), _derived={}
+    )
     assert aw_eval.score(at, poses).pa == 1.0
     assert aw_eval.score(below, poses).pa == pytest.approx(5 / 6)
     pa, sr = aw_eval.rescore_thresholds(np.array([[0.01, 0.0], [np.nextafter(0.01, 1), 0.0]]), [0.01])

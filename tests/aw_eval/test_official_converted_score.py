@@ -20,9 +20,28 @@ def test_converted_official_runs_score_as_finished(tmp_path):
     wrong[2, :3] += [0.4, 0.0, 0.0]
     write_active(pkg.initial_archive("partnet-none", "743"), logs / "743" / "final.episode.zip", final=wrong)
     convert(pkg.root, tmp_path / "logs", tmp_path / "suite", tmp_path / "runs")
-    assert main([str(tmp_path / "suite"), str(tmp_path / "runs"), "--out", str(tmp_path / "out"), "--jobs", "1",
-                 "--final-only", "--final", "fast", "--no-plots", "--bootstrap", "200", "--permutations", "200",
-                 "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                str(tmp_path / "suite"),
+                str(tmp_path / "runs"),
+                "--out",
+                str(tmp_path / "out"),
+                "--jobs",
+                "1",
+                "--final-only",
+                "--final",
+                "fast",
+                "--no-plots",
+                "--bootstrap",
+                "200",
+                "--permutations",
+                "200",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     runs = {r["task_id"]: r for r in json.loads((tmp_path / "out" / "scores.json").read_text())["runs"]}
     right, off = runs["partnet-none--21905"], runs["partnet-none--743"]
     assert right["status"] == off["status"] == "scored"

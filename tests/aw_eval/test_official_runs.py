@@ -33,8 +33,13 @@ def _inputs() -> _Inputs:
     plate = rng.uniform([-0.3, -0.2, -0.02], [0.3, 0.2, 0.02], (1000, 3))
     peg = rng.uniform([-0.02, -0.02, -0.1], [0.02, 0.02, 0.1], (1000, 3))
     targets = np.array([[0, 0, 0.1, 1, 0, 0, 0], [-0.2, 0, 0, 1, 0, 0, 0], [0.2, 0, 0, 1, 0, 0, 0]], dtype=float)
-    return _Inputs(["peg-a", "peg-b", "plate"], np.stack([peg, peg, plate])[[0, 1, 2]], targets, 0.7,
-                   [["peg-a", "peg-b"], ["plate"]])
+    return _Inputs(
+        ["peg-a", "peg-b", "plate"],
+        np.stack([peg, peg, plate])[[0, 1, 2]],
+        targets,
+        0.7,
+        [["peg-a", "peg-b"], ["plate"]],
+    )
 
 
 def _chamfer(a, b):
@@ -49,7 +54,10 @@ def test_swapped_identical_parts_are_matched_and_everything_is_correct():
     assert (m["PA"], m["SR"]) == (1.0, True)
     assert m["SCD"] < 1e-20
     assert [(p["part_id"], p["target_part_id"], p["correct"]) for p in m["parts"]] == [
-        ("peg-a", "peg-b", True), ("peg-b", "peg-a", True), ("plate", "plate", True)]
+        ("peg-a", "peg-b", True),
+        ("peg-b", "peg-a", True),
+        ("plate", "plate", True),
+    ]
 
 
 def test_metrics_follow_the_official_definitions():
@@ -85,21 +93,42 @@ def package(tmp_path_factory):
 
 
 def _new_run(pkg, logs, selection, source=None, run_id=None):
-    inputs = {(b, s): {**pkg.sample(b, s).expected, "initial_path": str(pkg.sample(b, s).initial_path),
-                       "initial_calls": 0, "identity": pkg.configuration(b)[1]["identity"],
-                       "reference": pkg.sample(b, s).reference}
-              for b, ids in selection.items() for s in ids}
-    return create_run(logs, selection, inputs, {b: pkg.task_text(b) for b in selection},
-                      {b: pkg.blocks[b]["reference_mode"] for b in selection}, {"agent": "codex", "model": "m1"},
-                      source_run=source.path if source else None, run_id=run_id)
+    inputs = {
+        (b, s): {
+            **pkg.sample(b, s).expected,
+            "initial_path": str(pkg.sample(b, s).initial_path),
+            "initial_calls": 0,
+            "identity": pkg.configuration(b)[1]["identity"],
+            "reference": pkg.sample(b, s).reference,
+        }
+        for b, ids in selection.items()
+        for s in ids
+    }
+    return create_run(
+        logs,
+        selection,
+        inputs,
+        {b: pkg.task_text(b) for b in selection},
+        {b: pkg.blocks[b]["reference_mode"] for b in selection},
+        {"agent": "codex", "model": "m1"},
+        source_run=source.path if source else None,
+        run_id=run_id,
+    )
 
 
 def _attempt(pkg, run, block, sid, final, tmp_path, status="completed"):
-    arc = write_active(pkg.initial_archive(block, sid), tmp_path / f"{block}-{sid.replace('/', '_')}.episode.zip", final)
-    write_result(run, block, sid, {"status": status, "execution": {"status": status, "usage": {"input_tokens": 10}},
-                                   "duration_seconds": 3.0},
-                 conversation=[{"type": "tool_call", "name": "get_state"}], final_archive=arc.path.read_bytes(),
-                 archive_calls=len(arc.calls))
+    arc = write_active(
+        pkg.initial_archive(block, sid), tmp_path / f"{block}-{sid.replace('/', '_')}.episode.zip", final
+    )
+    write_result(
+        run,
+        block,
+        sid,
+        {"status": status, "execution": {"status": status, "usage": {"input_tokens": 10}}, "duration_seconds": 3.0},
+        conversation=[{"type": "tool_call", "name": "get_state"}],
+        final_archive=arc.path.read_bytes(),
+        archive_calls=len(arc.calls),
+    )
 
 
 def test_aw_score_rescores_an_official_run_chain(package, tmp_path):
@@ -112,19 +141,26 @@ def test_aw_score_rescores_an_official_run_chain(package, tmp_path):
     resumed = _new_run(package, logs, {"partnet-none": ["743"]}, source=first, run_id="r2")
     _attempt(package, resumed, "partnet-none", "743", FINAL, tmp_path)
     out = tmp_path / "out"
-    assert cli_main([str(package.root), str(logs), "--out", str(out), "--jobs", "2"]) == 1  # one attempt is an error row
+    assert (
+        cli_main([str(package.root), str(logs), "--out", str(out), "--jobs", "2"]) == 1
+    )  # one attempt is an error row
     folder = out / "official" / "codex-m1"
     rows = read_metrics(folder / "metrics.jsonl")
     assert [(r["block"], r["sample_id"], r["status"]) for r in rows] == [
-        ("ikea-manualbook", "Chair/reidar", "error"), ("partnet-final-image", "21905", "scored"),
-        ("partnet-none", "21905", "scored"), ("partnet-none", "743", "scored")]  # partnet-final-image/743: pending
+        ("ikea-manualbook", "Chair/reidar", "error"),
+        ("partnet-final-image", "21905", "scored"),
+        ("partnet-none", "21905", "scored"),
+        ("partnet-none", "743", "scored"),
+    ]  # partnet-final-image/743: pending
     error, off, good, resumed_row = rows
     assert error["error"].startswith("FileNotFoundError") and (error["PA"], error["SR"], error["SCD"]) == (0.0, 0, None)
     assert (good["PA"], good["SR"]) == (1.0, 1) and good["SCD"] < 1e-12 and good["state_index"] == 3
     assert resumed_row["run"] == str(resumed.path) and good["run"] == str(first.path)
     inputs = package.evaluation_inputs("partnet-final-image", "21905")
     expected = score_state(inputs, OFF)
-    assert (off["SCD"], off["PA"], off["SR"]) == (expected["SCD"], expected["PA"], int(expected["SR"])) and off["SR"] == 0
+    assert (off["SCD"], off["PA"], off["SR"]) == (expected["SCD"], expected["PA"], int(expected["SR"])) and off[
+        "SR"
+    ] == 0
     assert off["parts"] == expected["parts"] and off["scale_divisor"] == inputs.divisor
     summary = read_summary(folder / "summary.json")
     assert summary == summarize(rows, package.benchmark)
@@ -134,7 +170,9 @@ def test_aw_score_rescores_an_official_run_chain(package, tmp_path):
 
 def test_aw_score_takes_a_folder_of_archives(package, tmp_path):
     folder = tmp_path / "episodes"
-    write_active(package.initial_archive("partnet-final-image", "743"), folder / "partnet-final-image" / "743.episode.zip", OFF)
+    write_active(
+        package.initial_archive("partnet-final-image", "743"), folder / "partnet-final-image" / "743.episode.zip", OFF
+    )
     out = tmp_path / "out"
     assert cli_main([str(package.root), str(folder), "--out", str(out), "--jobs", "1"]) == 0
     (row,) = read_metrics(out / "official" / "episodes" / "metrics.jsonl")
@@ -189,8 +227,11 @@ def test_unusable_runs_folders_get_one_line_errors(package, tmp_path, capsys):
     stray = tmp_path / "stray" / "nowhere" / "21905.episode.zip"
     stray.parent.mkdir(parents=True)
     stray.write_bytes(b"not a zip")
-    for runs, message in ((tmp_path / "missing", "runs directory not found"), (tmp_path / "empty", "no *.episode.zip archive"),
-                          (tmp_path / "stray", "no block folder above the archive")):
+    for runs, message in (
+        (tmp_path / "missing", "runs directory not found"),
+        (tmp_path / "empty", "no *.episode.zip archive"),
+        (tmp_path / "stray", "no block folder above the archive"),
+    ):
         assert cli_main([str(package.root), str(runs), "--out", str(tmp_path / "out")]) == 2
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1

@@ -12,8 +12,12 @@ from aw_eval.settings import ProtocolSettings
 
 
 def test_fps_numpy_and_jax_pick_identical_indices():
-    meshes = [trimesh.creation.box(extents=[1, 0.5, 0.2]), trimesh.creation.cylinder(radius=0.1, height=1.0),
-              trimesh.creation.icosphere(subdivisions=2), trimesh.creation.annulus(0.2, 0.4, 0.1)]
+    meshes = [
+        trimesh.creation.box(extents=[1, 0.5, 0.2]),
+        trimesh.creation.cylinder(radius=0.1, height=1.0),
+        trimesh.creation.icosphere(subdivisions=2),
+        trimesh.creation.annulus(0.2, 0.4, 0.1),
+    ]
     cands = np.stack([surface_samples(m, 1024, part_seed(7, i)) for i, m in enumerate(meshes)])
     want = np.stack([fps_numpy(c, 300) for c in cands])
     assert np.array_equal(fps_jax(cands, 300), want)
@@ -24,12 +28,18 @@ def test_fps_numpy_and_jax_pick_identical_indices():
 def test_compiled_fps_picks_the_numpy_indices(threads):
     """The compiled batch kernel picks :func:`fps_numpy`'s indices, on curved and flat meshes and
     on a lattice full of exact ties, on one thread or several."""
-    meshes = [trimesh.creation.box(extents=[1, 0.5, 0.2]), trimesh.creation.cylinder(radius=0.1, height=1.0),
-              trimesh.creation.icosphere(subdivisions=2), trimesh.creation.annulus(0.2, 0.4, 0.1)]
+    meshes = [
+        trimesh.creation.box(extents=[1, 0.5, 0.2]),
+        trimesh.creation.cylinder(radius=0.1, height=1.0),
+        trimesh.creation.icosphere(subdivisions=2),
+        trimesh.creation.annulus(0.2, 0.4, 0.1),
+    ]
     cands = np.stack([surface_samples(m, 1024, part_seed(7, i)) for i, m in enumerate(meshes)])
     assert np.array_equal(fps_batch(cands, 300, threads=threads), np.stack([fps_numpy(c, 300) for c in cands]))
     g = np.stack(np.meshgrid(*[np.arange(4.0)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    assert np.array_equal(fps_batch(np.stack([g, g[::-1]]), 20, threads=threads), np.stack([fps_numpy(g, 20), fps_numpy(g[::-1], 20)]))
+    assert np.array_equal(
+        fps_batch(np.stack([g, g[::-1]]), 20, threads=threads), np.stack([fps_numpy(g, 20), fps_numpy(g[::-1], 20)])
+    )
     with pytest.raises(ValueError):
         fps_batch(cands, 2000)
 

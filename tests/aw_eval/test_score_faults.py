@@ -20,8 +20,19 @@ from aw.runlock import RunDirLock
 from aw_eval.cli import main
 from aw_eval.study.fixtures import box_suite, write_scripted_run
 
-FAST = ["--protocol-setting", "n_surface=256", "--protocol-setting", "n_fps=64", "--bootstrap", "200",
-        "--permutations", "500", "--no-progress", "--no-plots", "--no-html"]
+FAST = [
+    "--protocol-setting",
+    "n_surface=256",
+    "--protocol-setting",
+    "n_fps=64",
+    "--bootstrap",
+    "200",
+    "--permutations",
+    "500",
+    "--no-progress",
+    "--no-plots",
+    "--no-html",
+]
 
 
 @pytest.fixture(scope="module")
@@ -41,8 +52,14 @@ def _aw_score(study, out, *extra, preexec=_default_sigint, **kw) -> subprocess.P
     suite, runs = study
     # No bytecode written: under a file size limit CPython would install .pyc files cut short.
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path), "PYTHONDONTWRITEBYTECODE": "1"}
-    return subprocess.Popen([sys.executable, "-m", "aw_eval.cli", str(suite), str(runs), "--out", str(out), *extra],
-                            env=env, preexec_fn=preexec, stderr=subprocess.PIPE, text=True, **kw)
+    return subprocess.Popen(
+        [sys.executable, "-m", "aw_eval.cli", str(suite), str(runs), "--out", str(out), *extra],
+        env=env,
+        preexec_fn=preexec,
+        stderr=subprocess.PIPE,
+        text=True,
+        **kw,
+    )
 
 
 def test_a_busy_out_is_refused_naming_its_holder(study, tmp_path, capsys):
@@ -57,7 +74,9 @@ def test_a_busy_out_is_refused_naming_its_holder(study, tmp_path, capsys):
 def _limit_file_size(limit: int):
     def pre() -> None:
         _default_sigint()
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG, as ENOSPC on a full disk
+        signal.signal(
+            signal.SIGXFSZ, signal.SIG_IGN
+        )  # a write past the limit fails with EFBIG, as ENOSPC on a full disk
         resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
     return pre
@@ -74,7 +93,12 @@ def test_a_failed_write_is_one_line_and_leaves_no_temporary_file(study, tmp_path
     _, err = proc.communicate(timeout=600)
     assert proc.returncode == 1 and "Traceback" not in err, err
     (line,) = [x for x in err.splitlines() if "error:" in x]
-    assert line.startswith("aw-score: error: ") and str(out) in line and "File too large" in line and "task_error" not in err
+    assert (
+        line.startswith("aw-score: error: ")
+        and str(out) in line
+        and "File too large" in line
+        and "task_error" not in err
+    )
     assert [p for p in out.rglob("*") if ".tmp" in p.name] == []
 
 

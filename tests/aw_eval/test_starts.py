@@ -18,8 +18,9 @@ def test_starts_equal_the_reference_bitwise():
         poses = np.concatenate([rng.normal(size=(4, 3)), rng.normal(size=(4, 4))], axis=1)
         target_poses = np.concatenate([rng.normal(size=(4, 3)), rng.normal(size=(4, 4))], axis=1)
         r_pca, t_pca = pca_starts(start_frame(pred), start_frame(target))
-        r_part, t_part = same_id_starts(quat_to_matrix(poses[:, 3:]), poses, quat_to_matrix(target_poses[:, 3:]),
-                                        target_poses, 1.7)
+        r_part, t_part = same_id_starts(
+            quat_to_matrix(poses[:, 3:]), poses, quat_to_matrix(target_poses[:, 3:]), target_poses, 1.7
+        )
         r0, t0 = np.concatenate([r_pca, r_part]), np.concatenate([t_pca, t_part])
         want = ref.pca_starts(pred, target) + ref.part_starts(poses, target_poses, 1.7)
         assert len(r0) == len(want) == 28

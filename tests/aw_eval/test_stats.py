@@ -29,6 +29,7 @@ IK, AB, FB = ("ikea_manual", "manual"), ("assemblybench", "manual"), ("fantastic
 
 # ---- eq. 3 ---------------------------------------------------------------------------------
 
+
 def test_table1_overall_astra_and_qwen():
     """Per-source SR columns of the paper's Table 1 reproduce its Overall column."""
     d = paper_design()
@@ -47,8 +48,11 @@ def test_table1_overall_astra_and_qwen():
 
 
 def test_weights_generalize_to_custom_sources_and_task_weights():
-    tasks = [TaskMeta("a1", "mine", "none", "x", 1.0), TaskMeta("a2", "mine", "none", "y", 3.0),
-             TaskMeta("b1", "other", "image", "z")]
+    tasks = [
+        TaskMeta("a1", "mine", "none", "x", 1.0),
+        TaskMeta("a2", "mine", "none", "y", 3.0),
+        TaskMeta("b1", "other", "image", "z"),
+    ]
     d = Design.from_tasks(tasks)
     assert d.sources == ("mine", "other")
     assert d.weights.tolist() == pytest.approx([0.125, 0.375, 0.5])
@@ -65,6 +69,7 @@ def test_design_rejects_bad_input():
 
 
 # ---- bootstrap -----------------------------------------------------------------------------
+
 
 def test_bootstrap_of_a_constant_is_the_constant():
     d = paper_design(5)
@@ -166,6 +171,7 @@ def test_draw_weights_when_a_condition_is_not_drawn():
 
 # ---- randomization tests and Holm ------------------------------------------------------------
 
+
 def test_holm_on_a_known_family():
     p = np.array([0.01, 0.04, 0.03, 0.005])
     # sorted: 0.005*4=0.02, 0.01*3=0.03, 0.03*2=0.06, 0.04*1=0.04 -> running max 0.06
@@ -252,6 +258,7 @@ def test_pairwise_tests_at_full_counts_on_a_paper_sized_table():
 
 
 # ---- paired reference effects and weighted medians -------------------------------------------
+
 
 def test_reference_effects_hand_computed():
     tasks = []

@@ -10,10 +10,23 @@ from aw_eval.study.model import RunScore, TaskFacts, load_npz, save_npz
 
 
 def _score() -> RunScore:
-    r = RunScore(system="S", task_id="t.1", status="scored", problems=["a note"], final_from="final.json", pa=0.5,
-                 sr=0.0, sra=1.0, scd=0.0123, part_errors=np.array([0.001, 0.2]), assignment=np.array([1, 0]),
-                 ck_t=np.array([0.0, 1.5]), ck_part_errors=np.array([[0.5, 0.5], [0.001, 0.2]]),
-                 call_kind=np.array([0, 2], np.int8), edit_revisit=np.array([False]))
+    r = RunScore(
+        system="S",
+        task_id="t.1",
+        status="scored",
+        problems=["a note"],
+        final_from="final.json",
+        pa=0.5,
+        sr=0.0,
+        sra=1.0,
+        scd=0.0123,
+        part_errors=np.array([0.001, 0.2]),
+        assignment=np.array([1, 0]),
+        ck_t=np.array([0.0, 1.5]),
+        ck_part_errors=np.array([[0.5, 0.5], [0.001, 0.2]]),
+        call_kind=np.array([0, 2], np.int8),
+        edit_revisit=np.array([False]),
+    )
     return r
 
 

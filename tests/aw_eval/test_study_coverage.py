@@ -15,8 +15,22 @@ from aw_server.cli import next_attempt_dir
 
 FB = (("fantastic_breaks", ("none",)),)
 TASKS = ["fantastic_breaks-box000-none", "fantastic_breaks-box001-none"]
-QUICK = ["--final-only", "--protocol-setting", "n_surface=192", "--protocol-setting", "n_fps=48", "--bootstrap", "50",
-         "--permutations", "50", "--no-progress", "--no-html", "--no-plots", "--jobs", "1"]
+QUICK = [
+    "--final-only",
+    "--protocol-setting",
+    "n_surface=192",
+    "--protocol-setting",
+    "n_fps=48",
+    "--bootstrap",
+    "50",
+    "--permutations",
+    "50",
+    "--no-progress",
+    "--no-html",
+    "--no-plots",
+    "--jobs",
+    "1",
+]
 
 
 @pytest.fixture(scope="module")

@@ -18,8 +18,9 @@ def task(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("dec")
     suite = box_suite(tmp / "s", objects_per_source=1, n_parts=3, blocks=(("assemblybench", ("manual",)),))
     task_dir, targets_path = suite_paths(suite, "assemblybench-box000-manual")
-    geom = aw_eval.load_task_geometry(task_dir, targets_path, cache_dir=tmp / "g",
-                                      settings=ProtocolSettings(n_surface=256, n_fps=64))
+    geom = aw_eval.load_task_geometry(
+        task_dir, targets_path, cache_dir=tmp / "g", settings=ProtocolSettings(n_surface=256, n_fps=64)
+    )
     targets = read_targets(targets_path)
     good = np.array([targets.parts[p].pose for p in geom.part_ids])
     return geom, good

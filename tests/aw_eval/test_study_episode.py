@@ -24,8 +24,9 @@ def _pose(t=(0, 0, 0), axis=(0, 0, 1), deg=0.0):
 
 
 def _write(run_dir: Path, calls, end=None, final=None, cut_tail: bytes | None = None, task_id="task-1"):
-    header = TrajectoryHeader(task_id=task_id, system="S", started_at="2025-01-01T00:00:00Z", part_ids=IDS,
-                              initial_poses={p: I7 for p in IDS})
+    header = TrajectoryHeader(
+        task_id=task_id, system="S", started_at="2025-01-01T00:00:00Z", part_ids=IDS, initial_poses={p: I7 for p in IDS}
+    )
     w = TrajectoryWriter(run_dir / "trajectory.jsonl", header)
     for c in calls:
         w.call(c)
@@ -63,8 +64,12 @@ def _episode_calls():
 
 def test_full_episode(tmp_path):
     calls, last = _episode_calls()
-    _write(tmp_path, calls, TrajectoryEnd(reason="finished", t=10.0, poses=last),
-           FinalState(task_id="task-1", reason="finished", poses=last))
+    _write(
+        tmp_path,
+        calls,
+        TrajectoryEnd(reason="finished", t=10.0, poses=last),
+        FinalState(task_id="task-1", reason="finished", poses=last),
+    )
     ep = read_episode(tmp_path, "task-1", IDS, SCORED, CENTROIDS, DIVISOR)
     assert ep.ck_seq.tolist() == [0, 3, 5, 6, 8, 10]
     assert ep.ck_t.tolist() == [0.0, 2.0, 4.0, 5.0, 7.0, 9.0]
@@ -101,8 +106,12 @@ def test_truncated_trajectory_without_final_uses_last_state(tmp_path):
 
 def test_final_json_for_another_task_is_ignored(tmp_path):
     calls, last = _episode_calls()
-    _write(tmp_path, calls, TrajectoryEnd(reason="timeout", t=10.0, poses=last),
-           FinalState(task_id="other", reason="finished", poses=last))
+    _write(
+        tmp_path,
+        calls,
+        TrajectoryEnd(reason="timeout", t=10.0, poses=last),
+        FinalState(task_id="other", reason="finished", poses=last),
+    )
     ep = read_episode(tmp_path, "task-1", IDS, SCORED, CENTROIDS, DIVISOR)
     assert ep.final_from == "trajectory" and ep.end_reason == "timeout"
     assert any("is for task 'other'" in p for p in ep.problems)
@@ -154,8 +163,12 @@ def test_final_json_contradicting_the_trajectory(tmp_path):
     trajectory's state is scored unless trust_final."""
     calls, last = _episode_calls()
     forged = {**last, "p02": _pose((0, 0, 0))}  # p02 back at the origin: not what was recorded
-    _write(tmp_path, calls, TrajectoryEnd(reason="finished", t=10.0, poses=last),
-           FinalState(task_id="task-1", reason="finished", poses=forged))
+    _write(
+        tmp_path,
+        calls,
+        TrajectoryEnd(reason="finished", t=10.0, poses=last),
+        FinalState(task_id="task-1", reason="finished", poses=forged),
+    )
     ep = read_episode(tmp_path, "task-1", IDS, SCORED, CENTROIDS, DIVISOR)
     assert ep.final_from == "trajectory" and np.allclose(ep.final_poses[0], last["p02"])
     (problem,) = [p for p in ep.problems if "contradicts" in p]
@@ -175,24 +188,37 @@ def test_end_record_contradicting_the_recorded_calls_is_flagged(tmp_path):
     final.json (both the live scene) agree with each other and with no recorded call. Flagged."""
     calls, last = _episode_calls()
     unrecorded = {**last, "p01": _pose((1.85, 1, 0), (1, 0, 0), 0.2)}  # a further, unrecorded move of p01
-    _write(tmp_path, calls, TrajectoryEnd(reason="disconnect", t=10.0, poses=unrecorded),
-           FinalState(task_id="task-1", reason="disconnect", poses=unrecorded))
+    _write(
+        tmp_path,
+        calls,
+        TrajectoryEnd(reason="disconnect", t=10.0, poses=unrecorded),
+        FinalState(task_id="task-1", reason="disconnect", poses=unrecorded),
+    )
     ep = read_episode(tmp_path, "task-1", IDS, SCORED, CENTROIDS, DIVISOR)
     (problem,) = [p for p in ep.problems if "end record" in p]
     assert "parts ['p01']" in problem and "not recorded" in problem
     # a consistent run has no such problem
     consistent = tmp_path / "ok"
     consistent.mkdir()
-    _write(consistent, calls, TrajectoryEnd(reason="disconnect", t=10.0, poses=last),
-           FinalState(task_id="task-1", reason="disconnect", poses=last))
-    assert not [p for p in read_episode(consistent, "task-1", IDS, SCORED, CENTROIDS, DIVISOR).problems
-                if "end record" in p]
+    _write(
+        consistent,
+        calls,
+        TrajectoryEnd(reason="disconnect", t=10.0, poses=last),
+        FinalState(task_id="task-1", reason="disconnect", poses=last),
+    )
+    assert not [
+        p for p in read_episode(consistent, "task-1", IDS, SCORED, CENTROIDS, DIVISOR).problems if "end record" in p
+    ]
 
 
 def test_final_json_naming_an_unknown_part(tmp_path):
     calls, last = _episode_calls()
-    _write(tmp_path, calls, TrajectoryEnd(reason="finished", t=10.0, poses=last),
-           FinalState(task_id="task-1", reason="finished", poses={**last, "p99": I7}))
+    _write(
+        tmp_path,
+        calls,
+        TrajectoryEnd(reason="finished", t=10.0, poses=last),
+        FinalState(task_id="task-1", reason="finished", poses={**last, "p99": I7}),
+    )
     ep = read_episode(tmp_path, "task-1", IDS, SCORED, CENTROIDS, DIVISOR)
     assert ep.final_from == "trajectory"
     assert any("names parts ['p99']" in p and "does not have" in p for p in ep.problems)
@@ -204,7 +230,8 @@ def test_final_json_with_extreme_poses_is_named_not_scored(tmp_path):
     _write(tmp_path, calls, TrajectoryEnd(reason="finished", t=10.0, poses=last))
     (tmp_path / "final.json").write_text(
         '{"format": "assemblyworld.final", "format_version": 1, "task_id": "task-1", "reason": "finished", "poses": '
-        '{"p01": [1e308, 0, 0, 1, 0, 0, 0], "p02": [0, 0, 0, 1, 0, 0, 0], "p03": [0, 0, 0, 1, 0, 0, 0]}}')
+        '{"p01": [1e308, 0, 0, 1, 0, 0, 0], "p02": [0, 0, 0, 1, 0, 0, 0], "p03": [0, 0, 0, 1, 0, 0, 0]}}'
+    )
     ep = read_episode(tmp_path, "task-1", IDS, SCORED, CENTROIDS, DIVISOR)
     assert ep.final_from == "trajectory" and np.isfinite(ep.final_poses).all()
     assert any("final.json unreadable" in p and "position beyond +-1e+06" in p for p in ep.problems)

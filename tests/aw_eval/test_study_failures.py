@@ -10,6 +10,7 @@ import sys
 import textwrap
 
 import pytest
+from score_helpers import make_study, paper_entries, run_from_errors
 
 from aw.formats import FinalState, read_final, read_manifest, write_final
 from aw_eval.cli import main
@@ -18,7 +19,6 @@ from aw_eval.report.markdown import render_markdown
 from aw_eval.report.results import build_results
 from aw_eval.study import ScoreSettings, StudyError, score_study
 from aw_eval.study.fixtures import box_suite, write_scripted_run
-from score_helpers import make_study, paper_entries, run_from_errors
 
 PROTO = ["--protocol", "n_surface=256", "--protocol", "n_fps=64", "--final", "fast"]
 FAST = ["--bootstrap", "50", "--permutations", "50", "--no-progress", "--no-plots", "--no-html", "--jobs", "1"]
@@ -27,8 +27,12 @@ FAST = ["--bootstrap", "50", "--permutations", "50", "--no-progress", "--no-plot
 @pytest.fixture(scope="module")
 def small(tmp_path_factory):
     root = tmp_path_factory.mktemp("fail")
-    suite = box_suite(root / "suite", objects_per_source=1, n_parts=2, blocks=(("fantastic_breaks", ("none",)),
-                                                                             ("partnet", ("none",))))
+    suite = box_suite(
+        root / "suite",
+        objects_per_source=1,
+        n_parts=2,
+        blocks=(("fantastic_breaks", ("none",)), ("partnet", ("none",))),
+    )
     tasks = [e.task_id for e in read_manifest(suite).tasks]
     runs = root / "runs"
     for t in tasks:
@@ -87,9 +91,14 @@ def test_a_broken_process_pool_is_an_error_not_zeros(small, tmp_path):
     script = tmp_path / "score_script.py"
     script.write_text(SCRIPT)
     out = tmp_path / "out"
-    res = subprocess.run([sys.executable, str(script), str(suite), str(runs), str(out)], capture_output=True,
-                         text=True, timeout=600, cwd=tmp_path,
-                         env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    res = subprocess.run(
+        [sys.executable, str(script), str(suite), str(runs), str(out)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+    )
     assert res.returncode != 0
     assert "ScoringFailed: scoring failed: a scoring worker process died or broke" in res.stderr
     assert "BrokenProcessPool" in res.stderr and 'if __name__ == "__main__":' in res.stderr
@@ -123,7 +132,9 @@ def test_a_lost_dask_worker_is_an_error_not_zeros(small, tmp_path):
 
     def score(address: str) -> None:
         try:
-            outcome["study"] = score_study(suite, runs, tmp_path / "o", ScoreSettings(), scheduler=address, progress=False)
+            outcome["study"] = score_study(
+                suite, runs, tmp_path / "o", ScoreSettings(), scheduler=address, progress=False
+            )
         except Exception as exc:
             outcome["error"] = exc
 
@@ -136,8 +147,9 @@ def test_a_lost_dask_worker_is_an_error_not_zeros(small, tmp_path):
                 while not any(watcher.processing().values()):
                     assert thread.is_alive(), outcome
                     time.sleep(0.02)
-                workers = [p for p in psutil.Process().children(recursive=True)
-                           if "spawn_main" in " ".join(p.cmdline())]
+                workers = [
+                    p for p in psutil.Process().children(recursive=True) if "spawn_main" in " ".join(p.cmdline())
+                ]
                 assert workers
                 for p in workers:
                     os.kill(p.pid, signal.SIGKILL)

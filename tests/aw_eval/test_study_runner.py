@@ -27,12 +27,17 @@ def test_process_pool_matches_in_process(tmp_path):
     blocks = (("fantastic_breaks", ("none",)),)
     suite = box_suite(tmp_path / "suite", objects_per_source=2, n_parts=2, blocks=blocks)
     for i, t in enumerate(["fantastic_breaks-box000-none", "fantastic_breaks-box001-none"]):
-        write_scripted_run(tmp_path / "runs" / "S" / t, suite, t, system="S", correct=["p01"] if i else None,
-                           inspect_moves=False)
+        write_scripted_run(
+            tmp_path / "runs" / "S" / t, suite, t, system="S", correct=["p01"] if i else None, inspect_moves=False
+        )
     settings = ScoreSettings(final_only=True, protocol=SMALL)
     geo = tmp_path / "geometry"
-    a, sa = score_study(suite, tmp_path / "runs", tmp_path / "o1", settings, n_jobs=1, progress=False, geometry_cache=geo)
-    b, sb = score_study(suite, tmp_path / "runs", tmp_path / "o2", settings, n_jobs=2, progress=False, geometry_cache=geo)
+    a, sa = score_study(
+        suite, tmp_path / "runs", tmp_path / "o1", settings, n_jobs=1, progress=False, geometry_cache=geo
+    )
+    b, sb = score_study(
+        suite, tmp_path / "runs", tmp_path / "o2", settings, n_jobs=2, progress=False, geometry_cache=geo
+    )
     assert sa.executor == "in-process" and sb.executor == "processes:2"
     assert sa.scored == sb.scored == 2
     for key, rec in a.runs.items():
@@ -73,15 +78,22 @@ def test_jax_backend_scores_a_study_as_numba_does(tmp_path):
         ScoreSettings(backend="gpu")
     blocks = (("fantastic_breaks", ("none",)),)
     suite = box_suite(tmp_path / "suite", objects_per_source=1, n_parts=2, blocks=blocks)
-    write_scripted_run(tmp_path / "runs" / "S" / "fantastic_breaks-box000-none", suite, "fantastic_breaks-box000-none",
-                       system="S", correct=["p01"], inspect_moves=False)
+    write_scripted_run(
+        tmp_path / "runs" / "S" / "fantastic_breaks-box000-none",
+        suite,
+        "fantastic_breaks-box000-none",
+        system="S",
+        correct=["p01"],
+        inspect_moves=False,
+    )
     geo = tmp_path / "geometry"
     out = {}
     for backend in ("numba", "jax"):
         settings = ScoreSettings(final_only=True, protocol=SMALL, backend=backend)
-        out[backend] = score_study(suite, tmp_path / "runs", tmp_path / backend, settings, n_jobs=1, progress=False,
-                                   geometry_cache=geo)[0]
-    (key, a), = out["numba"].runs.items()
+        out[backend] = score_study(
+            suite, tmp_path / "runs", tmp_path / backend, settings, n_jobs=1, progress=False, geometry_cache=geo
+        )[0]
+    ((key, a),) = out["numba"].runs.items()
     b = out["jax"].runs[key]
     assert a.score.status == b.score.status == "scored"
     assert (a.score.pa, a.score.sr, a.score.sra) == (b.score.pa, b.score.sr, b.score.sra)
@@ -98,8 +110,9 @@ def test_jax_backend_scores_every_exact_checkpoint_of_a_task_in_one_batch(tmp_pa
     suite = box_suite(tmp_path / "suite", objects_per_source=1, n_parts=2, blocks=blocks)
     task = "fantastic_breaks-box000-none"
     for system, correct in (("S", ["p01"]), ("T", None)):
-        write_scripted_run(tmp_path / "runs" / system / task, suite, task, system=system, correct=correct,
-                           inspect_moves=False)
+        write_scripted_run(
+            tmp_path / "runs" / system / task, suite, task, system=system, correct=correct, inspect_moves=False
+        )
     geo = tmp_path / "geometry"
     real = aw_eval.score_batch
     calls = []
@@ -113,8 +126,9 @@ def test_jax_backend_scores_every_exact_checkpoint_of_a_task_in_one_batch(tmp_pa
     for backend in ("numba", "jax"):
         calls.clear()
         settings = ScoreSettings(checkpoint_mode="exact", protocol=SMALL, backend=backend)
-        out[backend] = score_study(suite, tmp_path / "runs", tmp_path / backend, settings, n_jobs=1, progress=False,
-                                   geometry_cache=geo)[0]
+        out[backend] = score_study(
+            suite, tmp_path / "runs", tmp_path / backend, settings, n_jobs=1, progress=False, geometry_cache=geo
+        )[0]
         out[backend + "_calls"] = list(calls)
     assert len(out["jax_calls"]) == 1 and out["jax_calls"][0][1] == "jax"  # both runs' states, one batch
     assert len(out["numba_calls"]) >= 2  # numba: per run
@@ -123,6 +137,8 @@ def test_jax_backend_scores_every_exact_checkpoint_of_a_task_in_one_batch(tmp_pa
         b = out["jax"].runs[key].score
         a = a.score
         assert a.status == b.status == "scored"
-        assert np.array_equal(a.ck_pa, b.ck_pa) and np.array_equal(a.ck_sr, b.ck_sr) and np.array_equal(a.ck_sra, b.ck_sra)
+        assert (
+            np.array_equal(a.ck_pa, b.ck_pa) and np.array_equal(a.ck_sr, b.ck_sr) and np.array_equal(a.ck_sra, b.ck_sra)
+        )
         assert np.all(np.abs(a.ck_scd - b.ck_scd) <= 1e-9 * np.abs(a.ck_scd) + 1e-20)
         assert (a.pa, a.sr, a.sra) == (b.pa, b.sr, b.sra)

@@ -24,8 +24,9 @@ PARTS = {
 }
 
 
-def make_task(root: Path, condition: str = "none", n_refs: int | None = None, seed: int = 0,
-              task_id: str = "box3") -> tuple[Path, Path, Targets]:
+def make_task(
+    root: Path, condition: str = "none", n_refs: int | None = None, seed: int = 0, task_id: str = "box3"
+) -> tuple[Path, Path, Targets]:
     """Write ``root/tasks/<task_id>`` and ``root/targets/<task_id>.json``; return (task_dir, targets_path, targets).
 
     Each part is baked with a random rotation and a scattered offset; its target pose undoes that.
@@ -54,9 +55,15 @@ def make_task(root: Path, condition: str = "none", n_refs: int | None = None, se
         Image.new("RGB", (64, 48), (40 * i, 100, 200)).save(task_dir / rel)
         refs.append(rel)
     task = Task(
-        task_id=task_id, source="custom", dataset="test", category="table", object_id=task_id,
-        condition=condition, prompt=task_prompt(condition),
-        parts=[TaskPart(id=pid, mesh=f"parts/{pid}.obj") for pid in PARTS], references=refs,
+        task_id=task_id,
+        source="custom",
+        dataset="test",
+        category="table",
+        object_id=task_id,
+        condition=condition,
+        prompt=task_prompt(condition),
+        parts=[TaskPart(id=pid, mesh=f"parts/{pid}.obj") for pid in PARTS],
+        references=refs,
     )
     write_task(task_dir, task)
     tgt = Targets(task_id=task_id, parts=targets, scale=1.0)
@@ -74,8 +81,6 @@ def server_params(task_dir: Path, run_dir: Path, *extra: str):
 
     cmd = server_command(task_dir, run_dir, *extra)
     return StdioServerParameters(command=cmd[0], args=cmd[1:], env=dict(os.environ))
-
-
 
 
 def result_text(result) -> str:

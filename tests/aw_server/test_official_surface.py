@@ -12,17 +12,29 @@ import re
 
 import numpy as np
 import pytest
+from aw_server_helpers import server_params
 from mcp import Client
 from PIL import Image
 
 from aw.formats import read_final, read_trajectory
-from aw_server_helpers import server_params
 
 pytestmark = pytest.mark.anyio
 
 META = ["list_pages", "list_webmcp_tools", "execute_webmcp_tool", "read_manual_page"]
-PAGE_TOOLS = ["list_objects", "get_object", "get_scene", "get_state", "translate_objects", "rotate_objects",
-              "set_object_pose", "group_objects", "ungroup_objects", "capture_scene", "move_camera", "start_episode"]
+PAGE_TOOLS = [
+    "list_objects",
+    "get_object",
+    "get_scene",
+    "get_state",
+    "translate_objects",
+    "rotate_objects",
+    "set_object_pose",
+    "group_objects",
+    "ungroup_objects",
+    "capture_scene",
+    "move_camera",
+    "start_episode",
+]
 
 
 def official(task_dir, run):
@@ -83,11 +95,19 @@ async def test_meta_tools_and_every_page_tool(manual_task, tmp_path):
         assert by_name["capture_scene"]["annotations"] == {"readOnlyHint": True}
         assert by_name["translate_objects"]["annotations"] == {"readOnlyHint": False}
         cam = by_name["move_camera"]["inputSchema"]["properties"]
-        assert (cam["yaw"]["minimum"], cam["yaw"]["maximum"], cam["pitch"]["minimum"], cam["pitch"]["maximum"],
-                cam["zoom"]["minimum"], cam["zoom"]["maximum"]) == (-180, 180, -85, 85, 0.25, 4)
+        assert (
+            cam["yaw"]["minimum"],
+            cam["yaw"]["maximum"],
+            cam["pitch"]["minimum"],
+            cam["pitch"]["maximum"],
+            cam["zoom"]["minimum"],
+            cam["zoom"]["maximum"],
+        ) == (-180, 180, -85, 85, 0.25, 4)
         assert by_name["group_objects"]["inputSchema"]["properties"]["name"]["maxLength"] == 200
-        assert by_name["set_object_pose"]["inputSchema"]["anyOf"] == [{"required": ["position"]},
-                                                                       {"required": ["quaternion"]}]
+        assert by_name["set_object_pose"]["inputSchema"]["anyOf"] == [
+            {"required": ["position"]},
+            {"required": ["quaternion"]},
+        ]
 
         _, out, _ = await execute(c, "start_episode", {"task": "assemble"})
         assert out == {"status": "active"}
@@ -105,11 +125,11 @@ async def test_meta_tools_and_every_page_tool(manual_task, tmp_path):
 
         _, out, _ = await execute(c, "translate_objects", {"ids": ["part-0002"], "delta": [0.0, -0.5, 0.3]})
         assert out == {"status": "completed", "physics": "disabled", "index": 1}
-        _, out, _ = await execute(c, "rotate_objects", {"ids": ["part-0003"], "angles": [90, 0, 0],
-                                                        "pivot": [0, 0, 0]})
+        _, out, _ = await execute(c, "rotate_objects", {"ids": ["part-0003"], "angles": [90, 0, 0], "pivot": [0, 0, 0]})
         assert out["index"] == 2
-        _, out, _ = await execute(c, "set_object_pose", {"id": "part-0001", "position": [0.1, 0.2, 0.3],
-                                                         "quaternion": [0, 0, 0, 2]})
+        _, out, _ = await execute(
+            c, "set_object_pose", {"id": "part-0001", "position": [0.1, 0.2, 0.3], "quaternion": [0, 0, 0, 2]}
+        )
         assert out["index"] == 3
         _, out, _ = await execute(c, "group_objects", {"ids": ["part-0001", "part-0002"], "name": "top"})
         gid = out["result"]["id"]
@@ -148,17 +168,33 @@ async def test_meta_tools_and_every_page_tool(manual_task, tmp_path):
             r = await c.call_tool("read_manual_page", {"page": k})
             assert not r.is_error and [b.type for b in r.content] == ["image"]
             assert base64.b64decode(r.content[0].data) == ref.read_bytes() and r.content[0].mime_type == "image/png"
-        for bad, expected in ((0, "page must be >= 1"), (4, "page 4 is out of range; this task has 3 reference pages"),
-                              ("1", "page must be an integer, got a string"), (1.0, "page must be an integer")):
+        for bad, expected in (
+            (0, "page must be >= 1"),
+            (4, "page 4 is out of range; this task has 3 reference pages"),
+            ("1", "page must be an integer, got a string"),
+            (1.0, "page must be an integer"),
+        ):
             r = await c.call_tool("read_manual_page", {"page": bad})
             assert r.is_error and expected in text(r), text(r)
 
     # Recorded as the default surface records: project tool names and part ids, every state.
     traj = read_trajectory(run / "trajectory.jsonl")
     assert [x.tool for x in traj.calls] == [
-        "start_episode", "get_scene", "list_objects", "get_object", "translate_objects", "rotate_objects",
-        "set_object_pose", "group_objects", "translate_objects", "ungroup_objects", "get_state", "move_camera",
-        "get_state", "capture_scene"]
+        "start_episode",
+        "get_scene",
+        "list_objects",
+        "get_object",
+        "translate_objects",
+        "rotate_objects",
+        "set_object_pose",
+        "group_objects",
+        "translate_objects",
+        "ungroup_objects",
+        "get_state",
+        "move_camera",
+        "get_state",
+        "capture_scene",
+    ]
     assert all(x.ok and x.episode_active for x in traj.calls)
     assert traj.calls[4].args == {"ids": ["p02"], "delta": [0.0, -0.5, 0.3]} and traj.calls[4].changed == ["p02"]
     assert traj.calls[7].args == {"ids": ["p01", "p02"], "name": "top", "exclusive": True}
@@ -181,21 +217,42 @@ async def test_error_replies(box_task, tmp_path):
             ("list_webmcp_tools", {"pageId": "1"}, "pageId must be a number, got a string"),
             ("execute_webmcp_tool", {"pageId": 1}, "toolName is required"),
             ("execute_webmcp_tool", {"pageId": 7, "toolName": "list_objects"}, "pageId 7 is not the episode page"),
-            ("execute_webmcp_tool", {"pageId": 1, "toolName": "apply_force", "input": "{}"},
-             "'apply_force' is not registered on the episode page (it needs physics"),
-            ("execute_webmcp_tool", {"pageId": 1, "toolName": "advance_simulation", "input": '{"duration": 1}'},
-             "'advance_simulation' is not registered"),
+            (
+                "execute_webmcp_tool",
+                {"pageId": 1, "toolName": "apply_force", "input": "{}"},
+                "'apply_force' is not registered on the episode page (it needs physics",
+            ),
+            (
+                "execute_webmcp_tool",
+                {"pageId": 1, "toolName": "advance_simulation", "input": '{"duration": 1}'},
+                "'advance_simulation' is not registered",
+            ),
             ("execute_webmcp_tool", {"pageId": 1, "toolName": "end_episode"}, "'end_episode' is not registered"),
-            ("execute_webmcp_tool", {"pageId": 1, "toolName": "list_objects", "input": "{ids: 1}"},
-             "input is not valid JSON"),
-            ("execute_webmcp_tool", {"pageId": 1, "toolName": "list_objects", "input": "[1, 2]"},
-             "input must encode a JSON object, got an array"),
-            ("execute_webmcp_tool", {"pageId": 1, "toolName": "move_camera", "input": '{"yaw": NaN}'},
-             "NaN is not a JSON number"),
-            ("execute_webmcp_tool", {"pageId": 1, "toolName": "list_objects", "input": {}},
-             "input must be a string, got an object"),
-            ("execute_webmcp_tool", {"pageId": 1, "toolName": "list_objects", "inputs": "{}"},
-             "unexpected argument 'inputs'"),
+            (
+                "execute_webmcp_tool",
+                {"pageId": 1, "toolName": "list_objects", "input": "{ids: 1}"},
+                "input is not valid JSON",
+            ),
+            (
+                "execute_webmcp_tool",
+                {"pageId": 1, "toolName": "list_objects", "input": "[1, 2]"},
+                "input must encode a JSON object, got an array",
+            ),
+            (
+                "execute_webmcp_tool",
+                {"pageId": 1, "toolName": "move_camera", "input": '{"yaw": NaN}'},
+                "NaN is not a JSON number",
+            ),
+            (
+                "execute_webmcp_tool",
+                {"pageId": 1, "toolName": "list_objects", "input": {}},
+                "input must be a string, got an object",
+            ),
+            (
+                "execute_webmcp_tool",
+                {"pageId": 1, "toolName": "list_objects", "inputs": "{}"},
+                "unexpected argument 'inputs'",
+            ),
             ("read_manual_page", {"page": 1}, "page 1 is out of range; this task has no reference pages"),
         ]
         for tool, args, expected in meta_cases:

@@ -8,12 +8,12 @@ from __future__ import annotations
 import anyio
 import numpy as np
 import pytest
+from aw_server_helpers import quat_close, server_params
 from mcp import Client
 from scipy.spatial.transform import Rotation
 
 from aw.formats import read_final, read_trajectory
 from aw.pose import quat_to_matrix
-from aw_server_helpers import quat_close, server_params
 
 
 def _xyz_angles(m: np.ndarray) -> list[float]:

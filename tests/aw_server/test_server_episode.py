@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from aw_server_helpers import image_diff, png_bytes, quat_close, result_png, server_params
 from mcp import Client
 
 from aw.formats import read_final, read_trajectory
 from aw.pose import quat_to_matrix
-from aw_server_helpers import image_diff, png_bytes, quat_close, result_png, server_params
 
 pytestmark = pytest.mark.anyio
 
@@ -115,10 +115,18 @@ async def test_full_episode(box_task, tmp_path):
     assert all(c.camera is not None for c in calls)
     edits = [c for c in calls if c.poses is not None]
     assert [c.tool for c in edits] == [
-        "translate_objects", "translate_objects", "rotate_objects", "set_object_pose", "rotate_objects",
+        "translate_objects",
+        "translate_objects",
+        "rotate_objects",
+        "set_object_pose",
+        "rotate_objects",
         "set_object_pose",
     ]
-    assert edits[0].changed == ["p02"] and edits[0].args == {"ids": ["p02"], "delta": [0.0, -0.5, 0.3], "space": "world"}
+    assert edits[0].changed == ["p02"] and edits[0].args == {
+        "ids": ["p02"],
+        "delta": [0.0, -0.5, 0.3],
+        "space": "world",
+    }
     # Non-edits record no poses; group calls change no pose.
     assert all(c.poses is None and c.changed == [] for c in calls if c.tool in ("group_objects", "move_camera"))
     cam_call = next(c for c in calls if c.tool == "move_camera")

@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from aw_server_helpers import result_text, server_command, server_params
 from mcp import Client
 
 from aw.formats import read_trajectory
-from aw_server_helpers import result_text, server_command, server_params
 
 pytestmark = pytest.mark.anyio
 
@@ -47,7 +47,11 @@ BAD_CALLS = [
     ("translate_objects", {"ids": ["p01"], "delta": "[1, 0, 0]"}, ["delta:", "valid list"]),
     ("move_camera", {"yaw": "10"}, ["yaw:", "valid number"]),
     ("translate_objects", {"ids": ["p01"], "delta": [1, 0, 0], "space": "local"}, ["space:", "'world' or 'camera'"]),
-    ("translate_objects", {"ids": ["p01"], "delta": [1, 0, 0], "speed": 2}, ["unexpected argument 'speed'", "ids, delta, space"]),
+    (
+        "translate_objects",
+        {"ids": ["p01"], "delta": [1, 0, 0], "speed": 2},
+        ["unexpected argument 'speed'", "ids, delta, space"],
+    ),
     ("translate_objects", {"delta": [1, 0, 0]}, ["ids: required argument is missing"]),
     ("rotate_objects", {"ids": ["p01"], "angles": [1e5, 0, 0]}, ["angles[0]:", "less than or equal to 3600"]),
     ("rotate_objects", {"ids": ["p01"], "angles": [0, 0, 0], "pivot": [0, 0]}, ["pivot:", "at least 3 items"]),
@@ -97,7 +101,14 @@ class LeakChecker:
 
     def check_text(self, text: str) -> None:
         self.checked += 1
-        for needle in (str(self.task_dir), str(self.task_dir.parent.parent), "targets", ".obj", "parts/", "references/"):
+        for needle in (
+            str(self.task_dir),
+            str(self.task_dir.parent.parent),
+            "targets",
+            ".obj",
+            "parts/",
+            "references/",
+        ):
             assert needle not in text, (needle, text[:300])
         assert not ABS_PATH.search(text), text[:300]
         nums = self._numbers(text)
@@ -133,8 +144,14 @@ async def test_bad_input_and_no_leaks(box_task, tmp_path):
     async with Client(server_params(task_dir, run)) as c:
         # Valid calls on every tool: nothing hidden in the results either.
         for tool, args in [
-            ("start_episode", {}), ("list_objects", {}), ("get_object", {"id": "p01"}), ("get_object", {"id": "p03"}),
-            ("get_scene", {}), ("get_state", {}), ("capture_scene", {}), ("move_camera", {"yaw": 10}),
+            ("start_episode", {}),
+            ("list_objects", {}),
+            ("get_object", {"id": "p01"}),
+            ("get_object", {"id": "p03"}),
+            ("get_scene", {}),
+            ("get_state", {}),
+            ("capture_scene", {}),
+            ("move_camera", {"yaw": 10}),
         ]:
             r = await c.call_tool(tool, args)
             assert not r.is_error, result_text(r)
@@ -214,8 +231,9 @@ def test_raw_json_numbers(box_task, tmp_path):
     run = tmp_path / "run"
     init = {"protocolVersion": "2025-06-18", "capabilities": {}, "clientInfo": {"name": "raw", "version": "0"}}
     call = '{"jsonrpc":"2.0","id":%d,"method":"tools/call","params":{"name":"translate_objects","arguments":{"ids":["p01"],"delta":%s}}}'
-    proc = subprocess.Popen(server_command(task_dir, run), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        server_command(task_dir, run), stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     watchdog = threading.Timer(90, proc.kill)
     watchdog.start()
 

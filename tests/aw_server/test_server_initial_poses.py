@@ -5,19 +5,21 @@ from __future__ import annotations
 
 import json
 import subprocess
-import sys
 
 import numpy as np
 import pytest
+from aw_server_helpers import server_command, server_params
 from mcp import Client
 
 from aw.formats import read_final, read_trajectory
-from aw_server_helpers import server_command, server_params
 
 pytestmark = pytest.mark.anyio
 
-START = {"p01": [0.1, 0.2, 0.3, 1.0, 0.0, 0.0, 0.0], "p02": [-0.5, 0.0, 0.25, 0.0, 0.0, 0.0, 1.0],
-         "p03": [0.0, 0.75, 0.0, 0.5, 0.5, 0.5, 0.5]}
+START = {
+    "p01": [0.1, 0.2, 0.3, 1.0, 0.0, 0.0, 0.0],
+    "p02": [-0.5, 0.0, 0.25, 0.0, 0.0, 0.0, 1.0],
+    "p03": [0.0, 0.75, 0.0, 0.5, 0.5, 0.5, 0.5],
+}
 
 
 def _poses_file(path, task_id="box3_none", poses=START, fmt="assemblyworld.poses"):
@@ -53,19 +55,27 @@ async def test_a_runs_final_json_is_accepted(box_task, tmp_path):
 
 
 def _refused(task_dir, run, start) -> subprocess.CompletedProcess:
-    return subprocess.run(server_command(task_dir, run, "--initial-poses", str(start)), stdin=subprocess.DEVNULL,
-                          capture_output=True, text=True, timeout=120)
+    return subprocess.run(
+        server_command(task_dir, run, "--initial-poses", str(start)),
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
-@pytest.mark.parametrize("write, message", [
-    (lambda p: p.write_text("{not json"), "not JSON"),
-    (lambda p: _poses_file(p, task_id="other"), "poses are for task 'other', not 'box3_none'"),
-    (lambda p: _poses_file(p, poses={k: v for k, v in START.items() if k != "p03"}), "missing ['p03']"),
-    (lambda p: _poses_file(p, poses={**START, "p09": START["p01"]}), "unknown ['p09']"),
-    (lambda p: _poses_file(p, poses={**START, "p01": [0, 0, 0, 0, 0, 0, 0]}), "zero length"),
-    (lambda p: _poses_file(p, fmt="assemblyworld.task"), "expected an assemblyworld.poses file or a final.json"),
-    (lambda p: None, "initial-poses file not found"),
-])
+@pytest.mark.parametrize(
+    "write, message",
+    [
+        (lambda p: p.write_text("{not json"), "not JSON"),
+        (lambda p: _poses_file(p, task_id="other"), "poses are for task 'other', not 'box3_none'"),
+        (lambda p: _poses_file(p, poses={k: v for k, v in START.items() if k != "p03"}), "missing ['p03']"),
+        (lambda p: _poses_file(p, poses={**START, "p09": START["p01"]}), "unknown ['p09']"),
+        (lambda p: _poses_file(p, poses={**START, "p01": [0, 0, 0, 0, 0, 0, 0]}), "zero length"),
+        (lambda p: _poses_file(p, fmt="assemblyworld.task"), "expected an assemblyworld.poses file or a final.json"),
+        (lambda p: None, "initial-poses file not found"),
+    ],
+)
 def test_bad_poses_file_is_one_line_naming_it(box_task, tmp_path, write, message):
     task_dir, _, _ = box_task
     start = tmp_path / "start.json"

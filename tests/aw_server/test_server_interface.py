@@ -9,17 +9,27 @@ import sys
 
 import anyio
 import pytest
+from aw_server_helpers import server_params
 from mcp import Client
 
 from aw.formats import read_task, read_trajectory
 from aw.prompt import task_prompt
-from aw_server_helpers import server_params
 
 pytestmark = pytest.mark.anyio
 
 TOOLS = {
-    "list_objects", "get_object", "get_scene", "get_state", "translate_objects", "rotate_objects",
-    "set_object_pose", "group_objects", "ungroup_objects", "capture_scene", "move_camera", "start_episode",
+    "list_objects",
+    "get_object",
+    "get_scene",
+    "get_state",
+    "translate_objects",
+    "rotate_objects",
+    "set_object_pose",
+    "group_objects",
+    "ungroup_objects",
+    "capture_scene",
+    "move_camera",
+    "start_episode",
 }
 
 
@@ -75,7 +85,9 @@ async def test_tools_prompt_and_resources(manual_task, tmp_path):
         assert tools["ungroup_objects"].input_schema["required"] == ["ids"]
 
         mc = _props(tools["move_camera"])
-        assert set(mc) == {"yaw", "pitch", "zoom", "right", "up"} and "required" not in tools["move_camera"].input_schema
+        assert (
+            set(mc) == {"yaw", "pitch", "zoom", "right", "up"} and "required" not in tools["move_camera"].input_schema
+        )
         assert (mc["yaw"]["minimum"], mc["yaw"]["maximum"]) == (-180, 180)
         assert (mc["pitch"]["minimum"], mc["pitch"]["maximum"]) == (-85, 85)
         assert (mc["zoom"]["minimum"], mc["zoom"]["maximum"]) == (0.25, 4)
@@ -101,7 +113,10 @@ async def test_tools_prompt_and_resources(manual_task, tmp_path):
         # The same pages as resources, in order, plus the task text.
         resources = (await c.list_resources()).resources
         assert [r.uri for r in resources] == [
-            "aw://task/prompt", "aw://task/references/01", "aw://task/references/02", "aw://task/references/03",
+            "aw://task/prompt",
+            "aw://task/references/01",
+            "aw://task/references/02",
+            "aw://task/references/03",
         ]
         assert all(r.mime_type == "image/png" for r in resources[1:])
         text = (await c.read_resource("aw://task/prompt")).contents[0].text

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import anyio
 import pytest
+from aw_server_helpers import result_text, server_command, server_params
 from mcp import Client
 
 from aw.formats import read_final, read_trajectory
-from aw_server_helpers import result_text, server_command, server_params
 
 pytestmark = pytest.mark.anyio
 
@@ -69,8 +69,9 @@ def test_client_killed_mid_episode(box_task, tmp_path):
     run = tmp_path / "run"
     script = tmp_path / "client.py"
     script.write_text(textwrap.dedent(CLIENT_SCRIPT))
-    client = subprocess.Popen([sys.executable, str(script), *server_command(task_dir, run)],
-                              stdout=subprocess.PIPE, text=True)
+    client = subprocess.Popen(
+        [sys.executable, str(script), *server_command(task_dir, run)], stdout=subprocess.PIPE, text=True
+    )
     try:
         line = client.stdout.readline()
         assert line.strip() == "READY"
@@ -122,8 +123,9 @@ def _rpc(proc, id_, method, params=None):
 def test_server_signalled(box_task, tmp_path, signum):
     task_dir, _, _ = box_task
     run = tmp_path / "run"
-    proc = subprocess.Popen(server_command(task_dir, run), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        server_command(task_dir, run), stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     watchdog = threading.Timer(90, proc.kill)
     watchdog.start()
     try:
@@ -131,7 +133,9 @@ def test_server_signalled(box_task, tmp_path, signum):
         _rpc(proc, 1, "initialize", init)
         _rpc(proc, None, "notifications/initialized")
         _rpc(proc, 2, "tools/call", {"name": "start_episode", "arguments": {}})
-        r = _rpc(proc, 3, "tools/call", {"name": "translate_objects", "arguments": {"ids": ["p01"], "delta": [0, 0, 2]}})
+        r = _rpc(
+            proc, 3, "tools/call", {"name": "translate_objects", "arguments": {"ids": ["p01"], "delta": [0, 0, 2]}}
+        )
         assert r["result"]["isError"] is False
         proc.send_signal(signum)
         code = proc.wait(timeout=60)
@@ -183,7 +187,17 @@ async def test_budget_exhausted(box_task, tmp_path):
     assert final.poses["p01"] == [1, 0, 0, 1, 0, 0, 0] and final.poses["p02"] == [0, 1, 0, 1, 0, 0, 0]
     traj = read_trajectory(run / "trajectory.jsonl")
     assert traj.end.reason == "timeout"
-    assert [c.ok for c in traj.calls if c.tool != "get_state"] == [True, True, True, False, False, False, False, True, True]
+    assert [c.ok for c in traj.calls if c.tool != "get_state"] == [
+        True,
+        True,
+        True,
+        False,
+        False,
+        False,
+        False,
+        True,
+        True,
+    ]
     assert traj.calls[0].episode_active is True and 0.0 <= traj.calls[0].t <= traj.calls[1].t  # its edit started it
 
 
@@ -197,8 +211,12 @@ async def test_http_transport(box_task, tmp_path):
     task_dir, _, _ = box_task
     run = tmp_path / "run"
     port = _free_port()
-    proc = subprocess.Popen(server_command(task_dir, run, "--transport", "http", "--port", str(port)),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        server_command(task_dir, run, "--transport", "http", "--port", str(port)),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         t0 = time.monotonic()
         while True:
@@ -226,8 +244,13 @@ async def test_http_transport(box_task, tmp_path):
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "aw_server.cli", *args], capture_output=True, text=True, timeout=60,
-                          stdin=subprocess.DEVNULL)
+    return subprocess.run(
+        [sys.executable, "-m", "aw_server.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        stdin=subprocess.DEVNULL,
+    )
 
 
 def test_startup_refusals(box_task, tmp_path):
@@ -295,8 +318,9 @@ async def test_a_refused_start_reaches_the_mcp_client_as_its_message(box_task, t
     run = tmp_path / "busy"
     run.mkdir()
     (run / "trajectory.jsonl").write_text("{}\n")
-    params = StdioServerParameters(command=sys.executable, args=["-m", "aw_server.cli", str(task_dir), "--record", str(run)],
-                                   env=dict(os.environ))
+    params = StdioServerParameters(
+        command=sys.executable, args=["-m", "aw_server.cli", str(task_dir), "--record", str(run)], env=dict(os.environ)
+    )
     with pytest.raises(BaseException) as caught:
         async with Client(params):
             pass

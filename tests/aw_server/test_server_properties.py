@@ -9,30 +9,40 @@ import math
 import anyio
 import pytest
 from anyio.from_thread import start_blocking_portal
+from aw_server_helpers import result_text, server_params
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcp import Client
-
-from aw_server.tools import TOOL_SPECS
-from aw_server_helpers import result_text, server_params
 from test_server_errors import LeakChecker
 
+from aw_server.tools import TOOL_SPECS
+
 # Bounded and derandomized for CI (same examples every run); benchmarks/fuzz_server.py explores further.
-EXAMPLES = settings(max_examples=25, deadline=None, derandomize=True, database=None,
-                    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+EXAMPLES = settings(
+    max_examples=25,
+    deadline=None,
+    derandomize=True,
+    database=None,
+    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow],
+)
 REPLY_TIMEOUT_S = 120  # far above any call's time: a call that takes longer is a hang
 IDS = ["p01", "p02", "p03"]
 KNOWN = {s.name for s in TOOL_SPECS}
 
 FIELDS = sorted({name for spec in TOOL_SPECS for name in spec.args.model_fields} | {"extra"})
 scalars = st.one_of(
-    st.none(), st.booleans(), st.integers(-10**20, 10**20), st.floats(allow_nan=False, allow_infinity=False),
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**20), 10**20),
+    st.floats(allow_nan=False, allow_infinity=False),
     st.sampled_from(IDS + ["g1", "", "null", "[1, 2, 3]", '["p01"]', "{}", "1e308", "world", "camera"]),
     st.text(max_size=20),
 )
-values = st.recursive(scalars, lambda inner: st.one_of(st.lists(inner, max_size=5),
-                                                       st.dictionaries(st.text(max_size=6), inner, max_size=3)),
-                      max_leaves=10)
+values = st.recursive(
+    scalars,
+    lambda inner: st.one_of(st.lists(inner, max_size=5), st.dictionaries(st.text(max_size=6), inner, max_size=3)),
+    max_leaves=10,
+)
 arguments = st.dictionaries(st.sampled_from(FIELDS), values, max_size=4)
 
 
@@ -85,8 +95,10 @@ coords = st.floats(-2.0, 2.0, allow_nan=False)
 
 
 @EXAMPLES
-@given(ids=st.lists(st.sampled_from(IDS), min_size=1, max_size=3, unique=True),
-       delta=st.lists(coords, min_size=3, max_size=3))
+@given(
+    ids=st.lists(st.sampled_from(IDS), min_size=1, max_size=3, unique=True),
+    delta=st.lists(coords, min_size=3, max_size=3),
+)
 def test_valid_translations_move_exactly_the_selection(live, ids, delta):
     before = live.state()["poses"]
     result = live.call("translate_objects", {"ids": ids, "delta": delta})

@@ -7,15 +7,24 @@ from __future__ import annotations
 import json
 
 import pytest
+from aw_server_helpers import result_text, server_params
 from mcp import Client
 
 from aw.formats import read_final, read_trajectory
-from aw_server_helpers import result_text, server_params
 
 pytestmark = pytest.mark.anyio
 
-PYTHON_WORDS = ("Traceback", "RecursionError", "OverflowError", "JSONEncodeError", "TypeError", "ValueError",
-                "surrogates not allowed", "maximum recursion", "Error executing tool")
+PYTHON_WORDS = (
+    "Traceback",
+    "RecursionError",
+    "OverflowError",
+    "JSONEncodeError",
+    "TypeError",
+    "ValueError",
+    "surrogates not allowed",
+    "maximum recursion",
+    "Error executing tool",
+)
 
 
 def official(task_dir, run):
@@ -137,7 +146,8 @@ async def test_full_disk_changes_nothing_and_never_contradicts_replies(box_task,
     run, errlog = disk / "run", tmp_path / "stderr.txt"
     params = StdioServerParameters(
         command=sys.executable,
-        args=["-B", "-c", _WRAPPER, str(limit), str(errlog), str(task_dir), "--record", str(run), "--surface", surface])
+        args=["-B", "-c", _WRAPPER, str(limit), str(errlog), str(task_dir), "--record", str(run), "--surface", surface],
+    )
     dx, filler, told_ok, failure = 0.01, None, 0, ""
     async with Client(params) as c:
         assert (await _edit(c, surface, dx))[0]
@@ -178,8 +188,13 @@ def test_a_run_directory_that_takes_no_header_is_refused_in_one_line(box_task, t
     import sys
 
     task_dir, _, _ = box_task
-    r = subprocess.run([sys.executable, "-B", "-c", _WRAPPER, "100", "-", str(task_dir), "--record", str(tmp_path / "run")],
-                       stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=120)
+    r = subprocess.run(
+        [sys.executable, "-B", "-c", _WRAPPER, "100", "-", str(task_dir), "--record", str(tmp_path / "run")],
+        stdin=subprocess.DEVNULL,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     lines = r.stderr.splitlines()  # a pipe: not limited like the files
     assert r.returncode == 2 and len(lines) == 1, lines
     assert lines[0].startswith("aw-serve: error: cannot record in ") and "File too large" in lines[0]

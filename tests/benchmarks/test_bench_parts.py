@@ -28,11 +28,26 @@ def test_objects_have_the_promised_parts(tmp_path):
 
 
 def test_table_names_stopped_and_skipped_steps(tmp_path):
-    geometry = {"sampling_s": 0.2, "fps_s": 4.6, "groups_s": 53.1, "index_s": 24.2, "peak_rss_mb": 563.0,
-                "n_groups": 50, "group_sizes": [1]}
-    rows = [{"kind": "distinct", "parts": 50, "prepare": {"prepare_s": 0.5}, "geometry": geometry,
-             "render": {"start_s": 6.7, "picture_s": 1.2}, "score": {"error": "stopped after 300 s"},
-             "official": {"error": "not run (stopped at fewer parts)"}}]
+    geometry = {
+        "sampling_s": 0.2,
+        "fps_s": 4.6,
+        "groups_s": 53.1,
+        "index_s": 24.2,
+        "peak_rss_mb": 563.0,
+        "n_groups": 50,
+        "group_sizes": [1],
+    }
+    rows = [
+        {
+            "kind": "distinct",
+            "parts": 50,
+            "prepare": {"prepare_s": 0.5},
+            "geometry": geometry,
+            "render": {"start_s": 6.7, "picture_s": 1.2},
+            "score": {"error": "stopped after 300 s"},
+            "official": {"error": "not run (stopped at fewer parts)"},
+        }
+    ]
     path = tmp_path / "sweep.json"
     path.write_text(json.dumps({"rows": rows}))
     last = bench_parts.table(path).splitlines()[-1]

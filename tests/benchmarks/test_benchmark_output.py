@@ -11,8 +11,13 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def _bench_eval(out: Path) -> subprocess.CompletedProcess:
     # no part counts and no agreement: the run measures nothing and only writes its JSON
-    return subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_eval.py"), "--parts", "--out", str(out),
-                           "--name", "empty"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    return subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "bench_eval.py"), "--parts", "--out", str(out), "--name", "empty"],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
+    )
 
 
 def test_bench_eval_writes_into_out_and_refuses_to_overwrite(tmp_path):
@@ -23,12 +28,18 @@ def test_bench_eval_writes_into_out_and_refuses_to_overwrite(tmp_path):
     before = written.read_text()
     again = _bench_eval(tmp_path / "runs")
     assert again.returncode == 1
-    assert again.stderr.strip().splitlines() == [f"{written}: exists already; name another --out folder "
-                                                 "(benchmarks never overwrite results)"]
+    assert again.stderr.strip().splitlines() == [
+        f"{written}: exists already; name another --out folder (benchmarks never overwrite results)"
+    ]
     assert written.read_text() == before
 
 
 def test_out_is_required():
-    res = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_score.py")], capture_output=True, text=True,
-                         cwd=ROOT, timeout=120)
+    res = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "bench_score.py")],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+    )
     assert res.returncode == 2 and "--out" in res.stderr

@@ -98,7 +98,13 @@ def server_env(env: dict[str, str], marker: str) -> dict[str, str]:
     with a reduced environment."""
     from aw.runner.supervise import MARKER_VAR
 
-    keep = ("PYOPENGL_PLATFORM", "JAX_PLATFORMS", "JAX_COMPILATION_CACHE_DIR", "LP_NUM_THREADS", "MESA_GL_VERSION_OVERRIDE")
+    keep = (
+        "PYOPENGL_PLATFORM",
+        "JAX_PLATFORMS",
+        "JAX_COMPILATION_CACHE_DIR",
+        "LP_NUM_THREADS",
+        "MESA_GL_VERSION_OVERRIDE",
+    )
     out = {k: env[k] for k in keep if env.get(k)}
     out[MARKER_VAR] = marker
     return out

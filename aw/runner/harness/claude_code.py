@@ -24,11 +24,11 @@ from pathlib import Path
 
 from aw.formats import TokenUsage
 from aw.runner.harness.base import (
-    read_json_events,
     SERVER_NAME,
     HarnessOptions,
     HarnessUsage,
     PreparedRun,
+    read_json_events,
     reference_images,
     server_env,
     task_prompt_from_server,
@@ -56,7 +56,12 @@ class ClaudeCode:
         prompt += attachment_text(images)
         config = {
             "mcpServers": {
-                SERVER_NAME: {"type": "stdio", "command": serve_base[0], "args": [*serve_base[1:], *serve_args], "env": server_env(env, marker)}
+                SERVER_NAME: {
+                    "type": "stdio",
+                    "command": serve_base[0],
+                    "args": [*serve_base[1:], *serve_args],
+                    "env": server_env(env, marker),
+                }
             }
         }
         cfg_path = run_dir / "mcp_config.json"
@@ -68,19 +73,27 @@ class ClaudeCode:
         cmd = [
             opts.binary or "claude",
             "-p",
-            "--output-format", "stream-json",
+            "--output-format",
+            "stream-json",
             "--verbose",
-            "--mcp-config", str(cfg_path),
+            "--mcp-config",
+            str(cfg_path),
             "--strict-mcp-config",
-            "--allowedTools", *allowed,
-            "--disallowedTools", *DISALLOWED,
+            "--allowedTools",
+            *allowed,
+            "--disallowedTools",
+            *DISALLOWED,
         ]
         if opts.model:
             cmd += ["--model", opts.model]
         cmd += opts.extra_args
         cwd = Path(tempfile.mkdtemp(prefix="aw-claude-"))
         return PreparedRun(
-            command=cmd, env=dict(env), cwd=cwd, stdin=prompt.encode(), display_command=shlex.join(cmd) + " < prompt.txt"
+            command=cmd,
+            env=dict(env),
+            cwd=cwd,
+            stdin=prompt.encode(),
+            display_command=shlex.join(cmd) + " < prompt.txt",
         )
 
     def parse(self, transcript: Path, opts: HarnessOptions) -> HarnessUsage:
@@ -116,7 +129,9 @@ class ClaudeCode:
             cost = result.get("total_cost_usd")
             usage.cost_usd = float(cost) if isinstance(cost, (int, float)) else None
             u = result.get("usage")
-            usage.extra.update({k: result.get(k) for k in ("num_turns", "duration_ms", "duration_api_ms", "session_id") if k in result})
+            usage.extra.update(
+                {k: result.get(k) for k in ("num_turns", "duration_ms", "duration_api_ms", "session_id") if k in result}
+            )
         elif by_message:
             # No result event (killed at the limit): sum what the messages reported; no cost.
             u = {}
@@ -129,7 +144,9 @@ class ClaudeCode:
             usage.is_error = True
             usage.error = "the transcript has no result event"
         if isinstance(u, dict):
-            inp = sum(int(u.get(k) or 0) for k in ("input_tokens", "cache_read_input_tokens", "cache_creation_input_tokens"))
+            inp = sum(
+                int(u.get(k) or 0) for k in ("input_tokens", "cache_read_input_tokens", "cache_creation_input_tokens")
+            )
             out = int(u.get("output_tokens") or 0)
             usage.tokens = TokenUsage(input=inp, output=out, total=inp + out)
             usage.extra["usage_raw"] = u

@@ -25,11 +25,11 @@ from pathlib import Path
 
 from aw.formats import TokenUsage
 from aw.runner.harness.base import (
-    read_json_events,
     SERVER_NAME,
     HarnessOptions,
     HarnessUsage,
     PreparedRun,
+    read_json_events,
     reference_images,
     server_env,
     task_prompt_from_server,
@@ -75,7 +75,16 @@ class Codex:
         )
         (run_dir / "prompt.txt").write_text(prompt)
         cwd = Path(tempfile.mkdtemp(prefix="aw-codex-"))
-        cmd = [opts.binary or "codex", "exec", "--json", "--skip-git-repo-check", "--sandbox", "read-only", "-C", str(cwd)]
+        cmd = [
+            opts.binary or "codex",
+            "exec",
+            "--json",
+            "--skip-git-repo-check",
+            "--sandbox",
+            "read-only",
+            "-C",
+            str(cwd),
+        ]
         cmd += ["-c", 'approval_policy="never"']
         for k, v in server.items():
             cmd += ["-c", f"mcp_servers.{SERVER_NAME}.{k}={_toml(v)}"]
@@ -86,7 +95,11 @@ class Codex:
         for img in images:
             cmd += ["--image", str(img)]
         return PreparedRun(
-            command=cmd, env=dict(env), cwd=cwd, stdin=prompt.encode(), display_command=shlex.join(cmd) + " < prompt.txt"
+            command=cmd,
+            env=dict(env),
+            cwd=cwd,
+            stdin=prompt.encode(),
+            display_command=shlex.join(cmd) + " < prompt.txt",
         )
 
     def parse(self, transcript: Path, opts: HarnessOptions) -> HarnessUsage:

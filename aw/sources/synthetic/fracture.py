@@ -30,7 +30,9 @@ def _radius_fn(category: str, rng: np.random.Generator):
         return (lambda a: np.full_like(a, r)), rng.uniform(0.08, 0.16)
     if category == "bar":
         hx, hy = rng.uniform(0.015, 0.03), rng.uniform(0.03, 0.05)
-        return (lambda a: np.minimum(hx / np.maximum(np.abs(np.cos(a)), 1e-9), hy / np.maximum(np.abs(np.sin(a)), 1e-9))), rng.uniform(0.12, 0.2)
+        return (
+            lambda a: np.minimum(hx / np.maximum(np.abs(np.cos(a)), 1e-9), hy / np.maximum(np.abs(np.sin(a)), 1e-9))
+        ), rng.uniform(0.12, 0.2)
     if category == "hex_prism":
         r = rng.uniform(0.03, 0.05)
         sector = np.pi / 3
@@ -39,10 +41,14 @@ def _radius_fn(category: str, rng: np.random.Generator):
         r = rng.uniform(0.03, 0.05)
         amps = rng.uniform(0.04, 0.12, size=3)
         phases = rng.uniform(0, 2 * np.pi, size=3)
-        return (lambda a: r * (1 + sum(amp * np.cos((k + 2) * a + ph) for k, (amp, ph) in enumerate(zip(amps, phases))))), rng.uniform(0.05, 0.1)
+        return (
+            lambda a: r * (1 + sum(amp * np.cos((k + 2) * a + ph) for k, (amp, ph) in enumerate(zip(amps, phases))))
+        ), rng.uniform(0.05, 0.1)
     if category == "tile":
         hx, hy = rng.uniform(0.04, 0.07), rng.uniform(0.006, 0.01)
-        return (lambda a: np.minimum(hx / np.maximum(np.abs(np.cos(a)), 1e-9), hy / np.maximum(np.abs(np.sin(a)), 1e-9))), rng.uniform(0.08, 0.14)
+        return (
+            lambda a: np.minimum(hx / np.maximum(np.abs(np.cos(a)), 1e-9), hy / np.maximum(np.abs(np.sin(a)), 1e-9))
+        ), rng.uniform(0.08, 0.14)
     raise ValueError(f"unknown fracture category {category!r}")
 
 
@@ -65,7 +71,12 @@ def _wall(lo_ring: np.ndarray, hi_ring: np.ndarray, sectors: int) -> np.ndarray:
     """Outward side wall between two rings of vertex indices (counter-clockwise order)."""
     k = np.arange(sectors)
     k1 = (k + 1) % sectors
-    return np.concatenate([np.stack([lo_ring[k], lo_ring[k1], hi_ring[k1]], axis=1), np.stack([lo_ring[k], hi_ring[k1], hi_ring[k]], axis=1)])
+    return np.concatenate(
+        [
+            np.stack([lo_ring[k], lo_ring[k1], hi_ring[k1]], axis=1),
+            np.stack([lo_ring[k], hi_ring[k1], hi_ring[k]], axis=1),
+        ]
+    )
 
 
 def fracture(b: Builder, category: str, rng: np.random.Generator, rings: int = 10, sectors: int = 48) -> None:
@@ -74,7 +85,12 @@ def fracture(b: Builder, category: str, rng: np.random.Generator, rings: int = 1
     ang = 2 * np.pi * np.arange(sectors) / sectors
     r_out = radius(ang)
     rho = np.arange(1, rings + 1) / rings
-    xy = np.concatenate([np.zeros((1, 2)), np.concatenate([np.stack([p * r_out * np.cos(ang), p * r_out * np.sin(ang)], axis=1) for p in rho])])
+    xy = np.concatenate(
+        [
+            np.zeros((1, 2)),
+            np.concatenate([np.stack([p * r_out * np.cos(ang), p * r_out * np.sin(ang)], axis=1) for p in rho]),
+        ]
+    )
 
     # fracture height field: tilted plane + rough sinusoids, clipped inside the solid
     scale = float(r_out.max())
@@ -91,10 +107,22 @@ def fracture(b: Builder, category: str, rng: np.random.Generator, rings: int = 1
     outer = 1 + (rings - 1) * sectors + np.arange(sectors)
     # lower fragment: bottom grid (0..nv-1), fracture grid (nv..2nv-1)
     v_a = np.concatenate([np.column_stack([xy, np.zeros(nv)]), np.column_stack([xy, z])])
-    f_a = np.concatenate([polar_grid_faces(rings, sectors, up=False), polar_grid_faces(rings, sectors, up=True) + nv, _wall(outer, outer + nv, sectors)])
+    f_a = np.concatenate(
+        [
+            polar_grid_faces(rings, sectors, up=False),
+            polar_grid_faces(rings, sectors, up=True) + nv,
+            _wall(outer, outer + nv, sectors),
+        ]
+    )
     # upper fragment: fracture grid (0..nv-1), top grid (nv..2nv-1)
     v_b = np.concatenate([np.column_stack([xy, z]), np.column_stack([xy, np.full(nv, height)])])
-    f_b = np.concatenate([polar_grid_faces(rings, sectors, up=False), polar_grid_faces(rings, sectors, up=True) + nv, _wall(outer, outer + nv, sectors)])
+    f_b = np.concatenate(
+        [
+            polar_grid_faces(rings, sectors, up=False),
+            polar_grid_faces(rings, sectors, up=True) + nv,
+            _wall(outer, outer + nv, sectors),
+        ]
+    )
 
     rot = rotation_about_axis(2, rng.uniform(-np.pi, np.pi))
     if category in ("bar", "tile") and rng.uniform() < 0.5:

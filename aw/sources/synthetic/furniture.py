@@ -69,7 +69,9 @@ def _leg(rng: np.random.Generator, length: float, thick: float):
     if kind == 1:
         return cylinder(thick / 2, length, sections=20)
     r0, r1 = thick / 2, thick / 3
-    return revolved([[0, -length / 2], [r1, -length / 2], [r0, length * 0.3], [r0 * 0.8, length / 2], [0, length / 2]], sections=20)
+    return revolved(
+        [[0, -length / 2], [r1, -length / 2], [r0, length * 0.3], [r0 * 0.8, length / 2], [0, length / 2]], sections=20
+    )
 
 
 def _handle(length: float, vertical: bool = False):
@@ -114,11 +116,13 @@ def chair(b: Builder, n: int, rng: np.random.Generator) -> None:
             b.add("star_base", base, step="base")
         else:  # sled chair: two identical side frames and a crossbar
             t = 0.025
-            frame = merge([
-                box((t, t, h - st), (0, sd / 2 - t, (h - st) / 2)),
-                box((t, t, h - st), (0, -sd / 2 + t, (h - st) / 2)),
-                box((t, sd + 0.06, t), (0, 0, t / 2)),
-            ])
+            frame = merge(
+                [
+                    box((t, t, h - st), (0, sd / 2 - t, (h - st) / 2)),
+                    box((t, t, h - st), (0, -sd / 2 + t, (h - st) / 2)),
+                    box((t, sd + 0.06, t), (0, 0, t / 2)),
+                ]
+            )
             b.add_copies("side_frame", frame, [((-sw / 2 + t, 0, 0), None), ((sw / 2 - t, 0, 0), None)], step="base")
             b.add("crossbar", cylinder(0.012, sw - 2 * t, (0, -sd / 2 + t, 0.12), axis="x"), step="base")
         return
@@ -139,7 +143,9 @@ def chair(b: Builder, n: int, rng: np.random.Generator) -> None:
         b.add_copies("rail_fb", rail, [((0, y, rail_z), None) for y in (sd / 2 - lw, -sd / 2 + lw)], step="rails")
     if "rails_side" in chosen:
         rail = cylinder(0.011, sd - 2 * lw, axis="y")
-        b.add_copies("rail_side", rail, [((x, 0, rail_z + 0.07), None) for x in (sw / 2 - lw, -sw / 2 + lw)], step="rails")
+        b.add_copies(
+            "rail_side", rail, [((x, 0, rail_z + 0.07), None) for x in (sw / 2 - lw, -sw / 2 + lw)], step="rails"
+        )
 
     # back: panel, panel + crest, or two posts with a crest rail and vertical slats
     if back_count == 1:
@@ -195,7 +201,10 @@ def table(b: Builder, n: int, rng: np.random.Generator) -> None:
         else:
             lw = rng.uniform(0.03, 0.045)
             leg = _leg(rng, h - tt, lw)
-            pos = [((radius * 0.6 * np.cos(a), radius * 0.6 * np.sin(a), (h - tt) / 2), None) for a in 2 * np.pi * np.arange(3) / 3]
+            pos = [
+                ((radius * 0.6 * np.cos(a), radius * 0.6 * np.sin(a), (h - tt) / 2), None)
+                for a in 2 * np.pi * np.arange(3) / 3
+            ]
             b.add_copies("leg", leg, pos, step="legs")
         return
 
@@ -211,7 +220,11 @@ def table(b: Builder, n: int, rng: np.random.Generator) -> None:
     r = n - 5
     feats = {"aprons_long": 2, "aprons_short": 2, "stretchers": 2, "center_stretcher": 1, "drawer": 2}
     chosen = _pick_features(
-        rng, feats, r, fill_max=12, requires={"aprons_short": ("aprons_long",), "center_stretcher": ("stretchers",), "drawer": ("aprons_long",)}
+        rng,
+        feats,
+        r,
+        fill_max=12,
+        requires={"aprons_short": ("aprons_long",), "center_stretcher": ("stretchers",), "drawer": ("aprons_long",)},
     )
     fill = r - sum(feats[f] for f in chosen)
     planks = 1 + min(fill, int(rng.integers(0, 5)))  # the top may be made of identical planks
@@ -253,16 +266,31 @@ def table(b: Builder, n: int, rng: np.random.Generator) -> None:
         else:
             sw_ = span_y / shelf_slats
             slat = box((2 * lx - lw, sw_ * 0.8, 0.015))
-            b.add_copies("shelf_slat", slat, [((0, y, shelf_z), None) for y in _spaced(shelf_slats, span_y - sw_)], step="shelf")
+            b.add_copies(
+                "shelf_slat", slat, [((0, y, shelf_z), None) for y in _spaced(shelf_slats, span_y - sw_)], step="shelf"
+            )
 
 
-def _carcass(b: Builder, rng: np.random.Generator, width: float, depth: float, height: float, t: float, bottom_z: float) -> None:
+def _carcass(
+    b: Builder, rng: np.random.Generator, width: float, depth: float, height: float, t: float, bottom_z: float
+) -> None:
     """Two identical sides, identical top and bottom boards, and a thin back panel (5 parts)."""
     side = box((t, depth, height))
-    b.add_copies("side", side, [((x, 0, bottom_z + height / 2), None) for x in (-(width - t) / 2, (width - t) / 2)], step="carcass")
+    b.add_copies(
+        "side",
+        side,
+        [((x, 0, bottom_z + height / 2), None) for x in (-(width - t) / 2, (width - t) / 2)],
+        step="carcass",
+    )
     board = box((width - 2 * t, depth, t))
-    b.add_copies("board", board, [((0, 0, bottom_z + t / 2), None), ((0, 0, bottom_z + height - t / 2), None)], step="carcass")
-    b.add("back_panel", box((width - 2 * t, 0.006, height - 2 * t), (0, -depth / 2 + 0.003, bottom_z + height / 2)), step="back")
+    b.add_copies(
+        "board", board, [((0, 0, bottom_z + t / 2), None), ((0, 0, bottom_z + height - t / 2), None)], step="carcass"
+    )
+    b.add(
+        "back_panel",
+        box((width - 2 * t, 0.006, height - 2 * t), (0, -depth / 2 + 0.003, bottom_z + height / 2)),
+        step="back",
+    )
 
 
 def storage(b: Builder, n: int, rng: np.random.Generator, doors: bool = True) -> None:
@@ -279,7 +307,9 @@ def storage(b: Builder, n: int, rng: np.random.Generator, doors: bool = True) ->
         fh = rng.uniform(0.06, 0.12)
         foot = cylinder(0.02, fh, sections=16)
         fx, fy = width / 2 - 0.05, depth / 2 - 0.05
-        b.add_copies("foot", foot, [((sx * fx, sy * fy, fh / 2), None) for sx in (-1, 1) for sy in (-1, 1)], step="base")
+        b.add_copies(
+            "foot", foot, [((sx * fx, sy * fy, fh / 2), None) for sx in (-1, 1) for sy in (-1, 1)], step="base"
+        )
         bottom_z = fh
     elif "plinth" in chosen:
         ph = rng.uniform(0.05, 0.09)
@@ -294,10 +324,20 @@ def storage(b: Builder, n: int, rng: np.random.Generator, doors: bool = True) ->
     if "doors" in chosen:
         dw = width / 2 - 0.003
         door = box((dw, 0.018, height - 0.01))
-        b.add_copies("door", door, [((x, depth / 2 + 0.009, bottom_z + height / 2), None) for x in (-width / 4, width / 4)], step="doors")
+        b.add_copies(
+            "door",
+            door,
+            [((x, depth / 2 + 0.009, bottom_z + height / 2), None) for x in (-width / 4, width / 4)],
+            step="doors",
+        )
         if "handles" in chosen:
             handle = _handle(min(0.3, height * rng.uniform(0.12, 0.25)), vertical=True)
-            b.add_copies("handle", handle, [((x, depth / 2 + 0.018, bottom_z + height * 0.55), None) for x in (-0.05, 0.05)], step="doors")
+            b.add_copies(
+                "handle",
+                handle,
+                [((x, depth / 2 + 0.018, bottom_z + height * 0.55), None) for x in (-0.05, 0.05)],
+                step="doors",
+            )
 
 
 def shelf(b: Builder, n: int, rng: np.random.Generator) -> None:
@@ -312,11 +352,13 @@ def bench(b: Builder, n: int, rng: np.random.Generator) -> None:
     tt = rng.uniform(0.025, 0.035)
     frame_t = rng.uniform(0.04, 0.06)
     # two identical end frames (legs and a foot rail in one part)
-    frame = merge([
-        box((frame_t, frame_t, h - tt), (0, depth / 2 - frame_t, (h - tt) / 2)),
-        box((frame_t, frame_t, h - tt), (0, -depth / 2 + frame_t, (h - tt) / 2)),
-        box((frame_t, depth, frame_t * 1.2), (0, 0, h - tt - frame_t * 0.6)),
-    ])
+    frame = merge(
+        [
+            box((frame_t, frame_t, h - tt), (0, depth / 2 - frame_t, (h - tt) / 2)),
+            box((frame_t, frame_t, h - tt), (0, -depth / 2 + frame_t, (h - tt) / 2)),
+            box((frame_t, depth, frame_t * 1.2), (0, 0, h - tt - frame_t * 0.6)),
+        ]
+    )
     fx = length / 2 - 0.08
     b.add_copies("end_frame", frame, [((x, 0, 0), None) for x in (-fx, fx)], step="frames")
     r = n - 2
@@ -327,13 +369,20 @@ def bench(b: Builder, n: int, rng: np.random.Generator) -> None:
         b.add("stretcher", box((2 * fx - frame_t, 0.03, 0.06), (0, 0, 0.15)), step="frames")
     if "lower_rails" in chosen:
         rail = cylinder(0.012, 2 * fx - frame_t, axis="x")
-        b.add_copies("lower_rail", rail, [((0, y, 0.08), None) for y in (-depth / 2 + frame_t, depth / 2 - frame_t)], step="frames")
+        b.add_copies(
+            "lower_rail",
+            rail,
+            [((0, y, 0.08), None) for y in (-depth / 2 + frame_t, depth / 2 - frame_t)],
+            step="frames",
+        )
     if planks == 1:
         b.add("seat", box((length, depth, tt), (0, 0, h - tt / 2)), step="seat")
     else:
         pw = depth / planks
         plank = box((length, pw - 0.006, tt))
-        b.add_copies("seat_plank", plank, [((0, y, h - tt / 2), None) for y in _spaced(planks, depth - pw)], step="seat")
+        b.add_copies(
+            "seat_plank", plank, [((0, y, h - tt / 2), None) for y in _spaced(planks, depth - pw)], step="seat"
+        )
 
 
 def desk(b: Builder, n: int, rng: np.random.Generator) -> None:
@@ -344,8 +393,14 @@ def desk(b: Builder, n: int, rng: np.random.Generator) -> None:
     pt = rng.uniform(0.018, 0.025)
     b.add("top", box((width, depth, tt), (0, 0, h - tt / 2)), step="top")
     side = box((pt, depth - 0.04, h - tt))
-    b.add_copies("side_panel", side, [((x, 0, (h - tt) / 2), None) for x in (-(width - pt) / 2, (width - pt) / 2)], step="sides")
-    b.add("modesty_panel", box((width - 2 * pt, pt, (h - tt) * 0.45), (0, -depth / 2 + 0.05, h - tt - (h - tt) * 0.225)), step="sides")
+    b.add_copies(
+        "side_panel", side, [((x, 0, (h - tt) / 2), None) for x in (-(width - pt) / 2, (width - pt) / 2)], step="sides"
+    )
+    b.add(
+        "modesty_panel",
+        box((width - 2 * pt, pt, (h - tt) * 0.45), (0, -depth / 2 + 0.05, h - tt - (h - tt) * 0.225)),
+        step="sides",
+    )
     r = n - 4
     # a drawer pedestal: drawers (front + pull each) inside a box under the top
     feats = {"pedestal_box": 1, "cable_tray": 1}
@@ -357,7 +412,9 @@ def desk(b: Builder, n: int, rng: np.random.Generator) -> None:
     drawers = drawers_parts // 2
     px = (width - pt) / 2 - 0.22
     if "pedestal_box" in chosen:
-        b.add("pedestal_box", box((0.4, depth - 0.08, (h - tt) * 0.7), (px, 0, (h - tt) * 0.35 + 0.02)), step="pedestal")
+        b.add(
+            "pedestal_box", box((0.4, depth - 0.08, (h - tt) * 0.7), (px, 0, (h - tt) * 0.35 + 0.02)), step="pedestal"
+        )
     if "cable_tray" in chosen:
         b.add("cable_tray", box((width * 0.6, 0.12, 0.06), (-0.05, -depth / 2 + 0.12, h - tt - 0.05)), step="sides")
     if drawers:

@@ -96,7 +96,9 @@ def _core_flange_coupling(b: Builder, rng: np.random.Generator, core: int) -> Ca
     r_fl = r_sh * rng.uniform(3.2, 4.2)
     t_fl = rng.uniform(0.012, 0.018)
     hub_r, hub_l = r_sh * 1.8, t_fl * 1.2
-    flange = revolved([[0, 0], [r_fl, 0], [r_fl, t_fl], [hub_r, t_fl], [hub_r, t_fl + hub_l], [0, t_fl + hub_l]], sections=40)
+    flange = revolved(
+        [[0, 0], [r_fl, 0], [r_fl, t_fl], [hub_r, t_fl], [hub_r, t_fl + hub_l], [0, t_fl + hub_l]], sections=40
+    )
     rot_px = np.array([[0, 0, 1.0], [0, 1, 0], [-1, 0, 0]])  # +Z -> +X
     rot_nx = np.array([[0, 0, -1.0], [0, 1, 0], [1, 0, 0]])  # +Z -> -X
     b.add_copies("flange", flange, [((0.0005, 0, 0), rot_px), ((-0.0005, 0, 0), rot_nx)], step="flanges")
@@ -106,14 +108,27 @@ def _core_flange_coupling(b: Builder, rng: np.random.Generator, core: int) -> Ca
     else:
         l2 = l1 * rng.uniform(1.3, 1.8)
         b.add("shaft_a", cylinder(r_sh, l1, at=(l1 / 2 - 0.01, 0, 0), axis="x", sections=28), step="shafts")
-        b.add("shaft_b", revolved([[0, 0], [r_sh, 0], [r_sh, l2 * 0.6], [r_sh * 0.8, l2 * 0.6], [r_sh * 0.8, l2], [0, l2]], at=(-l2 + 0.01, 0, 0), axis="x", sections=28), step="shafts")
+        b.add(
+            "shaft_b",
+            revolved(
+                [[0, 0], [r_sh, 0], [r_sh, l2 * 0.6], [r_sh * 0.8, l2 * 0.6], [r_sh * 0.8, l2], [0, l2]],
+                at=(-l2 + 0.01, 0, 0),
+                axis="x",
+                sections=28,
+            ),
+            step="shafts",
+        )
 
     def sites(k: int) -> list[Site]:
         out = []
         rb = 0.5 * (hub_r + r_fl)
         for i in range(k):
             a = 2 * np.pi * i / k
-            out.append(Site(np.array([-t_fl - 0.0005, rb * np.cos(a), rb * np.sin(a)]), np.array([1.0, 0, 0]), 2 * t_fl + 0.001))
+            out.append(
+                Site(
+                    np.array([-t_fl - 0.0005, rb * np.cos(a), rb * np.sin(a)]), np.array([1.0, 0, 0]), 2 * t_fl + 0.001
+                )
+            )
         return out
 
     return sites
@@ -127,16 +142,35 @@ def _core_pillow_block(b: Builder, rng: np.random.Generator, core: int) -> Calla
     r_b = r_sh * 2.2
     axis_z = t + r_b * 1.8
     hw = r_b * 1.6
-    housing = merge([box((hw, dpt * 0.8, axis_z - t), (0, 0, (axis_z - t) / 2)), tube(r_b, r_b * 1.5, hw, at=(0, 0, axis_z - t), axis="x")])
+    housing = merge(
+        [
+            box((hw, dpt * 0.8, axis_z - t), (0, 0, (axis_z - t) / 2)),
+            tube(r_b, r_b * 1.5, hw, at=(0, 0, axis_z - t), axis="x"),
+        ]
+    )
     xs = [0.0] if core == 3 else [-w * 0.3, w * 0.3]
     b.add_copies("housing", housing, [((x, 0, t), None) for x in xs], step="housings")
     shaft_len = w * rng.uniform(1.05, 1.3)
-    b.add("shaft", revolved([[0, 0], [r_sh * 0.8, 0], [r_sh * 0.8, 0.03], [r_sh, 0.03], [r_sh, shaft_len], [0, shaft_len]], at=(-shaft_len / 2, 0, axis_z), axis="x", sections=24), step="shaft")
+    b.add(
+        "shaft",
+        revolved(
+            [[0, 0], [r_sh * 0.8, 0], [r_sh * 0.8, 0.03], [r_sh, 0.03], [r_sh, shaft_len], [0, shaft_len]],
+            at=(-shaft_len / 2, 0, axis_z),
+            axis="x",
+            sections=24,
+        ),
+        step="shaft",
+    )
     if core >= 6:
         bearing = tube(r_sh, r_b, hw * 0.8, axis="x", sections=28)
         b.add_copies("bearing", bearing, [((x, 0, axis_z), None) for x in xs], step="bearings")
     if core >= 7:
-        pulley = revolved([[0, 0], [r_b * 2.4, 0], [r_b * 2.0, 0.012], [r_b * 2.4, 0.024], [0, 0.024]], at=(w * 0.5, 0, axis_z), axis="x", sections=40)
+        pulley = revolved(
+            [[0, 0], [r_b * 2.4, 0], [r_b * 2.0, 0.012], [r_b * 2.4, 0.024], [0, 0.024]],
+            at=(w * 0.5, 0, axis_z),
+            axis="x",
+            sections=40,
+        )
         b.add("pulley", pulley, step="pulley")
 
     def sites(k: int) -> list[Site]:
@@ -160,7 +194,11 @@ def _core_gear_train(b: Builder, rng: np.random.Generator, core: int) -> Callabl
     gear_t = rng.uniform(0.01, 0.016)
     for i, (x, z, r) in enumerate(zip(centres, teeth, radii)):
         shaft_len = rng.uniform(0.06, 0.09) + 0.02 * i
-        b.add(f"shaft_{'ab'[i]}", cylinder(r_sh, shaft_len, at=(x, 0, t + shaft_len / 2 - 0.004), sections=20), step="shafts")
+        b.add(
+            f"shaft_{'ab'[i]}",
+            cylinder(r_sh, shaft_len, at=(x, 0, t + shaft_len / 2 - 0.004), sections=20),
+            step="shafts",
+        )
         outline = gear_profile(r - 1.1 * module, r + module, z, per_tooth=8)
         gear = ring_prism(outline, circle_profile(r_sh, z * 8), gear_t, at=(x, 0, t + 0.02 + gear_t / 2))
         b.add(f"gear_{z}t", gear, step="gears")
@@ -197,14 +235,32 @@ def _core_motor_mount(b: Builder, rng: np.random.Generator, core: int) -> Callab
         z0 = 0.0
         cz -= t
     b.add("bracket", placed(bracket, (0, 0, z0)), step="bracket")
-    body = revolved([[0, 0], [r_m, 0], [r_m, motor_len], [r_m * 0.4, motor_len], [r_m * 0.4, motor_len + 0.006], [0, motor_len + 0.006]], sections=36)
+    body = revolved(
+        [
+            [0, 0],
+            [r_m, 0],
+            [r_m, motor_len],
+            [r_m * 0.4, motor_len],
+            [r_m * 0.4, motor_len + 0.006],
+            [0, motor_len + 0.006],
+        ],
+        sections=36,
+    )
     rot_py = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]])  # +Z -> +Y
     b.add("motor", placed(body, (0, y_face, cz), rot_py), step="motor")
     shaft_l = rng.uniform(0.03, 0.05)
     if core >= 5:
         pulley = revolved([[0, 0], [r_m * 0.7, 0], [r_m * 0.55, 0.008], [r_m * 0.7, 0.016], [0, 0.016]], sections=36)
-        b.add("pulley", placed(pulley, (0, y_face - shaft_l * 0.6, cz), np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])), step="pulley")
-    b.add("motor_shaft", cylinder(0.004, shaft_l, at=(0, y_face - shaft_l / 2 + 0.004, cz), axis="y", sections=14), step="motor")
+        b.add(
+            "pulley",
+            placed(pulley, (0, y_face - shaft_l * 0.6, cz), np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])),
+            step="pulley",
+        )
+    b.add(
+        "motor_shaft",
+        cylinder(0.004, shaft_l, at=(0, y_face - shaft_l / 2 + 0.004, cz), axis="y", sections=14),
+        step="motor",
+    )
 
     def sites(k: int) -> list[Site]:
         if core >= 4:
@@ -221,7 +277,12 @@ CATEGORIES: dict[str, Callable] = {
     "gear_train": _core_gear_train,
     "motor_mount": _core_motor_mount,
 }
-_CORE_SIZES = {"flange_coupling": (3, 4), "pillow_block": (3, 4, 6, 7), "gear_train": (3, 5, 7, 8), "motor_mount": (3, 4, 5)}
+_CORE_SIZES = {
+    "flange_coupling": (3, 4),
+    "pillow_block": (3, 4, 6, 7),
+    "gear_train": (3, 5, 7, 8),
+    "motor_mount": (3, 4, 5),
+}
 
 
 def _plan(n: int, rng: np.random.Generator, cores: tuple[int, ...]) -> tuple[int, int, int]:

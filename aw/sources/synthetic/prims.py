@@ -57,12 +57,16 @@ def cylinder(radius: float, length: float, at=(0.0, 0.0, 0.0), axis: str = "z", 
     return placed(trimesh.creation.cylinder(radius=radius, height=length, sections=sections), at, _axis_rot(axis))
 
 
-def tube(r_in: float, r_out: float, length: float, at=(0.0, 0.0, 0.0), axis: str = "z", sections: int = 32) -> trimesh.Trimesh:
+def tube(
+    r_in: float, r_out: float, length: float, at=(0.0, 0.0, 0.0), axis: str = "z", sections: int = 32
+) -> trimesh.Trimesh:
     """Hollow cylinder (ring) centred at ``at`` along ``axis``."""
     return ring_prism(circle_profile(r_out, sections), circle_profile(r_in, sections), length, at=at, axis=axis)
 
 
-def revolved(profile: Sequence[Sequence[float]], at=(0.0, 0.0, 0.0), axis: str = "z", sections: int = 32) -> trimesh.Trimesh:
+def revolved(
+    profile: Sequence[Sequence[float]], at=(0.0, 0.0, 0.0), axis: str = "z", sections: int = 32
+) -> trimesh.Trimesh:
     """Solid of revolution about ``axis`` of a ``(radius, height)`` polyline from the axis to the axis."""
     prof = np.asarray(profile, dtype=np.float64)
     if prof[0, 0] != 0 or prof[-1, 0] != 0:
@@ -134,7 +138,9 @@ def prism(profile: np.ndarray, length: float, at=(0.0, 0.0, 0.0), axis: str = "z
     return _oriented(placed(trimesh.Trimesh(verts, faces, process=False), at, _axis_rot(axis)))
 
 
-def ring_prism(outer: np.ndarray, inner: np.ndarray, length: float, at=(0.0, 0.0, 0.0), axis: str = "z") -> trimesh.Trimesh:
+def ring_prism(
+    outer: np.ndarray, inner: np.ndarray, length: float, at=(0.0, 0.0, 0.0), axis: str = "z"
+) -> trimesh.Trimesh:
     """Extrusion of the region between two loops sampled at the same angles (a ring with a bore)."""
     outer = np.asarray(outer, dtype=np.float64)
     inner = np.asarray(inner, dtype=np.float64)

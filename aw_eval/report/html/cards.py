@@ -23,16 +23,39 @@ from aw_eval.study.episode import poses_array
 from aw_eval.study.model import RunScore, TaskFacts
 from aw_eval.study.table import RunRecord, Study
 
-__all__ = ["TaskRuns", "RunView", "Picture", "Card", "load_run_view", "task_card", "registration_hint", "viewer_data", "system_colors", "CARD_SIZE", "FRAME_SIZE",
-           "MAX_VIEWER_STATES", "MAX_LISTED_CALLS"]
+__all__ = [
+    "TaskRuns",
+    "RunView",
+    "Picture",
+    "Card",
+    "load_run_view",
+    "task_card",
+    "registration_hint",
+    "viewer_data",
+    "system_colors",
+    "CARD_SIZE",
+    "FRAME_SIZE",
+    "MAX_VIEWER_STATES",
+    "MAX_LISTED_CALLS",
+]
 
 CARD_SIZE = (320, 240)  # target and final-state pictures
 FRAME_SIZE = (160, 120)  # filmstrip frames
 MAX_VIEWER_STATES = 200  # recorded states per run in the 3D viewer (evenly spaced; first and last kept)
 MAX_VIEWER_FACES = 1500  # triangles per part in the 3D viewer (vertex clustering above it)
 MAX_LISTED_CALLS = 2000  # tool calls listed per run
-_SYSTEM_PALETTE = ("#4C72B0", "#DD8452", "#55A868", "#C44E52", "#8172B3", "#937860", "#DA8BC3", "#8C8C8C",
-                   "#CCB974", "#64B5CD")
+_SYSTEM_PALETTE = (
+    "#4C72B0",
+    "#DD8452",
+    "#55A868",
+    "#C44E52",
+    "#8172B3",
+    "#937860",
+    "#DA8BC3",
+    "#8C8C8C",
+    "#CCB974",
+    "#64B5CD",
+)
 
 
 def system_colors(systems: list[str]) -> dict[str, str]:
@@ -49,7 +72,7 @@ class TaskRuns:
     facts: dict[str, TaskFacts]
 
     @classmethod
-    def of(cls, study: Study, task_id: str) -> "TaskRuns":
+    def of(cls, study: Study, task_id: str) -> TaskRuns:
         facts = {task_id: study.facts[task_id]} if task_id in study.facts else {}
         return cls(list(study.systems), {(s, task_id): study.record(s, task_id) for s in study.systems}, facts)
 
@@ -136,7 +159,9 @@ def _run_numbers(r: RunScore) -> str:
 
 
 def _img(src: str, alt: str, size: tuple[int, int]) -> str:
-    return f'<img src="{html.escape(src)}" alt="{html.escape(alt)}" width="{size[0]}" height="{size[1]}" loading="lazy">'
+    return (
+        f'<img src="{html.escape(src)}" alt="{html.escape(alt)}" width="{size[0]}" height="{size[1]}" loading="lazy">'
+    )
 
 
 def _x_of(r: RunScore) -> np.ndarray:
@@ -159,8 +184,9 @@ class Picture:
     target: bool = False
 
 
-def _final_pictures(scene: TaskScene | None, views: dict[str, RunView], study: TaskRuns, task_id: str, camera,
-                    folder: Path, rel: str) -> list[Picture]:
+def _final_pictures(
+    scene: TaskScene | None, views: dict[str, RunView], study: TaskRuns, task_id: str, camera, folder: Path, rel: str
+) -> list[Picture]:
     out = []
     if scene is not None:
         out.append(Picture("Target", rel + scene.render(scene.target_poses, camera, CARD_SIZE, folder), "", True))
@@ -182,8 +208,10 @@ def _finals(pictures: list[Picture], views: dict[str, RunView]) -> str:
         if p.src is not None:
             pic = _img(p.src, "target" if p.target else f"{p.label} final state", CARD_SIZE)
         else:
-            pic = (f'<div class="nopic" style="width:{CARD_SIZE[0]}px;height:{CARD_SIZE[1]}px">'
-                   f"{html.escape(p.numbers)}</div>")
+            pic = (
+                f'<div class="nopic" style="width:{CARD_SIZE[0]}px;height:{CARD_SIZE[1]}px">'
+                f"{html.escape(p.numbers)}</div>"
+            )
         v = views.get(p.label)
         note = f'<br><span class="note">{html.escape(v.note)}</span>' if v is not None and v.note else ""
         nums = f"<br>{html.escape(p.numbers)}" if p.numbers and p.src is not None else ""
@@ -207,10 +235,12 @@ def registration_hint(scene: TaskScene, view: RunView, threshold: float) -> str:
         return ""
     named = [scene.part_ids[i] + ("" if i < len(r.moved) and r.moved[i] else " (never moved)") for i in away[:4]]
     more = f" and {len(away) - 4} more" if len(away) > 4 else ""
-    return (f"{view.system}: {int(placed.sum())} of {len(placed)} parts lie at their targets as placed, yet PA is "
-            f"{_pa(r.pa)}. The scorer registers the whole assembly with ONE rigid transform before it compares "
-            f"parts, so the {'part' if len(away) == 1 else 'parts'} left away, {', '.join(named)}{more}, "
-            f"{'pulls' if len(away) == 1 else 'pull'} that transform off the parts in place.")
+    return (
+        f"{view.system}: {int(placed.sum())} of {len(placed)} parts lie at their targets as placed, yet PA is "
+        f"{_pa(r.pa)}. The scorer registers the whole assembly with ONE rigid transform before it compares "
+        f"parts, so the {'part' if len(away) == 1 else 'parts'} left away, {', '.join(named)}{more}, "
+        f"{'pulls' if len(away) == 1 else 'pull'} that transform off the parts in place."
+    )
 
 
 def _part_table(scene_ids: list[str], colors: np.ndarray | None, study: TaskRuns, doc_runs: dict, task_id: str) -> str:
@@ -229,12 +259,18 @@ def _part_table(scene_ids: list[str], colors: np.ndarray | None, study: TaskRuns
             r = study.score(s, task_id)
             e = float(r.part_errors[i]) if i < len(r.part_errors) else float("nan")
             cls = (doc_runs[(s, task_id)].get("part_classes") or [""] * (i + 1))[i] if (s, task_id) in doc_runs else ""
-            tds += (f'<td class="r" data-v="{"" if not np.isfinite(e) else f"{1000 * e:.6g}"}">{fixed(1000 * e, 2)}</td>'
-                    f'<td class="l {"ok" if cls == "correct" else ""}">{html.escape(cls.replace("_", " "))}</td>')
+            tds += (
+                f'<td class="r" data-v="{"" if not np.isfinite(e) else f"{1000 * e:.6g}"}">{fixed(1000 * e, 2)}</td>'
+                f'<td class="l {"ok" if cls == "correct" else ""}">{html.escape(cls.replace("_", " "))}</td>'
+            )
         rows.append(f"<tr>{tds}</tr>")
-    return (scroll_box(f'<table class="sortable parts"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>') +
-            '<p class="note">Matched part Chamfer distance (normalized units, ×1000) of the final state; a part is '
-            "correct at or below 10. Classes: the geometric failure classes of Table A-11.</p>")
+    return (
+        scroll_box(
+            f'<table class="sortable parts"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
+        )
+        + '<p class="note">Matched part Chamfer distance (normalized units, ×1000) of the final state; a part is '
+        "correct at or below 10. Classes: the geometric failure classes of Table A-11.</p>"
+    )
 
 
 def _curves(study: TaskRuns, task_id: str, views: dict[str, RunView], colors: dict[str, str]) -> str:
@@ -252,11 +288,15 @@ def _curves(study: TaskRuns, task_id: str, views: dict[str, RunView], colors: di
             scd.append(Series(s, colors[s], [0.0, 1.0], [1000 * r.scd] * 2))
     if not pa:
         return ""
-    legend = "".join(f'<span class="key"><span class="sw" style="background:{colors[s.label]}"></span>{html.escape(s.label)}</span>'
-                     for s in pa)
-    return (f'<div class="curves">{step_chart(pa, "PA (%) over normalized time", (0, 100), fmt=lambda v: f"{v:.0f}")}'
-            f'{step_chart(scd, "SCD ×1000 over normalized time", fmt=lambda v: fixed(v, 0 if v >= 100 else 2))}'
-            f'<div class="legend">{legend}</div></div>')
+    legend = "".join(
+        f'<span class="key"><span class="sw" style="background:{colors[s.label]}"></span>{html.escape(s.label)}</span>'
+        for s in pa
+    )
+    return (
+        f'<div class="curves">{step_chart(pa, "PA (%) over normalized time", (0, 100), fmt=lambda v: f"{v:.0f}")}'
+        f"{step_chart(scd, 'SCD ×1000 over normalized time', fmt=lambda v: fixed(v, 0 if v >= 100 else 2))}"
+        f'<div class="legend">{legend}</div></div>'
+    )
 
 
 def _filmstrip(view: RunView, scene: TaskScene, camera, folder: Path, rel: str) -> str:
@@ -279,9 +319,11 @@ def _calls(view: RunView, task_id: str, data_src: str | None) -> str:
         return '<p class="note">No trajectory: no tool calls.</p>'
     if data_src is None:
         return f'<p class="note">{len(view.calls)} tool calls (trajectory.jsonl).</p>'
-    return (f'<details class="calls" data-task="{html.escape(task_id)}" data-src="{html.escape(data_src)}" '
-            f'data-system="{html.escape(view.system)}"><summary>Tool calls ({len(view.calls)})</summary>'
-            '<ul class="calls"></ul></details>')
+    return (
+        f'<details class="calls" data-task="{html.escape(task_id)}" data-src="{html.escape(data_src)}" '
+        f'data-system="{html.escape(view.system)}"><summary>Tool calls ({len(view.calls)})</summary>'
+        '<ul class="calls"></ul></details>'
+    )
 
 
 def _call_rows(view: RunView) -> list[list[Any]]:
@@ -290,8 +332,16 @@ def _call_rows(view: RunView) -> list[list[Any]]:
     rows = []
     for c in view.calls[:MAX_LISTED_CALLS]:
         args = orjson.dumps(c.args).decode()
-        rows.append([c.seq, round(float(c.t), 2), c.tool, args if len(args) <= 160 else args[:157] + "...", bool(c.ok),
-                     c.error or ""])
+        rows.append(
+            [
+                c.seq,
+                round(float(c.t), 2),
+                c.tool,
+                args if len(args) <= 160 else args[:157] + "...",
+                bool(c.ok),
+                c.error or "",
+            ]
+        )
     return rows
 
 
@@ -306,9 +356,19 @@ class Card:
     pictures: list[Picture]
 
 
-def task_card(study: TaskRuns, task: dict[str, Any], doc_runs: dict, scene: TaskScene | None, views: dict[str, RunView],
-              folder: Path, rel: str, viewer_src: str | None, colors: dict[str, str], no_pictures: str = NO_MESHES,
-              threshold: float = ProtocolSettings.threshold) -> Card:
+def task_card(
+    study: TaskRuns,
+    task: dict[str, Any],
+    doc_runs: dict,
+    scene: TaskScene | None,
+    views: dict[str, RunView],
+    folder: Path,
+    rel: str,
+    viewer_src: str | None,
+    colors: dict[str, str],
+    no_pictures: str = NO_MESHES,
+    threshold: float = ProtocolSettings.threshold,
+) -> Card:
     """One task's card; pictures are rendered into ``folder`` (``rel``: its path from the page);
     without a ``scene`` the card says ``no_pictures`` instead. ``threshold``: the protocol's
     part-correct threshold (for the note on parts placed but not counted)."""
@@ -316,11 +376,16 @@ def task_card(study: TaskRuns, task: dict[str, Any], doc_runs: dict, scene: Task
     camera = None
     if scene is not None:
         camera = scene.camera([v.final for v in views.values()])
-    meta = " · ".join(str(x) for x in (task["source"], task["condition"], task["category"],
-                                       f"{task['n_parts']} parts", task["variant"]) if x)
+    meta = " · ".join(
+        str(x)
+        for x in (task["source"], task["condition"], task["category"], f"{task['n_parts']} parts", task["variant"])
+        if x
+    )
     pictures = _final_pictures(scene, views, study, tid, camera, folder, rel)
-    parts = [f'<section class="card" id="task-{slug(tid)}"><h3>{html.escape(tid)}</h3><p class="meta">{html.escape(meta)}</p>',
-             _finals(pictures, views)]
+    parts = [
+        f'<section class="card" id="task-{slug(tid)}"><h3>{html.escape(tid)}</h3><p class="meta">{html.escape(meta)}</p>',
+        _finals(pictures, views),
+    ]
     if scene is None:
         parts.append(f'<p class="note">{html.escape(no_pictures)}</p>')
     else:
@@ -329,8 +394,15 @@ def task_card(study: TaskRuns, task: dict[str, Any], doc_runs: dict, scene: Task
             if hint:
                 parts.append(f'<p class="hint">{html.escape(hint)}</p>')
     parts.append(_curves(study, tid, views, colors))
-    parts.append(_part_table(scene.part_ids if scene else (study.facts[tid].part_ids if tid in study.facts else []),
-                             scene.colors if scene else None, study, doc_runs, tid))
+    parts.append(
+        _part_table(
+            scene.part_ids if scene else (study.facts[tid].part_ids if tid in study.facts else []),
+            scene.colors if scene else None,
+            study,
+            doc_runs,
+            tid,
+        )
+    )
     for s in study.systems:
         v = views.get(s)
         if v is None:
@@ -340,8 +412,10 @@ def task_card(study: TaskRuns, task: dict[str, Any], doc_runs: dict, scene: Task
             parts.append(_filmstrip(v, scene, camera, folder, rel))
         parts.append(_calls(v, tid, viewer_src) + "</div>")
     if viewer_src is not None:
-        parts.append(f'<button class="open3d" data-task="{html.escape(tid)}" data-src="{html.escape(viewer_src)}">'
-                     "Open the 3D view</button><div class=\"viewer\" hidden></div>")
+        parts.append(
+            f'<button class="open3d" data-task="{html.escape(tid)}" data-src="{html.escape(viewer_src)}">'
+            'Open the 3D view</button><div class="viewer" hidden></div>'
+        )
     parts.append("</section>")
     return Card("".join(parts), pictures)
 
@@ -377,19 +451,44 @@ def viewer_data(scene: TaskScene, views: dict[str, RunView]) -> dict[str, Any]:
     parts = []
     for pid, m, c in zip(scene.part_ids, scene.meshes, scene.colors):
         v, f = _cluster(np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64), MAX_VIEWER_FACES)
-        parts.append({"id": pid, "color": "#%02x%02x%02x" % tuple(int(round(255 * x)) for x in c),
-                      "v": np.round(v, 5).reshape(-1).tolist(), "f": f.reshape(-1).tolist()})
+        parts.append(
+            {
+                "id": pid,
+                "color": "#%02x%02x%02x" % tuple(int(round(255 * x)) for x in c),
+                "v": np.round(v, 5).reshape(-1).tolist(),
+                "f": f.reshape(-1).tolist(),
+            }
+        )
     systems = {}
     for s, view in views.items():
         r = view.score
         states = []
         for k in _pick(len(view.states), MAX_VIEWER_STATES):
-            states.append({"label": f"checkpoint {k} (call {int(r.ck_seq[k])}, {float(r.ck_t[k]):.1f} s)",
-                           "pa": 100 * float(r.ck_pa[k]), "scd": 1000 * float(r.ck_scd[k]),
-                           "poses": np.round(view.states[k], 6).tolist()})
-        states.append({"label": "final state", "pa": 100 * r.pa, "scd": 1000 * r.scd if np.isfinite(r.scd) else None,
-                       "poses": np.round(view.final, 6).tolist()})
-        systems[s] = {"states": states, "n_recorded": int(len(view.states)), "calls": _call_rows(view),
-                      "n_calls": len(view.calls)}
-    return {"task_id": scene.task_id, "parts": parts, "target": np.round(scene.target_poses, 6).tolist(),
-            "systems": systems}
+            states.append(
+                {
+                    "label": f"checkpoint {k} (call {int(r.ck_seq[k])}, {float(r.ck_t[k]):.1f} s)",
+                    "pa": 100 * float(r.ck_pa[k]),
+                    "scd": 1000 * float(r.ck_scd[k]),
+                    "poses": np.round(view.states[k], 6).tolist(),
+                }
+            )
+        states.append(
+            {
+                "label": "final state",
+                "pa": 100 * r.pa,
+                "scd": 1000 * r.scd if np.isfinite(r.scd) else None,
+                "poses": np.round(view.final, 6).tolist(),
+            }
+        )
+        systems[s] = {
+            "states": states,
+            "n_recorded": int(len(view.states)),
+            "calls": _call_rows(view),
+            "n_calls": len(view.calls),
+        }
+    return {
+        "task_id": scene.task_id,
+        "parts": parts,
+        "target": np.round(scene.target_poses, 6).tolist(),
+        "systems": systems,
+    }

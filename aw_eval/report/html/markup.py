@@ -49,8 +49,10 @@ def _table(lines: list[str]) -> str:
     th = "".join(f'<th class="{"r" if r else "l"}">{_inline(h)}</th>' for h, r in zip(header, right))
     rows = []
     for line in lines[2:]:
-        tds = "".join(f'<td class="r" data-v="{sort_value(c)}">{_inline(c)}</td>' if r
-                      else f'<td class="l">{_inline(c)}</td>' for c, r in zip(_cells(line), right))
+        tds = "".join(
+            f'<td class="r" data-v="{sort_value(c)}">{_inline(c)}</td>' if r else f'<td class="l">{_inline(c)}</td>'
+            for c, r in zip(_cells(line), right)
+        )
         rows.append(f"<tr>{tds}</tr>")
     return scroll_box(f'<table class="sortable"><thead><tr>{th}</tr></thead><tbody>{"".join(rows)}</tbody></table>')
 

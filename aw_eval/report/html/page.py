@@ -15,10 +15,11 @@ import html
 import os
 import re
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import orjson
 
@@ -80,14 +81,17 @@ def _copy_static(folder: Path) -> None:
 def _overview(doc: dict[str, Any], study: Study) -> str:
     """A sortable table of every task: PA/SR per system, linking to the cards."""
     runs = {(r["system"], r["task_id"]): r for r in doc["runs"]}
-    head = "<th>Task</th><th>Source</th><th>Condition</th><th>Variant</th><th class=\"r\">Parts</th>" + "".join(
-        f'<th class="r">{html.escape(s)} PA (%)</th><th class="r">SR</th>' for s in study.systems)
+    head = '<th>Task</th><th>Source</th><th>Condition</th><th>Variant</th><th class="r">Parts</th>' + "".join(
+        f'<th class="r">{html.escape(s)} PA (%)</th><th class="r">SR</th>' for s in study.systems
+    )
     rows = []
     for t in doc["tasks"]:
         tid = t["task_id"]
-        tds = (f'<td class="l"><a href="#task-{slug(tid)}">{html.escape(tid)}</a></td><td class="l">{html.escape(t["source"])}'
-               f'</td><td class="l">{html.escape(t["condition"])}</td><td class="l">{html.escape(t["variant"])}</td>'
-               f'<td class="r" data-v="{t["n_parts"]}">{t["n_parts"]}</td>')
+        tds = (
+            f'<td class="l"><a href="#task-{slug(tid)}">{html.escape(tid)}</a></td><td class="l">{html.escape(t["source"])}'
+            f'</td><td class="l">{html.escape(t["condition"])}</td><td class="l">{html.escape(t["variant"])}</td>'
+            f'<td class="r" data-v="{t["n_parts"]}">{t["n_parts"]}</td>'
+        )
         for s in study.systems:
             r = runs[(s, tid)]
             if r["status"] == "scored":
@@ -95,7 +99,9 @@ def _overview(doc: dict[str, Any], study: Study) -> str:
             else:
                 tds += f'<td class="r" data-v="">{html.escape(r["status"])}</td><td class="r" data-v=""></td>'
         rows.append(f"<tr>{tds}</tr>")
-    return scroll_box(f'<table class="sortable tasks"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>')
+    return scroll_box(
+        f'<table class="sortable tasks"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'
+    )
 
 
 def _toc(body: str) -> str:
@@ -123,17 +129,25 @@ def _glance(doc: dict[str, Any], systems: list[str], pictures: dict[str, list[Pi
     rows = []
     for t, pics in picked[:GLANCE_TASKS]:
         tid = t["task_id"]
-        tds = (f'<td class="l"><a href="#task-{slug(tid)}">{html.escape(tid)}</a><br><span class="note">'
-               f'{t["n_parts"]} parts</span></td>')
+        tds = (
+            f'<td class="l"><a href="#task-{slug(tid)}">{html.escape(tid)}</a><br><span class="note">'
+            f"{t['n_parts']} parts</span></td>"
+        )
         for p in pics:
-            img = (f'<img src="{html.escape(p.src)}" alt="{html.escape(p.label)} on {html.escape(tid)}" width="{w}" '
-                   f'height="{h}">' if p.src else "")
+            img = (
+                f'<img src="{html.escape(p.src)}" alt="{html.escape(p.label)} on {html.escape(tid)}" width="{w}" '
+                f'height="{h}">'
+                if p.src
+                else ""
+            )
             tds += f'<td>{img}<div class="note">{html.escape(p.numbers)}</div></td>'
         rows.append(f"<tr>{tds}</tr>")
-    return (f'<h2 id="{slug(GLANCE_TITLE)}">{GLANCE_TITLE}</h2><p>The first task of each source: the target beside '
-            "every system's final state (registered onto the target, one camera per task). Each task has a card "
-            'under <a href="#tasks">Tasks</a>.</p>' +
-            scroll_box(f'<table class="glance"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>'))
+    return (
+        f'<h2 id="{slug(GLANCE_TITLE)}">{GLANCE_TITLE}</h2><p>The first task of each source: the target beside '
+        "every system's final state (registered onto the target, one camera per task). Each task has a card "
+        'under <a href="#tasks">Tasks</a>.</p>'
+        + scroll_box(f'<table class="glance"><thead><tr>{head}</tr></thead><tbody>{"".join(rows)}</tbody></table>')
+    )
 
 
 def _arrange(body: str, glance: str) -> str:
@@ -147,7 +161,7 @@ def _arrange(body: str, glance: str) -> str:
         if m is None or m.group(1) in open_ids:
             out.append(chunk)
         else:
-            out.append(f'<details class="fold"><summary>{m.group(0)}</summary>{chunk[m.end():]}</details>')
+            out.append(f'<details class="fold"><summary>{m.group(0)}</summary>{chunk[m.end() :]}</details>')
         if m is not None and m.group(1) == slug(TABLE1) and not placed:
             out.append(glance)
             placed = True
@@ -205,17 +219,39 @@ def build_card(job: CardJob) -> CardResult:
         card = None
         if scene is not None:
             try:
-                card = task_card(job.runs, job.task, job.doc_runs, scene, views, files / "renders", rel, viewer_src,
-                                 job.colors, threshold=job.threshold)
+                card = task_card(
+                    job.runs,
+                    job.task,
+                    job.doc_runs,
+                    scene,
+                    views,
+                    files / "renders",
+                    rel,
+                    viewer_src,
+                    job.colors,
+                    threshold=job.threshold,
+                )
             except RenderError as exc:
                 no_render = f"No pictures: offscreen rendering is unavailable ({exc})."
         if card is None:
-            card = task_card(job.runs, job.task, job.doc_runs, None, views, files / "renders", rel, viewer_src,
-                             job.colors, **({"no_pictures": no_render} if no_render else {}))
+            card = task_card(
+                job.runs,
+                job.task,
+                job.doc_runs,
+                None,
+                views,
+                files / "renders",
+                rel,
+                viewer_src,
+                job.colors,
+                **({"no_pictures": no_render} if no_render else {}),
+            )
     finally:
         if scene is not None:
             scene.close()
-    return CardResult(card.html, viewer_file, [p.split("/")[-1] for p in _srcs(card.html, rel)], no_render, card.pictures)
+    return CardResult(
+        card.html, viewer_file, [p.split("/")[-1] for p in _srcs(card.html, rel)], no_render, card.pictures
+    )
 
 
 def _cards(jobs: list[CardJob], n_jobs: int):
@@ -231,8 +267,15 @@ def _cards(jobs: list[CardJob], n_jobs: int):
         yield from ex.map(build_card, jobs)
 
 
-def write_html(study: Study, doc: dict[str, Any], markdown: str, out_dir: str | Path, suite_dir: str | Path | None,
-               log: Callable[[str], None] | None = None, jobs: int = 1) -> HtmlStats:
+def write_html(
+    study: Study,
+    doc: dict[str, Any],
+    markdown: str,
+    out_dir: str | Path,
+    suite_dir: str | Path | None,
+    log: Callable[[str], None] | None = None,
+    jobs: int = 1,
+) -> HtmlStats:
     """Write ``out_dir/report.html`` and ``out_dir/report_files/``; ``markdown`` is report.md's text
     (its image links are relative to ``out_dir``). Cards are built in ``jobs`` processes. Tasks
     whose meshes cannot be read (no ``suite_dir``, official packages) get cards without pictures."""
@@ -247,10 +290,18 @@ def write_html(study: Study, doc: dict[str, Any], markdown: str, out_dir: str | 
     before = {p.name for p in renders.iterdir()}
     colors = system_colors(list(study.systems))
     doc_runs = {(r["system"], r["task_id"]): r for r in doc["runs"]}
-    card_jobs = [CardJob(t, TaskRuns.of(study, t["task_id"]),
-                         {(s, t["task_id"]): doc_runs[(s, t["task_id"])] for s in study.systems},
-                         None if suite_dir is None else str(suite_dir), str(files), colors, protocol_of(doc).threshold)
-                 for t in doc["tasks"]]
+    card_jobs = [
+        CardJob(
+            t,
+            TaskRuns.of(study, t["task_id"]),
+            {(s, t["task_id"]): doc_runs[(s, t["task_id"])] for s in study.systems},
+            None if suite_dir is None else str(suite_dir),
+            str(files),
+            colors,
+            protocol_of(doc).threshold,
+        )
+        for t in doc["tasks"]
+    ]
     used_renders: set[str] = set()
     used_viewer: set[str] = set()
     cards, pictures, no_render = [], {}, None
@@ -270,16 +321,20 @@ def write_html(study: Study, doc: dict[str, Any], markdown: str, out_dir: str | 
             if p.name not in used:
                 p.unlink()
     body = _arrange(markdown_to_html(markdown), _glance(doc, list(study.systems), pictures))
-    body += ('\n<h2 id="tasks">Tasks</h2><p>Every task with each system\'s final PA and SR; the cards below show '
-             "the target beside each system's final state (registered onto the target, one camera, part colours "
-             "shared), filmstrips at the quality curves' normalized times, per-run curves and tool calls, and a 3D "
-             "view of the recorded states.</p>" + _overview(doc, study) + "".join(cards))
+    body += (
+        '\n<h2 id="tasks">Tasks</h2><p>Every task with each system\'s final PA and SR; the cards below show '
+        "the target beside each system's final state (registered onto the target, one camera, part colours "
+        "shared), filmstrips at the quality curves' normalized times, per-run curves and tool calls, and a 3D "
+        "view of the recorded states.</p>" + _overview(doc, study) + "".join(cards)
+    )
     title = html.escape(f"AssemblyWorld scores: {doc['suite']['name']}")
-    page = (f'<!doctype html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'
-            f'<meta name="viewport" content="width=device-width, initial-scale=1">'
-            f'<link rel="stylesheet" href="{ASSETS_DIR}/report.css"></head><body>{_toc(body)}<main>{body}</main>'
-            f'<script src="{ASSETS_DIR}/report.js"></script>'
-            f'<script src="{ASSETS_DIR}/viewer.js" data-plotly="{ASSETS_DIR}/{plotly_name}"></script></body></html>\n')
+    page = (
+        f'<!doctype html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title>'
+        f'<meta name="viewport" content="width=device-width, initial-scale=1">'
+        f'<link rel="stylesheet" href="{ASSETS_DIR}/report.css"></head><body>{_toc(body)}<main>{body}</main>'
+        f'<script src="{ASSETS_DIR}/report.js"></script>'
+        f'<script src="{ASSETS_DIR}/viewer.js" data-plotly="{ASSETS_DIR}/{plotly_name}"></script></body></html>\n'
+    )
     path = out / "report.html"
     tmp = path.with_name(f"report.html.tmp{os.getpid()}")
     tmp.write_text(page, encoding="utf-8")
@@ -288,8 +343,10 @@ def write_html(study: Study, doc: dict[str, Any], markdown: str, out_dir: str | 
     new = len(used_renders - before)
     stats = HtmlStats(path, path.stat().st_size, files_bytes, len(used_renders), new, time.perf_counter() - t0)
     if log is not None:
-        log(f"report.html: {stats.html_bytes / 1e6:.1f} MB page, {files_bytes / 1e6:.1f} MB in {ASSETS_DIR}/, "
-            f"{stats.renders} pictures ({new} rendered now), {stats.seconds:.1f} s")
+        log(
+            f"report.html: {stats.html_bytes / 1e6:.1f} MB page, {files_bytes / 1e6:.1f} MB in {ASSETS_DIR}/, "
+            f"{stats.renders} pictures ({new} rendered now), {stats.seconds:.1f} s"
+        )
     return stats
 
 

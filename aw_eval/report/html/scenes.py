@@ -68,7 +68,7 @@ class TaskScene:
         self._renderer = None  # opened on the first picture, at its size
 
     @classmethod
-    def load(cls, suite_dir: Path, task_id: str, part_ids: list[str], divisor: float) -> "TaskScene":
+    def load(cls, suite_dir: Path, task_id: str, part_ids: list[str], divisor: float) -> TaskScene:
         """Read a native task's meshes and targets (raises ``FormatError``/``OSError``/``ValueError``)."""
         from aw.formats import read_targets, read_task
         from aw.formats.suite import suite_paths

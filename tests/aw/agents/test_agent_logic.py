@@ -67,8 +67,13 @@ def test_heuristic_box_arithmetic():
 
 def test_reading_tool_results():
     assert object_ids({"objects": [{"id": "p01"}, {"id": "p02"}], "groups": [{"id": "g1"}]}) == (["p01", "p02"], ["g1"])
-    rec = {"id": "p01", "position": [0, 0, 0], "quaternion": [1, 0, 0, 0], "extents": [1, 2, 3],
-           "local_bounds": {"min": [0, 0, 0], "max": [1, 2, 3]}}
+    rec = {
+        "id": "p01",
+        "position": [0, 0, 0],
+        "quaternion": [1, 0, 0, 0],
+        "extents": [1, 2, 3],
+        "local_bounds": {"min": [0, 0, 0], "max": [1, 2, 3]},
+    }
     info = ObjectInfo.from_record(rec)
     assert np.allclose(info.local_centre, [0.5, 1, 1.5])
     with pytest.raises(ValueError, match="cannot read"):

@@ -23,8 +23,11 @@ from aw.runner.batch import BatchConfig, run_batch
 def synthetic_suite(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("synthetic") / "suite"
     prepare = Path(sys.executable).with_name("aw-prepare")
-    subprocess.run([str(prepare), "synthetic", "--out", str(out), "--per-source", "1", "--jobs", "2", "--no-progress"],
-                   check=True, capture_output=True)
+    subprocess.run(
+        [str(prepare), "synthetic", "--out", str(out), "--per-source", "1", "--jobs", "2", "--no-progress"],
+        check=True,
+        capture_output=True,
+    )
     return out
 
 
@@ -46,8 +49,18 @@ def test_oracle_without_noise_scores_100_percent_and_with_noise_does_not(synthet
     task_ids = [t.task_id for t in read_manifest(synthetic_suite).tasks]
     noisy_tasks = [t for t in task_ids if t.startswith(("ikea_manual", "partnet"))][:2]
     for system, noise, tasks in (("oracle", 0.0, None), ("oracle-noisy", 3.0, noisy_tasks)):
-        res = run_batch(BatchConfig(suite_dir=synthetic_suite, system=system, out_dir=runs, agent="oracle",
-                                    noise=noise, tasks=tasks, jobs=2, progress=False))
+        res = run_batch(
+            BatchConfig(
+                suite_dir=synthetic_suite,
+                system=system,
+                out_dir=runs,
+                agent="oracle",
+                noise=noise,
+                tasks=tasks,
+                jobs=2,
+                progress=False,
+            )
+        )
         assert res.endings() == {"finished": len(tasks or task_ids)}
     exact = _scores(synthetic_suite, runs, "oracle")
     assert len(exact) == 5 and all(v == (1.0, 1.0) for v in exact.values()), exact

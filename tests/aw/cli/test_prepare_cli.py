@@ -43,7 +43,12 @@ def test_synthetic_suite_has_every_block_and_pairs_partnet(small_suite, capsys):
     by_source = {}
     for t in manifest.tasks:
         by_source.setdefault(t.source, []).append(t)
-    assert {s: len(v) for s, v in by_source.items()} == {"partnet": 4, "ikea_manual": 2, "assemblybench": 2, "fantastic_breaks": 2}
+    assert {s: len(v) for s, v in by_source.items()} == {
+        "partnet": 4,
+        "ikea_manual": 2,
+        "assemblybench": 2,
+        "fantastic_breaks": 2,
+    }
     assert {t.condition for t in by_source["partnet"]} == {"none", "image"}
     assert {t.condition for t in by_source["ikea_manual"] + by_source["assemblybench"]} == {"manual"}
     assert {t.condition for t in by_source["fantastic_breaks"]} == {"none"}
@@ -54,7 +59,23 @@ def test_synthetic_suite_has_every_block_and_pairs_partnet(small_suite, capsys):
 
 def test_summary_is_printed(tmp_path, capsys):
     out = tmp_path / "s"
-    assert main(["synthetic", "--out", str(out), "--per-source", "3", "--blocks", "fantastic_breaks", "--jobs", "1", "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "synthetic",
+                "--out",
+                str(out),
+                "--per-source",
+                "3",
+                "--blocks",
+                "fantastic_breaks",
+                "--jobs",
+                "1",
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "fantastic_breaks" in text and "size ratio median" in text and "2/2/2" in text
     assert "wrote 3 tasks of 3 objects" in text
@@ -62,7 +83,18 @@ def test_summary_is_printed(tmp_path, capsys):
 
 def test_parallel_build_is_byte_identical(small_suite, tmp_path):
     out = tmp_path / "par"
-    args = ["synthetic", "--out", str(out), "--per-source", "2", "--blocks", "partnet,fantastic_breaks", "--jobs", "2", "--no-progress"]
+    args = [
+        "synthetic",
+        "--out",
+        str(out),
+        "--per-source",
+        "2",
+        "--blocks",
+        "partnet,fantastic_breaks",
+        "--jobs",
+        "2",
+        "--no-progress",
+    ]
     assert main(args) == 0
     tasks = read_manifest(out).tasks
     assert [t for t in read_manifest(small_suite).tasks if t.source in ("partnet", "fantastic_breaks")] == tasks
@@ -73,7 +105,18 @@ def test_parallel_build_is_byte_identical(small_suite, tmp_path):
 
 def test_existing_suite_needs_overwrite(small_suite, tmp_path, capsys):
     out = tmp_path / "again"
-    args = ["synthetic", "--out", str(out), "--per-source", "1", "--blocks", "fantastic_breaks", "--jobs", "1", "--no-progress"]
+    args = [
+        "synthetic",
+        "--out",
+        str(out),
+        "--per-source",
+        "1",
+        "--blocks",
+        "fantastic_breaks",
+        "--jobs",
+        "1",
+        "--no-progress",
+    ]
     assert main(args) == 0
     (out / "notes.txt").write_text("mine")
     assert main(args) == 2
@@ -90,7 +133,9 @@ def test_bad_arguments_give_one_line_errors(tmp_path, capsys):
     assert main(["synthetic", "--out", str(tmp_path / "b"), "--blocks", "lego"]) == 2
     assert "unknown block" in capsys.readouterr().err
     (tmp_path / "file").write_text("x")
-    assert main(["synthetic", "--out", str(tmp_path / "file"), "--per-source", "1", "--blocks", "fantastic_breaks"]) == 2
+    assert (
+        main(["synthetic", "--out", str(tmp_path / "file"), "--per-source", "1", "--blocks", "fantastic_breaks"]) == 2
+    )
     assert "not a directory" in capsys.readouterr().err
     assert main(["synthetic", "--out", str(tmp_path / "file" / "sub"), "--per-source", "1"]) == 2
     assert "is a file" in capsys.readouterr().err
@@ -104,12 +149,17 @@ def test_bad_arguments_give_one_line_errors(tmp_path, capsys):
 
 
 def _folder(root):
-    for name, meta in (("desk", {"category": "desk", "conditions": ["none", "image"], "source": "partnet"}),
-                       ("lamp", {"source": "partnet"}), ("vase", None)):
+    for name, meta in (
+        ("desk", {"category": "desk", "conditions": ["none", "image"], "source": "partnet"}),
+        ("lamp", {"source": "partnet"}),
+        ("vase", None),
+    ):
         d = root / name
         d.mkdir(parents=True)
         for k in range(3):
-            trimesh.creation.box(extents=(0.3 + 0.2 * k, 0.2, 0.1 + 0.05 * k)).apply_translation((0, 0, 0.2 * k)).export(d / f"part{k}.obj")
+            trimesh.creation.box(extents=(0.3 + 0.2 * k, 0.2, 0.1 + 0.05 * k)).apply_translation(
+                (0, 0, 0.2 * k)
+            ).export(d / f"part{k}.obj")
         if meta:
             (d / "meta.json").write_text(json.dumps(meta))
     return root
@@ -118,10 +168,32 @@ def _folder(root):
 def test_folder_suite(tmp_path, capsys):
     src = _folder(tmp_path / "src")
     out = tmp_path / "suite"
-    assert main(["folder", str(src), "--out", str(out), "--source", "mine", "--jobs", "1", "--no-progress", "--variants", "1"]) == 0
+    assert (
+        main(
+            [
+                "folder",
+                str(src),
+                "--out",
+                str(out),
+                "--source",
+                "mine",
+                "--jobs",
+                "1",
+                "--no-progress",
+                "--variants",
+                "1",
+            ]
+        )
+        == 0
+    )
     manifest = _check_suite(out)
     originals = sorted((t.source, t.object_id, t.condition) for t in manifest.tasks if t.variant == "original")
-    assert originals == [("mine", "vase", "none"), ("partnet", "desk", "image"), ("partnet", "desk", "none"), ("partnet", "lamp", "none")]
+    assert originals == [
+        ("mine", "vase", "none"),
+        ("partnet", "desk", "image"),
+        ("partnet", "desk", "none"),
+        ("partnet", "lamp", "none"),
+    ]
     # variants for the first object of each source; the lone "mine" object has no donor
     desk_variants = sorted(t.variant for t in manifest.tasks if t.object_id == "desk" and t.condition == "none")
     assert desk_variants == ["distractor", "layout", "layout", "missing", "original"]
@@ -176,8 +248,23 @@ def test_folder_warns_of_unknown_meta_keys_in_one_line(tmp_path, capsys):
 def test_entry_point_runs(tmp_path):
     out = tmp_path / "ep"
     proc = subprocess.run(
-        [sys.executable, "-m", "aw.cli.prepare", "synthetic", "--out", str(out), "--per-source", "1", "--blocks", "fantastic_breaks", "--jobs", "1"],
-        capture_output=True, text=True, timeout=120,
+        [
+            sys.executable,
+            "-m",
+            "aw.cli.prepare",
+            "synthetic",
+            "--out",
+            str(out),
+            "--per-source",
+            "1",
+            "--blocks",
+            "fantastic_breaks",
+            "--jobs",
+            "1",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert proc.returncode == 0, proc.stderr
     assert "preparing objects" in proc.stderr  # tqdm progress goes to stderr
@@ -196,7 +283,9 @@ def test_folder_name_not_utf8_is_a_named_error_and_writes_nothing(tmp_path, caps
     src = _folder(tmp_path / "src")
     (src / "lamp").rename(src / os.fsdecode(b"zz-lamp\xff"))
     out = tmp_path / "o"
-    assert main(["folder", str(src), "--out", str(out), "--jobs", "1", "--no-progress"]) == 2  # an unusable SRC, found before any work: a usage error
+    assert (
+        main(["folder", str(src), "--out", str(out), "--jobs", "1", "--no-progress"]) == 2
+    )  # an unusable SRC, found before any work: a usage error
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "zz-lamp\\xff" in err and "not valid UTF-8" in err
     assert _no_suite(out)

@@ -118,8 +118,14 @@ def make_manifest():
             SuiteEntry(task_id="a-none", source="partnet", condition="none", object_id="a", n_parts=3),
             SuiteEntry(task_id="a-image", source="partnet", condition="image", object_id="a", n_parts=3),
             SuiteEntry(
-                task_id="a-missing", source="partnet", condition="none", object_id="a", n_parts=2,
-                variant="missing", base_task_id="a-none", weight=0.5,
+                task_id="a-missing",
+                source="partnet",
+                condition="none",
+                object_id="a",
+                n_parts=2,
+                variant="missing",
+                base_task_id="a-none",
+                weight=0.5,
             ),
         ],
     )
@@ -175,8 +181,14 @@ def test_final_round_trip_and_invalid(tmp_path):
 
 def test_run_info_round_trip_and_invalid(tmp_path):
     info = RunInfo(
-        system="random", task_id="demo-0001", agent="random-agent", wall_seconds=12.5, mcp_calls=40,
-        ended="finished", tokens=TokenUsage(input=100, output=20, total=120), cost_usd=0.01,
+        system="random",
+        task_id="demo-0001",
+        agent="random-agent",
+        wall_seconds=12.5,
+        mcp_calls=40,
+        ended="finished",
+        tokens=TokenUsage(input=100, output=20, total=120),
+        cost_usd=0.01,
         extra={"seed": 3},
     )
     path = tmp_path / "run.json"

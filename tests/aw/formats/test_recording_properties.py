@@ -28,32 +28,59 @@ from aw_eval.study.episode import RunUnreadable, read_episode
 IDS = ["p01", "p02"]
 I7 = [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
 # Bounded and derandomized for CI (same examples every run); benchmarks/fuzz_server.py explores further.
-FAST = settings(max_examples=25, deadline=None, derandomize=True, database=None,
-                suppress_health_check=[HealthCheck.too_slow])
+FAST = settings(
+    max_examples=25, deadline=None, derandomize=True, database=None, suppress_health_check=[HealthCheck.too_slow]
+)
 
-json_scalars = st.one_of(st.none(), st.booleans(), st.integers(-10**30, 10**30),
-                         st.floats(allow_nan=False, allow_infinity=False), st.text(max_size=12))
-json_values = st.recursive(json_scalars, lambda inner: st.one_of(
-    st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=8), inner, max_size=4)), max_leaves=12)
+json_scalars = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**30), 10**30),
+    st.floats(allow_nan=False, allow_infinity=False),
+    st.text(max_size=12),
+)
+json_values = st.recursive(
+    json_scalars,
+    lambda inner: st.one_of(st.lists(inner, max_size=4), st.dictionaries(st.text(max_size=8), inner, max_size=4)),
+    max_leaves=12,
+)
 finite = st.floats(-1e3, 1e3, allow_nan=False)
 poses = st.lists(finite, min_size=3, max_size=3).flatmap(
-    lambda p: st.lists(st.floats(-1, 1, allow_nan=False), min_size=4, max_size=4)
-    .filter(lambda q: sum(v * v for v in q) > 1e-6).map(lambda q: p + q))
+    lambda p: (
+        st.lists(st.floats(-1, 1, allow_nan=False), min_size=4, max_size=4)
+        .filter(lambda q: sum(v * v for v in q) > 1e-6)
+        .map(lambda q: p + q)
+    )
+)
 
 
 def _header() -> TrajectoryHeader:
-    return TrajectoryHeader(task_id="t1", system="s", started_at="2026-01-01T00:00:00Z", part_ids=IDS,
-                            initial_poses={p: I7 for p in IDS})
+    return TrajectoryHeader(
+        task_id="t1", system="s", started_at="2026-01-01T00:00:00Z", part_ids=IDS, initial_poses={p: I7 for p in IDS}
+    )
 
 
 def _valid_lines() -> list[dict]:
     return [
         _header().model_dump(mode="json", exclude_none=True),
         {"type": "call", "seq": 1, "server_t": 0.5, "tool": "get_state", "ok": True, "episode_active": False},
-        {"type": "call", "seq": 2, "t": 0.0, "server_t": 1.0, "tool": "translate_objects", "ok": True,
-         "changed": ["p01"], "poses": {"p01": [1, 0, 0, 1, 0, 0, 0], "p02": I7}},
-        {"type": "end", "reason": "finished", "t": 2.0, "server_t": 3.0,
-         "poses": {"p01": [1, 0, 0, 1, 0, 0, 0], "p02": I7}},
+        {
+            "type": "call",
+            "seq": 2,
+            "t": 0.0,
+            "server_t": 1.0,
+            "tool": "translate_objects",
+            "ok": True,
+            "changed": ["p01"],
+            "poses": {"p01": [1, 0, 0, 1, 0, 0, 0], "p02": I7},
+        },
+        {
+            "type": "end",
+            "reason": "finished",
+            "t": 2.0,
+            "server_t": 3.0,
+            "poses": {"p01": [1, 0, 0, 1, 0, 0, 0], "p02": I7},
+        },
     ]
 
 
@@ -95,16 +122,39 @@ def test_arbitrary_bytes(data):
 
 
 @FAST
-@given(line=st.integers(0, 3), key=st.sampled_from(["type", "seq", "t", "server_t", "tool", "ok", "poses", "changed",
-                                                    "part_ids", "initial_poses", "reason", "extra"]),
-       value=json_values, cut=st.integers(0, 2000))
+@given(
+    line=st.integers(0, 3),
+    key=st.sampled_from(
+        [
+            "type",
+            "seq",
+            "t",
+            "server_t",
+            "tool",
+            "ok",
+            "poses",
+            "changed",
+            "part_ids",
+            "initial_poses",
+            "reason",
+            "extra",
+        ]
+    ),
+    value=json_values,
+    cut=st.integers(0, 2000),
+)
 def test_mutated_recordings(line, key, value, cut):
     """A valid recording with one field of one line replaced by any JSON value, optionally cut."""
     lines = _valid_lines()
     lines[line][key] = value
     text = "".join(json.dumps(rec) + "\n" for rec in lines)
-    final = {"format": "assemblyworld.final", "format_version": 1, "task_id": "t1", "reason": "finished",
-             "poses": {"p01": [1, 0, 0, 1, 0, 0, 0], "p02": I7}}
+    final = {
+        "format": "assemblyworld.final",
+        "format_version": 1,
+        "task_id": "t1",
+        "reason": "finished",
+        "poses": {"p01": [1, 0, 0, 1, 0, 0, 0], "p02": I7},
+    }
     if key in final:
         final[key] = value
     with _scratch() as d:
@@ -115,9 +165,18 @@ def test_mutated_recordings(line, key, value, cut):
 
 
 @FAST
-@given(steps=st.lists(st.tuples(st.sampled_from(["get_state", "translate_objects", "start_episode"]),
-                                st.floats(0, 10, allow_nan=False), poses), min_size=0, max_size=8),
-       end=st.sampled_from([None, "finished", "timeout", "error", "disconnect", "interrupted"]))
+@given(
+    steps=st.lists(
+        st.tuples(
+            st.sampled_from(["get_state", "translate_objects", "start_episode"]),
+            st.floats(0, 10, allow_nan=False),
+            poses,
+        ),
+        min_size=0,
+        max_size=8,
+    ),
+    end=st.sampled_from([None, "finished", "timeout", "error", "disconnect", "interrupted"]),
+)
 def test_written_recordings_read_back(steps, end):
     """What the writer writes, the reader reads back: calls, times, checkpoints, final state."""
     with _scratch() as d:
@@ -136,13 +195,22 @@ def _write_and_read(run: Path, steps, end) -> None:
         if changed:
             state = {**state, "p01": pose}
         t = None if started is None else server_t - started
-        rec = TrajectoryCall(seq=seq, t=t, server_t=server_t, tool=tool, ok=True, changed=changed,
-                             poses=dict(state) if changed else None, episode_active=started is not None)
+        rec = TrajectoryCall(
+            seq=seq,
+            t=t,
+            server_t=server_t,
+            tool=tool,
+            ok=True,
+            changed=changed,
+            poses=dict(state) if changed else None,
+            episode_active=started is not None,
+        )
         w.call(rec)
         written.append(rec)
     if end is not None:
-        w.end(TrajectoryEnd(reason=end, t=None if started is None else server_t - started, server_t=server_t,
-                            poses=state))
+        w.end(
+            TrajectoryEnd(reason=end, t=None if started is None else server_t - started, server_t=server_t, poses=state)
+        )
         write_final(run / "final.json", FinalState(task_id="t1", reason=end, poses=state))
     else:
         w.close()

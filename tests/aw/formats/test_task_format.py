@@ -70,7 +70,9 @@ def test_nan_and_duplicate_keys_are_rejected(task_dir):
     text = (task_dir / "task.json").read_text()
     (task_dir / "task.json").write_text(text.replace('"budget_minutes": 60.0', '"budget_minutes": NaN'))
     expect_error("task.json", "not valid JSON", task_dir)
-    (task_dir / "task.json").write_text(text.replace('"budget_minutes": 60.0', '"budget_minutes": 60.0, "budget_minutes": 5'))
+    (task_dir / "task.json").write_text(
+        text.replace('"budget_minutes": 60.0', '"budget_minutes": 60.0, "budget_minutes": 5')
+    )
     expect_error("task.json", "duplicate key 'budget_minutes'", task_dir)
 
 

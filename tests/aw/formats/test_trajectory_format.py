@@ -24,21 +24,46 @@ def pose(x):
 
 def header():
     return TrajectoryHeader(
-        task_id="demo-0001", system="test", started_at="2026-01-01T00:00:00.000Z", part_ids=IDS,
-        initial_poses={"p01": I7, "p02": I7}, camera=CameraState(target=[0, 0, 0], yaw=-60, pitch=35, distance=3),
+        task_id="demo-0001",
+        system="test",
+        started_at="2026-01-01T00:00:00.000Z",
+        part_ids=IDS,
+        initial_poses={"p01": I7, "p02": I7},
+        camera=CameraState(target=[0, 0, 0], yaw=-60, pitch=35, distance=3),
     )
 
 
 CALLS = [
     TrajectoryCall(seq=1, t=0.0, tool="start_episode", ok=True),
-    TrajectoryCall(seq=2, t=1.5, tool="translate_objects", args={"ids": ["p01"], "delta": [0.5, 0, 0]}, ok=True,
-                   changed=["p01"], poses={"p01": pose(0.5), "p02": I7}),
-    TrajectoryCall(seq=3, t=2.0, tool="translate_objects", args={"ids": ["zz"], "delta": [1, 0, 0]}, ok=False,
-                   error="unknown id 'zz'"),
-    TrajectoryCall(seq=5, t=3.25, tool="capture_scene", args={"note": "caf\u00e9"}, ok=True,
-                   image="captures/000005.png"),
-    TrajectoryCall(seq=6, t=4.0, tool="set_object_pose", args={"id": "p02", "position": [0, 1, 0]}, ok=True,
-                   changed=["p02"], poses={"p01": pose(0.5), "p02": [0, 1, 0, 1, 0, 0, 0]}),
+    TrajectoryCall(
+        seq=2,
+        t=1.5,
+        tool="translate_objects",
+        args={"ids": ["p01"], "delta": [0.5, 0, 0]},
+        ok=True,
+        changed=["p01"],
+        poses={"p01": pose(0.5), "p02": I7},
+    ),
+    TrajectoryCall(
+        seq=3,
+        t=2.0,
+        tool="translate_objects",
+        args={"ids": ["zz"], "delta": [1, 0, 0]},
+        ok=False,
+        error="unknown id 'zz'",
+    ),
+    TrajectoryCall(
+        seq=5, t=3.25, tool="capture_scene", args={"note": "caf\u00e9"}, ok=True, image="captures/000005.png"
+    ),
+    TrajectoryCall(
+        seq=6,
+        t=4.0,
+        tool="set_object_pose",
+        args={"id": "p02", "position": [0, 1, 0]},
+        ok=True,
+        changed=["p02"],
+        poses={"p01": pose(0.5), "p02": [0, 1, 0, 1, 0, 0, 0]},
+    ),
 ]
 END = TrajectoryEnd(reason="finished", t=5.0, message="done", poses={"p01": pose(0.5), "p02": [0, 1, 0, 1, 0, 0, 0]})
 

@@ -43,9 +43,13 @@ def test_walk_from_any_start_finds_the_nearest_point(cloud):
     pts = rng.normal(size=(700, 3)) if cloud == "gaussian" else _surface_cloud(rng)
     graph = build_graph(pts)
     assert graph is not None
-    x = np.concatenate([rng.normal(size=(300, 3)) * 0.5,  # inside and near
-                        rng.normal(size=(200, 3)) * 6.0,  # far: wide, almost tied balls
-                        pts[:100] + rng.normal(size=(100, 3)) * 1e-3])  # on the cloud
+    x = np.concatenate(
+        [
+            rng.normal(size=(300, 3)) * 0.5,  # inside and near
+            rng.normal(size=(200, 3)) * 6.0,  # far: wide, almost tied balls
+            pts[:100] + rng.normal(size=(100, 3)) * 1e-3,
+        ]
+    )  # on the cloud
     start = rng.integers(0, len(pts), len(x))
     got, margin = _walk_all(pts, tuple(graph), x, start)
     assert np.array_equal(got, _brute(x, pts))
@@ -75,13 +79,13 @@ def test_graph_rows_hold_the_delaunay_neighbours_in_order_then_sentinels():
     indptr, indices = Delaunay(pts).vertex_neighbor_vertices
     for i in range(len(pts)):
         lo, hi = graph.indptr[i], graph.indptr[i + 1]
-        real = indices[indptr[i]:indptr[i + 1]]
+        real = indices[indptr[i] : indptr[i + 1]]
         assert (hi - lo) % LANES == 0 and len(real) <= hi - lo < len(real) + LANES
-        assert np.array_equal(graph.indices[lo:lo + len(real)], real)
-        assert np.all(graph.indices[lo + len(real):hi] == i)
-        assert np.array_equal(graph.coords[:, lo:lo + len(real)], pts[real].T)
-        assert np.all(graph.coords[:, lo + len(real):hi] == SENTINEL)
-        assert np.allclose(graph.half_inv[lo:lo + len(real)], 0.5 / np.linalg.norm(pts[real] - pts[i], axis=1))
+        assert np.array_equal(graph.indices[lo : lo + len(real)], real)
+        assert np.all(graph.indices[lo + len(real) : hi] == i)
+        assert np.array_equal(graph.coords[:, lo : lo + len(real)], pts[real].T)
+        assert np.all(graph.coords[:, lo + len(real) : hi] == SENTINEL)
+        assert np.allclose(graph.half_inv[lo : lo + len(real)], 0.5 / np.linalg.norm(pts[real] - pts[i], axis=1))
 
 
 @pytest.mark.parametrize("cloud", ["gaussian", "surfaces"])
@@ -99,10 +103,14 @@ def test_one_qhull_run_serves_the_cloud_in_every_frame_and_order(cloud):
     shared = tuple(graph_for(tree, pts))
     if cloud == "gaussian":  # in general position the triangulation is unique: the same rows
         own = graph_for(tree)
-        rows = lambda g: [set(g[1][g[0][i]:g[0][i + 1]].tolist()) - {i} for i in range(len(copy))]  # noqa: E731
+        rows = lambda g: [set(g[1][g[0][i] : g[0][i + 1]].tolist()) - {i} for i in range(len(copy))]  # noqa: E731
         assert rows(shared) == rows(own)
-    x = np.concatenate([tree.points[rng.integers(0, len(copy), 300)] + rng.normal(size=(300, 3)) * 0.02,
-                        rng.normal(size=(100, 3)) * 2.0])
+    x = np.concatenate(
+        [
+            tree.points[rng.integers(0, len(copy), 300)] + rng.normal(size=(300, 3)) * 0.02,
+            rng.normal(size=(100, 3)) * 2.0,
+        ]
+    )
     j, margin = _walk_all(tree.points, shared, x, rng.integers(0, len(copy), len(x)))
     assert np.array_equal(j, _brute(x, tree.points))
     for scale in (0.999, 0.5):
@@ -117,8 +125,9 @@ def _scan_rows(graph, x, dj):
     indptr, _, coords, half_inv = graph
     for i in range(x.shape[0]):
         j = i % (indptr.shape[0] - 1)
-        out[i, 0], out[i, 1] = _scan(coords[0], coords[1], coords[2], half_inv, indptr[j], indptr[j + 1], x[i, 0], x[i, 1],
-                                     x[i, 2], dj[i])
+        out[i, 0], out[i, 1] = _scan(
+            coords[0], coords[1], coords[2], half_inv, indptr[j], indptr[j + 1], x[i, 0], x[i, 1], x[i, 2], dj[i]
+        )
     return out
 
 
@@ -210,7 +219,9 @@ def test_exact_registration_of_trajectory_checkpoints_is_unchanged_by_graphs():
         r0, t0 = checkpoint_starts(geom, ck)
         tree_p = build_tree(pred)
         plain = ICPProblem(pred, index.target, tree_t=index.tree_t, tree_p=tree_p)
-        walked = ICPProblem(pred, index.target, tree_t=index.tree_t, tree_p=tree_p, graph_t=index.graph_t, graph_p=graph_for(tree_p))
+        walked = ICPProblem(
+            pred, index.target, tree_t=index.tree_t, tree_p=tree_p, graph_t=index.graph_t, graph_p=graph_for(tree_p)
+        )
         for k in range(len(r0)):
             a, b = plain.run(r0[k], t0[k], 100, 1e-9), walked.run(r0[k], t0[k], 100, 1e-9)
             assert a.objective == b.objective and np.array_equal(a.rotation, b.rotation)

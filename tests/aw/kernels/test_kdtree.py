@@ -68,13 +68,17 @@ def test_tree_layout_invariants(kind):
     assert np.array_equal(tree.points, pts[tree.index])
     for node in range(len(tree.left)):
         a, b = tree.left[node], tree.right[node]
-        seg = tree.points[tree.start[node]:tree.end[node]]
+        seg = tree.points[tree.start[node] : tree.end[node]]
         assert np.array_equal(tree.lo[node], seg.min(0)) and np.array_equal(tree.hi[node], seg.max(0))
         if a < 0:
-            assert len(seg) <= LEAF_SIZE and np.all(tree.leaf_of[tree.start[node]:tree.end[node]] == node)
+            assert len(seg) <= LEAF_SIZE and np.all(tree.leaf_of[tree.start[node] : tree.end[node]] == node)
             continue
         dim, split = tree.dim[node], tree.split[node]
-        assert tree.points[tree.start[a]:tree.end[a], dim].max() <= split <= tree.points[tree.start[b]:tree.end[b], dim].min()
+        assert (
+            tree.points[tree.start[a] : tree.end[a], dim].max()
+            <= split
+            <= tree.points[tree.start[b] : tree.end[b], dim].min()
+        )
         assert abs((tree.end[a] - tree.start[a]) - (tree.end[b] - tree.start[b])) <= 1  # median split
     d, rows = tree.query(pts[:200] + 0.01)
     want = _brute(pts[:200] + 0.01, pts)

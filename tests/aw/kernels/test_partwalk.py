@@ -17,7 +17,10 @@ from aw_eval.registration import checkpoint_starts
 def _assembly(rng, n_parts, n=300, divisor=2.5):
     """Baked clouds of ``n_parts`` flat-ish boxes, random poses and the posed, normalized union."""
     clouds = rng.random((n_parts, n, 3)) * [1.0, 0.5, 0.1]
-    poses = np.concatenate([rng.normal(size=(n_parts, 3)) * 0.6, Rotation.random(n_parts, random_state=rng).as_quat()[:, [3, 0, 1, 2]]], axis=1)
+    poses = np.concatenate(
+        [rng.normal(size=(n_parts, 3)) * 0.6, Rotation.random(n_parts, random_state=rng).as_quat()[:, [3, 0, 1, 2]]],
+        axis=1,
+    )
     rot = Rotation.from_quat(poses[:, [4, 5, 6, 3]]).as_matrix()
     posed = (np.einsum("pij,pnj->pni", rot, clouds) + poses[:, None, :3]) / divisor
     trees = [build_tree(c) for c in clouds]
@@ -93,8 +96,9 @@ def test_assembly_icp_equals_the_prediction_tree_icp(n_parts):
         ck = geom.checkpoint(poses)
         pred = ck.points
         tree_p = build_tree(pred)
-        plain = ICPProblem(pred, index.target, tree_t=index.tree_t, tree_p=tree_p, graph_t=index.graph_t,
-                           graph_p=graph_for(tree_p))
+        plain = ICPProblem(
+            pred, index.target, tree_t=index.tree_t, tree_p=tree_p, graph_t=index.graph_t, graph_p=graph_for(tree_p)
+        )
         walked = index.assembly_problem(ck.poses, ck.rotations, ck.parts, geom.divisor)
         assert index.part_clouds is not None
         r0, t0 = checkpoint_starts(geom, ck)
@@ -102,13 +106,17 @@ def test_assembly_icp_equals_the_prediction_tree_icp(n_parts):
             x, y = plain.run(r0[k], t0[k], 100, 1e-9), walked.run(r0[k], t0[k], 100, 1e-9)
             assert x.iterations == y.iterations
             assert abs(x.objective - y.objective) <= 1e-12 * x.objective
-            assert np.allclose(x.rotation, y.rotation, atol=1e-10) and np.allclose(x.translation, y.translation, atol=1e-10)
+            assert np.allclose(x.rotation, y.rotation, atol=1e-10) and np.allclose(
+                x.translation, y.translation, atol=1e-10
+            )
 
 
 def test_exact_scores_do_not_depend_on_the_search():
     """``exact`` through the parts' clouds equals ``exact`` with the prediction's own structures
     (the fallback used where a part has no graph)."""
-    geom, obj = make_points_geometry(3, 60, seed=4, settings=aw_eval.ProtocolSettings(n_fps=60, n_surface=400, max_iters=30))
+    geom, obj = make_points_geometry(
+        3, 60, seed=4, settings=aw_eval.ProtocolSettings(n_fps=60, n_surface=400, max_iters=30)
+    )
     cks = trajectory_checkpoints(obj, 3, seed=2)
     walked = [aw_eval.score(geom, c, mode="exact") for c in cks]
     geom.index().part_clouds = None  # as if a part could not be triangulated

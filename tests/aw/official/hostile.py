@@ -105,6 +105,7 @@ def _edit_row(member: str, line: int, edit: Callable[[dict], None], raw: dict[st
 def _state_value(offset: int, value: float):
     """Set one number of the final state's vector (mjSTATE_INTEGRATION: time, then each free
     body's position and quaternion), written by the project's archive writer."""
+
     def damage(run: Path, scratch: Path) -> None:
         ep = read_archive(_final(run))
         ep.states[-1].integration[offset] = value
@@ -127,10 +128,10 @@ def _corrupt_deflate(run: Path, scratch: Path) -> None:
     data = bytearray(path.read_bytes())
     with zipfile.ZipFile(path) as zf:
         info = zf.getinfo("frames.jsonl")
-    name_len = int.from_bytes(data[info.header_offset + 26:info.header_offset + 28], "little")
-    extra_len = int.from_bytes(data[info.header_offset + 28:info.header_offset + 30], "little")
+    name_len = int.from_bytes(data[info.header_offset + 26 : info.header_offset + 28], "little")
+    extra_len = int.from_bytes(data[info.header_offset + 28 : info.header_offset + 30], "little")
     start = info.header_offset + 30 + name_len + extra_len
-    data[start:start + info.compress_size] = b"\xff" * info.compress_size
+    data[start : start + info.compress_size] = b"\xff" * info.compress_size
     path.write_bytes(bytes(data))
     _rehash_result(run)
 
@@ -191,34 +192,88 @@ VARIANTS = [
     Variant("zero-quaternion", _zero_quaternion, "quaternion has zero length", True),
     Variant("position-1e300", _state_value(1, 1e300), "holds a value beyond +-1e+09", True),
     Variant("position-1e8", _state_value(1, 1e8), "position beyond +-1e+06", True),
-    Variant("arguments-1000-deep", _edit_row("calls.jsonl", 0, _set(arguments={"x": "@DEEP@"}), {"@DEEP@": _deep(1000)}),
-            "nested deeper than 64 levels", True),
-    Variant("arguments-5MB-array", _edit_row("calls.jsonl", 0, _set(arguments={"x": "@BIG@"}),
-                                             {"@BIG@": "[" + "0.0," * 1_300_000 + "0.0]"}),
-            "over the limit of 4194304 per row", True),
+    Variant(
+        "arguments-1000-deep",
+        _edit_row("calls.jsonl", 0, _set(arguments={"x": "@DEEP@"}), {"@DEEP@": _deep(1000)}),
+        "nested deeper than 64 levels",
+        True,
+    ),
+    Variant(
+        "arguments-5MB-array",
+        _edit_row("calls.jsonl", 0, _set(arguments={"x": "@BIG@"}), {"@BIG@": "[" + "0.0," * 1_300_000 + "0.0]"}),
+        "over the limit of 4194304 per row",
+        True,
+    ),
     # the run log
     Variant("final-archive-links-outside", _link_outside, "links outside the run log", False),
     Variant("sample-folder-links-outside", _sample_dir_outside, "links outside the run log", False),
-    Variant("run-json-100000-deep", _json_file("run.json", _set(versions="@DEEP@"), {"@DEEP@": _deep(100_000)}, False),
-            "run.json: not valid JSON", False),
-    Variant("result-json-100000-deep", _json_file("result.json", _set(extra="@DEEP@"), {"@DEEP@": _deep(100_000)}),
-            "result.json: not valid JSON", False),
-    Variant("input-json-100000-deep", _json_file("input.json", _set(extra="@DEEP@"), {"@DEEP@": _deep(100_000)}),
-            "input.json: not valid JSON", False),
-    Variant("conversation-100000-deep", _conversation(_deep(100_000)), "conversation.jsonl: line 1: not valid JSON", False),
-    Variant("conversation-not-objects", _conversation("[1, 2]"), "conversation.jsonl: line 1: expected a JSON object", False),
-    Variant("result-nan", _json_file("result.json", _set(duration_seconds="@NAN@"), {"@NAN@": "NaN"}),
-            "NaN and Infinity are not JSON numbers", False),
-    Variant("result-infinity", _json_file("result.json", _set_in("execution", cost_usd="@INF@"), {"@INF@": "Infinity"}),
-            "NaN and Infinity are not JSON numbers", False),
-    Variant("result-status-list", _json_file("result.json", _set(status=["completed"])), "result.json: status: missing", False),
-    Variant("result-archive-list", _json_file("result.json", _set(archive=["saved"])), "archive: expected an object", False),
-    Variant("result-execution-string", _json_file("result.json", _set(execution="completed")),
-            "execution: expected an object", False),
-    Variant("result-tool-calls-string", _json_file("result.json", _set(tool_calls="many")),
-            "tool_calls: expected a number or null", False),
-    Variant("run-options-list", _json_file("run.json", _set(options=["codex"]), in_sample=False),
-            "options: expected an object", False),
-    Variant("run-tasks-list", _json_file("run.json", _set(tasks=["Assemble."]), in_sample=False),
-            "tasks: expected an object", False),
+    Variant(
+        "run-json-100000-deep",
+        _json_file("run.json", _set(versions="@DEEP@"), {"@DEEP@": _deep(100_000)}, False),
+        "run.json: not valid JSON",
+        False,
+    ),
+    Variant(
+        "result-json-100000-deep",
+        _json_file("result.json", _set(extra="@DEEP@"), {"@DEEP@": _deep(100_000)}),
+        "result.json: not valid JSON",
+        False,
+    ),
+    Variant(
+        "input-json-100000-deep",
+        _json_file("input.json", _set(extra="@DEEP@"), {"@DEEP@": _deep(100_000)}),
+        "input.json: not valid JSON",
+        False,
+    ),
+    Variant(
+        "conversation-100000-deep", _conversation(_deep(100_000)), "conversation.jsonl: line 1: not valid JSON", False
+    ),
+    Variant(
+        "conversation-not-objects", _conversation("[1, 2]"), "conversation.jsonl: line 1: expected a JSON object", False
+    ),
+    Variant(
+        "result-nan",
+        _json_file("result.json", _set(duration_seconds="@NAN@"), {"@NAN@": "NaN"}),
+        "NaN and Infinity are not JSON numbers",
+        False,
+    ),
+    Variant(
+        "result-infinity",
+        _json_file("result.json", _set_in("execution", cost_usd="@INF@"), {"@INF@": "Infinity"}),
+        "NaN and Infinity are not JSON numbers",
+        False,
+    ),
+    Variant(
+        "result-status-list",
+        _json_file("result.json", _set(status=["completed"])),
+        "result.json: status: missing",
+        False,
+    ),
+    Variant(
+        "result-archive-list", _json_file("result.json", _set(archive=["saved"])), "archive: expected an object", False
+    ),
+    Variant(
+        "result-execution-string",
+        _json_file("result.json", _set(execution="completed")),
+        "execution: expected an object",
+        False,
+    ),
+    Variant(
+        "result-tool-calls-string",
+        _json_file("result.json", _set(tool_calls="many")),
+        "tool_calls: expected a number or null",
+        False,
+    ),
+    Variant(
+        "run-options-list",
+        _json_file("run.json", _set(options=["codex"]), in_sample=False),
+        "options: expected an object",
+        False,
+    ),
+    Variant(
+        "run-tasks-list",
+        _json_file("run.json", _set(tasks=["Assemble."]), in_sample=False),
+        "tasks: expected an object",
+        False,
+    ),
 ]

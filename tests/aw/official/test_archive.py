@@ -69,8 +69,17 @@ def edit_jsonl(files, name, edit):
 
 def test_setup_archive_layout(setup):
     files = members(setup.path)
-    assert set(files) == {"manifest.json", "frames.jsonl", "frames.bin", "calls.jsonl", "events.jsonl", "world/model.xml",
-                          "world/meshes/part-0001.obj", "world/meshes/part-0002.obj", "world/meshes/part-0003.obj"}
+    assert set(files) == {
+        "manifest.json",
+        "frames.jsonl",
+        "frames.bin",
+        "calls.jsonl",
+        "events.jsonl",
+        "world/model.xml",
+        "world/meshes/part-0001.obj",
+        "world/meshes/part-0002.obj",
+        "world/meshes/part-0003.obj",
+    }
     manifest = json.loads(files["manifest.json"])
     assert manifest["hashes"] == {n: hashlib.sha256(d).hexdigest() for n, d in files.items() if n != "manifest.json"}
     assert manifest["lifecycle"] == "setup" and manifest["engine"] == "3.12.0" and manifest["stateSpec"] == 16383
@@ -155,7 +164,9 @@ def test_oversized_archives_refused(setup, tmp_path):
 
 def test_hash_inventory(setup, tmp_path):
     files = members(setup.path)
-    changed = rezip(setup.path, tmp_path / "a.zip", {**files, "world/model.xml": files["world/model.xml"] + b" "}, rehash=False)
+    changed = rezip(
+        setup.path, tmp_path / "a.zip", {**files, "world/model.xml": files["world/model.xml"] + b" "}, rehash=False
+    )
     with pytest.raises(HashInventoryError, match="world/model.xml.*SHA-256"):
         read_archive(changed)
     assert read_archive(changed, verify_hashes=False).manifest["id"] == setup.manifest["id"]
@@ -225,20 +236,36 @@ def _stray_member(files):
 
 
 def _bad_group(files):
-    return edit_jsonl(files, "frames.jsonl", lambda rows: rows[1].update(groups=[{"id": "g", "name": "g", "members": ["part-0001", "zzz"]}]))
+    return edit_jsonl(
+        files,
+        "frames.jsonl",
+        lambda rows: rows[1].update(groups=[{"id": "g", "name": "g", "members": ["part-0001", "zzz"]}]),
+    )
 
 
 def _mjb_declared_missing(files):
     return edit_manifest(files, model={"format": "mjb", "path": "model.mjb"})
 
 
-@pytest.mark.parametrize("damage,message", [
-    (_frames_bin_short, "frames.bin"), (_frames_bin_nan, "non-finite"), (_state_gap, "state indices"),
-    (_call_beyond_states, "state_index"), (_bad_timestamp, "ISO-8601"), (_event_kind_unknown, "kind request or complete"),
-    (_trace_outside_call, "trace range"), (_ended_without_end, "end is present"), (_unknown_manifest_key, "unknown keys"),
-    (_error_without_message, "error message"), (_setup_with_history, "setup"), (_stray_member, "notes.txt"),
-    (_bad_group, "group member"), (_mjb_declared_missing, "model.mjb"),
-])
+@pytest.mark.parametrize(
+    "damage,message",
+    [
+        (_frames_bin_short, "frames.bin"),
+        (_frames_bin_nan, "non-finite"),
+        (_state_gap, "state indices"),
+        (_call_beyond_states, "state_index"),
+        (_bad_timestamp, "ISO-8601"),
+        (_event_kind_unknown, "kind request or complete"),
+        (_trace_outside_call, "trace range"),
+        (_ended_without_end, "end is present"),
+        (_unknown_manifest_key, "unknown keys"),
+        (_error_without_message, "error message"),
+        (_setup_with_history, "setup"),
+        (_stray_member, "notes.txt"),
+        (_bad_group, "group member"),
+        (_mjb_declared_missing, "model.mjb"),
+    ],
+)
 def test_inconsistent_episodes(active, tmp_path, damage, message):
     out = rezip(active.path, tmp_path / "bad.zip", damage(members(active.path)))
     with pytest.raises(InconsistentEpisodeError, match=message) as info:
@@ -250,20 +277,27 @@ def _drop_events_of(call_id):
     return lambda rows: rows.__setitem__(slice(None), [r for r in rows if r["call_id"] != call_id])
 
 
-@pytest.mark.parametrize("edit", [
-    _drop_events_of("call-6"),  # the last call has none (cancelled at export)
-    lambda rows: rows.pop(),  # request only
-    lambda rows: rows.reverse(),  # complete before request, indices out of order
-    lambda rows: rows.append({**rows[0], "index": 99, "call_id": "call-77"}),  # a call the archive lacks
-])
+@pytest.mark.parametrize(
+    "edit",
+    [
+        _drop_events_of("call-6"),  # the last call has none (cancelled at export)
+        lambda rows: rows.pop(),  # request only
+        lambda rows: rows.reverse(),  # complete before request, indices out of order
+        lambda rows: rows.append({**rows[0], "index": 99, "call_id": "call-77"}),  # a call the archive lacks
+    ],
+)
 def test_events_are_checked_as_the_official_scorer_checks_them(active, tmp_path, edit):
     """assembly-world-bench ``episode_io.py`` applies only the episode schema to events, so
     no sequence of schema-valid events makes an episode unreadable."""
     out = rezip(active.path, tmp_path / "events.zip", edit_jsonl(members(active.path), "events.jsonl", edit))
     assert read_archive(out).final_state().index == 3
+
+
 def test_the_json_members_are_bounded_before_inflating(active):
     """The parsed size is bounded by the JSON text (zip headers), not only by each compressed member."""
     text = sum(len(d) for n, d in members(active.path).items() if n.endswith((".json", ".jsonl")))
     assert read_archive(active.path, limits=ArchiveLimits(max_json_bytes=text)).calls
-    with pytest.raises(ArchiveTooLargeError, match=f"the JSON members inflate to {text} bytes, over the limit of {text - 1}"):
+    with pytest.raises(
+        ArchiveTooLargeError, match=f"the JSON members inflate to {text} bytes, over the limit of {text - 1}"
+    ):
         read_archive(active.path, limits=ArchiveLimits(max_json_bytes=text - 1))

@@ -21,8 +21,21 @@ def test_convert_then_export(tmp_path, capsys):
     pkg = OfficialPackage(pkg_root, strict=False)
     run = write_run_log(tmp_path / "logs", pkg, {("partnet-none", "743"): FINAL}, "run-1")
     original = read_archive(run / "blocks" / "partnet-none" / "samples" / "743" / "final.episode.zip")
-    assert main(["official", str(pkg_root), "--episodes", str(tmp_path / "logs"), "--out", str(tmp_path / "suite"),
-                 "--runs", str(tmp_path / "runs")]) == 0
+    assert (
+        main(
+            [
+                "official",
+                str(pkg_root),
+                "--episodes",
+                str(tmp_path / "logs"),
+                "--out",
+                str(tmp_path / "suite"),
+                "--runs",
+                str(tmp_path / "runs"),
+            ]
+        )
+        == 0
+    )
     assert "wrote 1 task to " in capsys.readouterr().out
     run = tmp_path / "runs" / "fixture-m" / "partnet-none--743"
     out = tmp_path / "final.episode.zip"
@@ -30,16 +43,26 @@ def test_convert_then_export(tmp_path, capsys):
     assert "3 states, final state 3" in capsys.readouterr().out
     poses, index = pkg.final_state("partnet-none", "743", out)
     assert index == 3 and np.array_equal(poses, FINAL)
-    assert [f.integration.tolist() for f in read_archive(out).states] == [f.integration.tolist() for f in original.states]
+    assert [f.integration.tolist() for f in read_archive(out).states] == [
+        f.integration.tolist() for f in original.states
+    ]
     assert main(["official-export", str(run), "--suite", str(tmp_path / "suite"), "--out", str(out)]) == 2
     assert "already exists" in capsys.readouterr().err
-    assert main(["official-export", str(run), "--suite", str(tmp_path / "suite"), "--out", str(out), "--overwrite"]) == 0
+    assert (
+        main(["official-export", str(run), "--suite", str(tmp_path / "suite"), "--out", str(out), "--overwrite"]) == 0
+    )
 
 
 def test_export_a_native_run(tmp_path, capsys):
     ids = ["p01", "p02"]
-    task = Task(task_id="native", source="custom", dataset="test", object_id="native", prompt=task_prompt("none"),
-                parts=[TaskPart(id=i, mesh=f"parts/{i}.obj") for i in ids])
+    task = Task(
+        task_id="native",
+        source="custom",
+        dataset="test",
+        object_id="native",
+        prompt=task_prompt("none"),
+        parts=[TaskPart(id=i, mesh=f"parts/{i}.obj") for i in ids],
+    )
     meshes = [trimesh.creation.box([0.4, 0.2, 0.1]), trimesh.creation.box([0.1, 0.1, 0.3])]
     task_dir = tmp_path / "suite" / "tasks" / "native"
     (task_dir / "parts").mkdir(parents=True)
@@ -63,23 +86,42 @@ def test_export_a_native_run(tmp_path, capsys):
     out = tmp_path / "native.episode.zip"
     assert main(["official-export", str(tmp_path / "run"), "--suite", str(tmp_path / "suite"), "--out", str(out)]) == 0
     arc = read_archive(out)
-    assert [c["name"] for c in arc.calls] == ["start_episode", "set_object_pose", "get_scene", "translate_objects",
-                                              "get_object", "group_objects", "list_objects", "get_state", "set_object_pose"]
+    assert [c["name"] for c in arc.calls] == [
+        "start_episode",
+        "set_object_pose",
+        "get_scene",
+        "translate_objects",
+        "get_object",
+        "group_objects",
+        "list_objects",
+        "get_state",
+        "set_object_pose",
+    ]
     assert [c["state_index"] for c in arc.calls] == [0, 1, 1, 2, 2, 3, 3, 3, 3] and arc.lifecycle == "active"
     by_name = {c["name"]: c for c in arc.calls[:-1]}
     assert arc.calls[1]["arguments"]["id"] == "part-0002" and arc.calls[3]["arguments"]["ids"] == ["part-0001"]
     assert by_name["start_episode"]["result"] == {"status": "active"}
     assert by_name["group_objects"]["result"] == {"status": "completed", "physics": "disabled", "index": 3}
-    assert by_name["get_scene"]["result"]["up"] == "Z" and by_name["list_objects"]["result"]["objects"] == arc.manifest["objects"]
+    assert (
+        by_name["get_scene"]["result"]["up"] == "Z"
+        and by_name["list_objects"]["result"]["objects"] == arc.manifest["objects"]
+    )
     state = by_name["get_state"]["result"]
     assert state["index"] == 3 and [o["id"] for o in state["objects"]] == ["part-0001", "part-0002"]
     assert by_name["get_object"]["result"]["id"] == "part-0002" and by_name["get_object"]["result"]["mass"] == 1.0
     assert arc.calls[-1]["status"] == "error" and "result" not in arc.calls[-1]
-    assert arc.manifest["objects"][1] == {"id": "part-0002", "name": "Part p02", "type": "rigid", "collisionEnabled": False}
+    assert arc.manifest["objects"][1] == {
+        "id": "part-0002",
+        "name": "Part p02",
+        "type": "rigid",
+        "collisionEnabled": False,
+    }
     final = read_final(tmp_path / "run" / "final.json").poses
     restored = read_part_episode(out)
     np.testing.assert_allclose(restored.final_poses(), [final[p] for p in ids], atol=1e-12)
-    np.testing.assert_allclose([o["position"] + o["quaternion"] for o in state["objects"]], restored.final_poses(), atol=1e-12)
+    np.testing.assert_allclose(
+        [o["position"] + o["quaternion"] for o in state["objects"]], restored.final_poses(), atol=1e-12
+    )
     header = read_trajectory(tmp_path / "run" / "trajectory.jsonl").header
     np.testing.assert_allclose(restored.poses[0], [header.initial_poses[p] for p in ids], atol=1e-12)
 
@@ -91,8 +133,19 @@ def test_one_line_errors(tmp_path, capsys):
     (tmp_path / "run").mkdir()
     (tmp_path / "run" / "trajectory.jsonl").write_text("")
     (tmp_path / "bad.episode.zip").write_bytes(b"PK not really")
-    assert main(["official-export", str(tmp_path / "run"), "--initial", str(tmp_path / "bad.episode.zip"),
-                 "--out", str(tmp_path / "x.episode.zip")]) == 1
+    assert (
+        main(
+            [
+                "official-export",
+                str(tmp_path / "run"),
+                "--initial",
+                str(tmp_path / "bad.episode.zip"),
+                "--out",
+                str(tmp_path / "x.episode.zip"),
+            ]
+        )
+        == 1
+    )
     assert len(capsys.readouterr().err.splitlines()) == 1
 
 
@@ -115,8 +168,21 @@ def _partly_downloaded(tmp_path):
 
 def test_a_partly_downloaded_package_converts_what_the_runs_need(tmp_path, capsys):
     pkg_root, _ = _partly_downloaded(tmp_path)
-    assert main(["official", str(pkg_root), "--episodes", str(tmp_path / "logs"), "--out", str(tmp_path / "suite"),
-                 "--runs", str(tmp_path / "runs")]) == 0
+    assert (
+        main(
+            [
+                "official",
+                str(pkg_root),
+                "--episodes",
+                str(tmp_path / "logs"),
+                "--out",
+                str(tmp_path / "suite"),
+                "--runs",
+                str(tmp_path / "runs"),
+            ]
+        )
+        == 0
+    )
     assert "wrote 1 task to" in capsys.readouterr().out
     assert (tmp_path / "runs" / "fixture-m" / "partnet-none--743" / "trajectory.jsonl").is_file()
 
@@ -127,8 +193,21 @@ def test_what_the_runs_need_and_the_package_lacks_is_named(tmp_path, capsys):
     pkg_root, pkg = _partly_downloaded(tmp_path)
     sample = pkg.sample("partnet-none", "743")
     sample.evaluation_path.unlink()
-    assert main(["official", str(pkg_root), "--episodes", str(tmp_path / "logs"), "--out", str(tmp_path / "suite"),
-                 "--runs", str(tmp_path / "runs")]) == 1
+    assert (
+        main(
+            [
+                "official",
+                str(pkg_root),
+                "--episodes",
+                str(tmp_path / "logs"),
+                "--out",
+                str(tmp_path / "suite"),
+                "--runs",
+                str(tmp_path / "runs"),
+            ]
+        )
+        == 1
+    )
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and "1 files the suite needs are not in the package" in err
     assert str(sample.evaluation_path.relative_to(pkg_root)) in err

@@ -17,7 +17,6 @@ from aw.official.export import export_run
 from aw.official.package import OfficialPackage
 from tests.aw.official.builders import FINAL, PART_IDS, write_package, write_run_log
 
-
 RUN = "2026-01-02T030405.123456+0000-1a2b3c4d"
 SYSTEM = "fixture-m"  # <agent>-<model> of the fixture run log's options
 
@@ -28,8 +27,16 @@ def converted(tmp_path_factory):
     of them from a timed-out execution), converted to a suite and runs."""
     root = tmp_path_factory.mktemp("conv")
     pkg = OfficialPackage(write_package(root / "benchmark"), strict=False)
-    run = write_run_log(root / "logs", pkg, {("partnet-none", "21905"): FINAL, ("partnet-final-image", "21905"): FINAL[::-1].copy(),
-                                             ("ikea-manualbook", "Chair/reidar"): FINAL}, RUN)
+    run = write_run_log(
+        root / "logs",
+        pkg,
+        {
+            ("partnet-none", "21905"): FINAL,
+            ("partnet-final-image", "21905"): FINAL[::-1].copy(),
+            ("ikea-manualbook", "Chair/reidar"): FINAL,
+        },
+        RUN,
+    )
     result = run / "blocks" / "partnet-final-image" / "samples" / "21905" / "result.json"
     value = json.loads(result.read_text())
     value.update(status="failed", execution={"status": "timeout"})
@@ -50,19 +57,33 @@ def test_suite_of_the_package(converted):
     assert np.array_equal(inputs.points, official.points) and inputs.divisor == official.divisor
     targets = read_targets(root / "suite" / "targets" / "ikea-manualbook--Chair--reidar.json")
     assert targets.eval_divisor == official.divisor
-    assert initial_archive_path(root / "suite", "partnet-none--21905").read_bytes() == pkg.sample("partnet-none", "21905").initial_path.read_bytes()
+    assert (
+        initial_archive_path(root / "suite", "partnet-none--21905").read_bytes()
+        == pkg.sample("partnet-none", "21905").initial_path.read_bytes()
+    )
     assert not initial_archive_path(root / "suite", "partnet-none--743").exists()
 
 
 def test_runs_of_the_archives(converted):
     root, _, _, runs = converted
     system = SYSTEM
-    assert sorted(p.name for p in runs) == ["ikea-manualbook--Chair--reidar", "partnet-final-image--21905", "partnet-none--21905"]
+    assert sorted(p.name for p in runs) == [
+        "ikea-manualbook--Chair--reidar",
+        "partnet-final-image--21905",
+        "partnet-none--21905",
+    ]
     run = root / "runs" / system / "partnet-final-image--21905"
     traj = read_trajectory(run / "trajectory.jsonl")
     assert traj.header.started_at == "2026-01-02T03:04:07.178Z" and traj.header.part_ids == PART_IDS
-    assert [c.tool for c in traj.calls] == ["start_episode", "get_state", "set_object_pose", "set_object_pose",
-                                            "set_object_pose", "translate_objects", "list_objects"]
+    assert [c.tool for c in traj.calls] == [
+        "start_episode",
+        "get_state",
+        "set_object_pose",
+        "set_object_pose",
+        "set_object_pose",
+        "translate_objects",
+        "list_objects",
+    ]
     assert [c.t for c in traj.calls] == [0.0, 1.5, 3.0, 4.5, 6.0, 7.5, 9.0]
     assert not traj.calls[5].ok and traj.calls[5].error == "Unknown object: nope"
     assert traj.end.reason == "finished"  # an exported official episode is a finished one, not an error
@@ -77,14 +98,19 @@ def test_round_trip_keeps_states(converted, tmp_path):
     """official -> project -> official: the same state indices and vectors, so the same scores."""
     root, pkg, _, _ = converted
     system = SYSTEM
-    original = read_archive(root / "logs" / RUN / "blocks" / "ikea-manualbook" / "samples" / "Chair--reidar" / "final.episode.zip")
+    original = read_archive(
+        root / "logs" / RUN / "blocks" / "ikea-manualbook" / "samples" / "Chair--reidar" / "final.episode.zip"
+    )
     initial = pkg.initial_archive("ikea-manualbook", "Chair/reidar")
-    again = export_run(root / "runs" / system / "ikea-manualbook--Chair--reidar", initial, tmp_path / "again.episode.zip")
+    again = export_run(
+        root / "runs" / system / "ikea-manualbook--Chair--reidar", initial, tmp_path / "again.episode.zip"
+    )
     assert [f.index for f in again.states] == [f.index for f in original.states] == [1, 2, 3]
     for a, b in zip([again.initial, *again.states], [original.initial, *original.states]):
         assert np.array_equal(a.integration, b.integration)
-    assert [(c["name"], c["before_index"], c["state_index"], c["status"], c["timestamp"]) for c in again.calls] == \
-           [(c["name"], c["before_index"], c["state_index"], c["status"], c["timestamp"]) for c in original.calls]
+    assert [(c["name"], c["before_index"], c["state_index"], c["status"], c["timestamp"]) for c in again.calls] == [
+        (c["name"], c["before_index"], c["state_index"], c["status"], c["timestamp"]) for c in original.calls
+    ]
     assert again.manifest["id"] == original.manifest["id"] and again.lifecycle == "active"
     poses, index = pkg.final_state("ikea-manualbook", "Chair/reidar", again.path)
     assert index == 3 and np.array_equal(poses, read_part_episode(original, initial).final_poses())
@@ -104,10 +130,18 @@ def test_resumed_chain_counts_its_latest_attempt(tmp_path):
     """A resumed run replaces its source run's attempt, even a failed one replacing a saved
     export (which is then not converted), and both stay one system, named from the chain's first run's options."""
     pkg = OfficialPackage(write_package(tmp_path / "benchmark", {"partnet-none": ["21905", "743"]}), strict=False)
-    first = write_run_log(tmp_path / "logs", pkg, {("partnet-none", "21905"): FINAL, ("partnet-none", "743"): FINAL}, "run-a")
+    first = write_run_log(
+        tmp_path / "logs", pkg, {("partnet-none", "21905"): FINAL, ("partnet-none", "743"): FINAL}, "run-a"
+    )
     moved = FINAL.copy()
     moved[0, :3] += 0.25
-    write_run_log(tmp_path / "logs", pkg, {("partnet-none", "21905"): moved, ("partnet-none", "743"): None}, "run-b", source_run=first)
+    write_run_log(
+        tmp_path / "logs",
+        pkg,
+        {("partnet-none", "21905"): moved, ("partnet-none", "743"): None},
+        "run-b",
+        source_run=first,
+    )
     skipped = []
     _, runs = convert(pkg.root, tmp_path / "logs", tmp_path / "suite", tmp_path / "runs", skipped=skipped)
     assert [p.relative_to(tmp_path / "runs").as_posix() for p in runs] == [f"{SYSTEM}/partnet-none--21905"]

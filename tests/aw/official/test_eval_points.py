@@ -22,16 +22,24 @@ def test_round_trip(tmp_path):
     assert back.group_labels().tolist() == [0, 1, 0]
 
 
-@pytest.mark.parametrize("change,message", [
-    ({"points": np.zeros((3, 999, 3))}, "points"),
-    ({"part_ids": np.array(["1", "0", "2"])}, "sorted"),
-    ({"scale_divisor": np.float64(-1)}, "positive"),
-    ({"target_poses": np.zeros((3, 7))}, "zero quaternion"),
-    ({"equivalence_groups": np.array([0.5, 1, 2])}, "integer"),
-])
+@pytest.mark.parametrize(
+    "change,message",
+    [
+        ({"points": np.zeros((3, 999, 3))}, "points"),
+        ({"part_ids": np.array(["1", "0", "2"])}, "sorted"),
+        ({"scale_divisor": np.float64(-1)}, "positive"),
+        ({"target_poses": np.zeros((3, 7))}, "zero quaternion"),
+        ({"equivalence_groups": np.array([0.5, 1, 2])}, "integer"),
+    ],
+)
 def test_refusals(tmp_path, change, message):
-    arrays = {"part_ids": np.array(["0", "1", "2"]), "points": evaluation_points(), "target_poses": FINAL,
-              "scale_divisor": np.float64(0.7), "equivalence_groups": np.array([0, 1, 2])}
+    arrays = {
+        "part_ids": np.array(["0", "1", "2"]),
+        "points": evaluation_points(),
+        "target_poses": FINAL,
+        "scale_divisor": np.float64(0.7),
+        "equivalence_groups": np.array([0, 1, 2]),
+    }
     np.savez(tmp_path / "t.npz", **{**arrays, **change})
     with pytest.raises(FormatError, match=message) as info:
         read_eval_inputs(tmp_path / "t.npz")

@@ -93,8 +93,12 @@ def test_a_conversion_that_fails_late_leaves_no_suite_and_no_runs(package, tmp_p
     run = write_run_log(tmp_path / "logs", pkg, {("partnet-none", "21905"): FINAL, SAMPLE: FINAL}, "run-1")
     next(v for v in ALL if v.name == "corrupt-deflate").damage(run, tmp_path)
     suite, runs = tmp_path / "suite", tmp_path / "runs"
-    assert prepare(["official", str(pkg.root), "--episodes", str(tmp_path / "logs"), "--out", str(suite),
-                    "--runs", str(runs)]) == 1
+    assert (
+        prepare(
+            ["official", str(pkg.root), "--episodes", str(tmp_path / "logs"), "--out", str(suite), "--runs", str(runs)]
+        )
+        == 1
+    )
     assert "cannot be inflated" in capsys.readouterr().err
     assert [p.name for p in suite.iterdir()] == [] and [p.name for p in runs.iterdir()] == []
 
@@ -112,9 +116,23 @@ def test_a_full_disk_while_writing_the_evaluation_is_one_line_and_leaves_nothing
         resource.setrlimit(resource.RLIMIT_FSIZE, (600, 600))
 
     out = tmp_path / "out"
-    proc = subprocess.run([sys.executable, "-m", "aw_eval.cli", str(package.root), str(pristine.parent), "--out", str(out),
-                           "--jobs", "1"], preexec_fn=limit, capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path), "PYTHONDONTWRITEBYTECODE": "1"})
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "aw_eval.cli",
+            str(package.root),
+            str(pristine.parent),
+            "--out",
+            str(out),
+            "--jobs",
+            "1",
+        ],
+        preexec_fn=limit,
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path), "PYTHONDONTWRITEBYTECODE": "1"},
+    )
     # (no bytecode written: under the limit CPython would install .pyc files cut short)
     assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
     assert _one_line_error(proc.stderr, "aw-score").endswith("metrics.jsonl: File too large")

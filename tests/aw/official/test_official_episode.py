@@ -8,7 +8,13 @@ import numpy as np
 import pytest
 
 from aw.official.archive import EpisodeArchive, Frame, write_archive
-from aw.official.episode import catalogue_part_ids, check_continuation, free_body_rotations, load_model, read_part_episode
+from aw.official.episode import (
+    catalogue_part_ids,
+    check_continuation,
+    free_body_rotations,
+    load_model,
+    read_part_episode,
+)
 from aw.official.errors import EpisodeMismatchError, WorldModelError
 from tests.aw.official.builders import FINAL, INITIAL, PART_IDS, write_active, write_setup
 
@@ -23,7 +29,9 @@ def to_mjb(ep: EpisodeArchive, path) -> EpisodeArchive:
     manifest = dict(copy.deepcopy(ep.manifest), model={"format": "mjb", "path": "model.mjb"})
     files = {n: d for n, d in ep.files.items() if not n.startswith("world/")}
     files["world/model.mjb"] = buffer.tobytes()
-    return write_archive(EpisodeArchive(path, manifest, files, ep.initial, ep.states, ep.traces, ep.calls, ep.events), path)
+    return write_archive(
+        EpisodeArchive(path, manifest, files, ep.initial, ep.states, ep.traces, ep.calls, ep.events), path
+    )
 
 
 def test_poses_of_every_state(tmp_path):
@@ -41,8 +49,13 @@ def test_final_state_is_the_highest_state_not_the_last_row(tmp_path):
     setup = write_setup(tmp_path / "s.episode.zip")
     final = write_active(setup, tmp_path / "f.episode.zip")
     last = final.calls[-2]  # the failed call: give it one more trace holding the initial state
-    final.traces.append(Frame("trace", dict(final.traces[-1].record, index=len(final.traces), call_id=last["id"]),
-                              final.initial.integration.copy()))
+    final.traces.append(
+        Frame(
+            "trace",
+            dict(final.traces[-1].record, index=len(final.traces), call_id=last["id"]),
+            final.initial.integration.copy(),
+        )
+    )
     last["trace_end"] = len(final.traces)
     final.calls[-1].update(trace_start=len(final.traces), trace_end=len(final.traces))
     rewritten = write_archive(final, tmp_path / "g.episode.zip")
@@ -112,7 +125,7 @@ def test_free_body_rotations_are_mujocos_xmat(tmp_path):
         quats /= np.linalg.norm(quats, axis=1, keepdims=True)
         quats *= [[1.0], [1 + 3e-16 * (trial % 5 - 2)], [2.5]]
         for k, q in enumerate(quats):
-            data.qpos[7 * k:7 * k + 7] = [0.1 * k, 0.0, 0.2, *q]
+            data.qpos[7 * k : 7 * k + 7] = [0.1 * k, 0.0, 0.2, *q]
         mujoco.mj_forward(model, data)
         want = data.xmat[1:4].reshape(3, 3, 3)
         assert np.array_equal(free_body_rotations(quats), want)

@@ -19,8 +19,13 @@ SOURCES = ("partnet", "ikea-manualbook", "assemblybench-manualbook", "fantastic-
 def _benchmark():
     ids = {b: [f"{k:04d}" for k in range(20)] for b in BLOCKS}
     ids["ikea-manualbook"] = [f"Chair/c{k}" for k in range(20)]
-    return {"blocks": [{"name": b, "source": "partnet" if b.startswith("partnet") else b, "samples": {s: {} for s in ids[b]}}
-                       for b in BLOCKS], "sources": list(SOURCES)}
+    return {
+        "blocks": [
+            {"name": b, "source": "partnet" if b.startswith("partnet") else b, "samples": {s: {} for s in ids[b]}}
+            for b in BLOCKS
+        ],
+        "sources": list(SOURCES),
+    }
 
 
 def _rows(benchmark):
@@ -29,9 +34,16 @@ def _rows(benchmark):
     rows = []
     for i, block in enumerate(benchmark["blocks"]):
         for k, sid in enumerate(block["samples"]):
-            base = {"block": block["name"], "sample_id": sid, "run": "/logs/r", "duration_seconds": 10.0 + k,
-                    "usage": {"input_tokens": 100 * k, "output_tokens": None, "cached": 3}, "cost_usd": None,
-                    "tool_calls": k if k % 2 else None, "attempt_finished": True}
+            base = {
+                "block": block["name"],
+                "sample_id": sid,
+                "run": "/logs/r",
+                "duration_seconds": 10.0 + k,
+                "usage": {"input_tokens": 100 * k, "output_tokens": None, "cached": 3},
+                "cost_usd": None,
+                "tool_calls": k if k % 2 else None,
+                "attempt_finished": True,
+            }
             if block["name"] == "ikea-manualbook" and k % 5 == 0:
                 rows.append({**base, "status": "error", "error": "ValueError: x", "SCD": None, "PA": 0.0, "SR": 0})
             else:
@@ -46,9 +58,14 @@ def _mean(xs):
 def _expected_block(rows, name):
     mine = [r for r in rows if r["block"] == name]
     scored = [r for r in mine if r["status"] == "scored"]
-    return {"attempted": len(mine), "expected": 20, "scored": len(scored),
-            "SCD": _mean([r["SCD"] for r in scored]) if scored else None,
-            "PA": _mean([r["PA"] for r in mine]), "SR": _mean([r["SR"] for r in mine])}
+    return {
+        "attempted": len(mine),
+        "expected": 20,
+        "scored": len(scored),
+        "SCD": _mean([r["SCD"] for r in scored]) if scored else None,
+        "PA": _mean([r["PA"] for r in mine]),
+        "SR": _mean([r["SR"] for r in mine]),
+    }
 
 
 def _close(a, b):
@@ -67,18 +84,37 @@ def test_complete_run_gives_source_and_overall_means():
     assert _close(got["blocks"], blocks)
     # IKEA: 4 error rows count 0 in PA and SR, and are left out of SCD
     assert got["blocks"]["ikea-manualbook"]["scored"] == 16
-    sources = {s: {m: _mean([blocks[b][m] for b in BLOCKS if (b.startswith("partnet") and s == "partnet") or b == s])
-                   for m in ("SCD", "PA", "SR")} for s in SOURCES}
+    sources = {
+        s: {
+            m: _mean([blocks[b][m] for b in BLOCKS if (b.startswith("partnet") and s == "partnet") or b == s])
+            for m in ("SCD", "PA", "SR")
+        }
+        for s in SOURCES
+    }
     assert _close(got["sources"], sources)
     overall = {m: _mean([sources[s][m] for s in SOURCES]) for m in ("SCD", "PA", "SR")}
     assert _close(got["official_overall"], overall)
     # the two PartNet blocks share one source: overall SCD weighs each source, not each block
     assert got["official_overall"]["SCD"] != pytest.approx(_mean([blocks[b]["SCD"] for b in BLOCKS]))
     assert (got["status"], got["attempted"], got["expected"], got["scored"]) == ("complete", 100, 100, 96)
-    assert list(got) == ["protocol", "status", "attempted", "expected", "scored", "blocks", "official_overall",
-                         "resource_accounting", "sources", "resources", "token_usage"]
+    assert list(got) == [
+        "protocol",
+        "status",
+        "attempted",
+        "expected",
+        "scored",
+        "blocks",
+        "official_overall",
+        "resource_accounting",
+        "sources",
+        "resources",
+        "token_usage",
+    ]
     assert got["resources"]["cost_usd"] == {"reported_samples": 0, "mean": None}
-    assert got["resources"]["tool_calls"] == {"reported_samples": 50, "mean": _mean([k for k in range(20) if k % 2] * 5)}
+    assert got["resources"]["tool_calls"] == {
+        "reported_samples": 50,
+        "mean": _mean([k for k in range(20) if k % 2] * 5),
+    }
     assert got["resources"]["duration_seconds"]["mean"] == pytest.approx(10 + 9.5)
     # only *_tokens keys that some row reports
     assert got["token_usage"] == {"input_tokens": {"reported_samples": 100, "mean": pytest.approx(950.0)}}
@@ -88,8 +124,11 @@ def test_official_equal_source_weights_example():
     """The official test's numbers: block i scores SCD i, so the overall SCD is
     mean(0.5, 2, 3, 4) (the PartNet source averages blocks 0 and 1)."""
     bench = _benchmark()
-    rows = [{"block": b["name"], "sample_id": s, "status": "scored", "SCD": float(i), "PA": i / 4, "SR": i % 2}
-            for i, b in enumerate(bench["blocks"]) for s in b["samples"]]
+    rows = [
+        {"block": b["name"], "sample_id": s, "status": "scored", "SCD": float(i), "PA": i / 4, "SR": i % 2}
+        for i, b in enumerate(bench["blocks"])
+        for s in b["samples"]
+    ]
     assert summarize(rows, bench)["official_overall"]["SCD"] == _mean([0.5, 2, 3, 4])
     assert summarize(rows[:20], bench)["official_overall"] is None
 

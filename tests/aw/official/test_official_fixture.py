@@ -25,19 +25,56 @@ def official_style_episode(mjb: bool) -> bytes:
     spec = int(mujoco.mjtState.mjSTATE_INTEGRATION)
     state = np.empty(mujoco.mj_stateSize(model, spec))
     mujoco.mj_getState(model, mujoco.MjData(model), state, spec)
-    frame = {"kind": "initial", "index": 0, "groups": [], "groupCounter": 0, "camera": {"position": [3, -4, 3], "target": [0, 0, 0]}}
-    files = {"world/model.xml": xml, "frames.bin": state.astype("<f8").tobytes(), "frames.jsonl": json.dumps(frame).encode(),
-             "calls.jsonl": b"", "events.jsonl": b""}
-    physics = {"enabled": False, "detection": False, "response": False, "gravity": [0, 0, -9.81], "strategy": "fixed",
-               "duration": 0.25, "maxDuration": 5, "quietDuration": 0.1, "linearThreshold": 0.01, "angularThreshold": 0.01}
-    manifest = {"format": "3dwebagent-episode", "version": 1, "id": "fixture", "name": "Synthetic fixture",
-                "contract": "3dwebagent-runtime-1", "engine": "3.12.0", "lifecycle": "setup", "originTime": 0,
-                "units": "normalized", "task": "Assemble.", "requiredCapabilities": ["state"],
-                "producer": {"backend": "native", "build": "0" * 64, "engine": "3.12.0", "implementation": "synthetic-fixture",
-                             "language": "python"},
-                "stateSpec": spec, "stateSize": len(state),
-                "objects": [{"id": "part-0001", "name": "Part p", "type": "rigid", "collisionEnabled": False}],
-                "runtime": {"enabledTools": [], "physics": physics}}
+    frame = {
+        "kind": "initial",
+        "index": 0,
+        "groups": [],
+        "groupCounter": 0,
+        "camera": {"position": [3, -4, 3], "target": [0, 0, 0]},
+    }
+    files = {
+        "world/model.xml": xml,
+        "frames.bin": state.astype("<f8").tobytes(),
+        "frames.jsonl": json.dumps(frame).encode(),
+        "calls.jsonl": b"",
+        "events.jsonl": b"",
+    }
+    physics = {
+        "enabled": False,
+        "detection": False,
+        "response": False,
+        "gravity": [0, 0, -9.81],
+        "strategy": "fixed",
+        "duration": 0.25,
+        "maxDuration": 5,
+        "quietDuration": 0.1,
+        "linearThreshold": 0.01,
+        "angularThreshold": 0.01,
+    }
+    manifest = {
+        "format": "3dwebagent-episode",
+        "version": 1,
+        "id": "fixture",
+        "name": "Synthetic fixture",
+        "contract": "3dwebagent-runtime-1",
+        "engine": "3.12.0",
+        "lifecycle": "setup",
+        "originTime": 0,
+        "units": "normalized",
+        "task": "Assemble.",
+        "requiredCapabilities": ["state"],
+        "producer": {
+            "backend": "native",
+            "build": "0" * 64,
+            "engine": "3.12.0",
+            "implementation": "synthetic-fixture",
+            "language": "python",
+        },
+        "stateSpec": spec,
+        "stateSize": len(state),
+        "objects": [{"id": "part-0001", "name": "Part p", "type": "rigid", "collisionEnabled": False}],
+        "runtime": {"enabledTools": [], "physics": physics},
+    }
     if mjb:
         buffer = np.empty(mujoco.mj_sizeModel(model), dtype=np.uint8)
         mujoco.mj_saveModel(model, None, buffer)

@@ -24,22 +24,45 @@ BLOCKS = ("partnet-none", "partnet-final-image")
 
 
 def _inputs(selection):
-    return {(b, s): {"episode": f"{s}.episode.zip", "episode_id": f"awa-{s}", "sha256": "0" * 64, "parts": 2,
-                     "initial_path": f"/pkg/{b}/{s}.episode.zip", "initial_calls": 0, "identity": {"dataset": b},
-                     "reference": None}
-            for b, ids in selection.items() for s in ids}
+    return {
+        (b, s): {
+            "episode": f"{s}.episode.zip",
+            "episode_id": f"awa-{s}",
+            "sha256": "0" * 64,
+            "parts": 2,
+            "initial_path": f"/pkg/{b}/{s}.episode.zip",
+            "initial_calls": 0,
+            "identity": {"dataset": b},
+            "reference": None,
+        }
+        for b, ids in selection.items()
+        for s in ids
+    }
 
 
 def _run(logs, selection, source=None, run_id=None):
-    return create_run(logs, selection, _inputs(selection), {b: f"Assemble ({b})." for b in selection},
-                      {b: "none" for b in selection}, {"agent": "codex", "model": "m"}, protocol_text="Rules.",
-                      source_run=source.path if source else None, run_id=run_id)
+    return create_run(
+        logs,
+        selection,
+        _inputs(selection),
+        {b: f"Assemble ({b})." for b in selection},
+        {b: "none" for b in selection},
+        {"agent": "codex", "model": "m"},
+        protocol_text="Rules.",
+        source_run=source.path if source else None,
+        run_id=run_id,
+    )
 
 
 def _finish(run, block, sid, status="completed", archive=b"zip-bytes"):
-    write_result(run, block, sid, {"status": status, "execution": {"status": status}},
-                 conversation=[{"type": "tool_call", "name": "get_scene"}, {"type": "tool_result"}],
-                 final_archive=archive)
+    write_result(
+        run,
+        block,
+        sid,
+        {"status": status, "execution": {"status": status}},
+        conversation=[{"type": "tool_call", "name": "get_scene"}, {"type": "tool_result"}],
+        final_archive=archive,
+    )
 
 
 def test_sample_slug_is_the_official_folder_name():
@@ -55,7 +78,12 @@ def test_create_run_writes_the_official_layout(tmp_path):
     run = _run(tmp_path / "logs", {BLOCKS[0]: ["21905", "Chair/reidar"]})
     assert re.fullmatch(r"\d{4}-\d\d-\d\dT\d{6}\.\d{6}\+0000-[0-9a-f]{8}", run.run_id)
     meta = json.loads((run.path / "run.json").read_text())
-    assert (meta["version"], meta["kind"], meta["status"], meta["source_run"]) == (1, "assembly-world-bench", "running", None)
+    assert (meta["version"], meta["kind"], meta["status"], meta["source_run"]) == (
+        1,
+        "assembly-world-bench",
+        "running",
+        None,
+    )
     assert meta["selection"] == {BLOCKS[0]: ["21905", "Chair/reidar"]}
     assert (run.path / "run.json").read_text().endswith("}\n")
     sample = run.path / "blocks" / BLOCKS[0] / "samples" / "Chair--reidar"
@@ -70,7 +98,9 @@ def test_create_run_writes_the_official_layout(tmp_path):
     assert result["archive"]["status"] == "saved" and result["tool_calls"] == 1
     assert count_tool_calls(sample / "conversation.jsonl") == 1
     (attempt,) = [a for a in read_attempts(read_run(run.path)) if a.sample_id == "Chair/reidar"]
-    assert attempt.archive_saved and attempt.final_archive.read_bytes() == b"zip-bytes" and attempt.slug == "Chair--reidar"
+    assert (
+        attempt.archive_saved and attempt.final_archive.read_bytes() == b"zip-bytes" and attempt.slug == "Chair--reidar"
+    )
 
 
 def test_same_sample_id_in_two_blocks_stays_two_samples(tmp_path):

@@ -32,7 +32,9 @@ def _project_runs(package, tmp_path):
         final = FINAL.copy()
         final[1, :3] += [0.0, 0.01 * k, 0.0]
         arc = write_active(package.initial_archive(block, sid), tmp_path / f"{k}.episode.zip", final)
-        ep = read_part_episode(arc.path, package.initial_archive(block, sid), package.evaluation_inputs(block, sid).part_ids)
+        ep = read_part_episode(
+            arc.path, package.initial_archive(block, sid), package.evaluation_inputs(block, sid).part_ids
+        )
         write_episode_run(ep, runs, "mysystem", task_id_for_sample(block, sid))
         finals[(block, sid)] = ep
     return runs / "mysystem", finals
@@ -43,7 +45,11 @@ def test_project_runs_become_an_official_run_log_with_the_same_states(package, t
     run = export_runs(system_dir, package, tmp_path / "logs", options={"agent": "aw-run", "model": "m"})
     meta = json.loads((run.path / "run.json").read_text())
     assert meta["status"] == "completed" and meta["kind"] == "assembly-world-bench"
-    assert meta["selection"] == {"partnet-none": ["21905"], "partnet-final-image": ["21905"], "ikea-manualbook": ["Chair/reidar"]}
+    assert meta["selection"] == {
+        "partnet-none": ["21905"],
+        "partnet-final-image": ["21905"],
+        "ikea-manualbook": ["Chair/reidar"],
+    }
     assert meta["tasks"]["ikea-manualbook"] == package.task_text("ikea-manualbook")
     package.check_run(read_run(run.path))
     chosen = select_attempts([run.path])
@@ -94,7 +100,9 @@ def test_conversion_never_replaces_a_live_recording(package, tmp_path):
 
     block, sid = "partnet-none", "21905"
     arc = write_active(package.initial_archive(block, sid), tmp_path / "a.episode.zip", FINAL.copy())
-    ep = read_part_episode(arc.path, package.initial_archive(block, sid), package.evaluation_inputs(block, sid).part_ids)
+    ep = read_part_episode(
+        arc.path, package.initial_archive(block, sid), package.evaluation_inputs(block, sid).part_ids
+    )
     task_id = task_id_for_sample(block, sid)
     run_dir = tmp_path / "runs" / "mysystem" / task_id
     with RunDirLock(run_dir, command="aw-serve live"):

@@ -28,8 +28,13 @@ def copy_package(src, dst):
 def test_blocks_samples_and_inputs(package_root):
     pkg = OfficialPackage(package_root, strict=False)
     assert list(pkg.blocks) == ["partnet-none", "partnet-final-image", "ikea-manualbook"]
-    assert pkg.samples() == [("partnet-none", "21905"), ("partnet-none", "743"), ("partnet-final-image", "21905"),
-                             ("partnet-final-image", "743"), ("ikea-manualbook", "Chair/reidar")]
+    assert pkg.samples() == [
+        ("partnet-none", "21905"),
+        ("partnet-none", "743"),
+        ("partnet-final-image", "21905"),
+        ("partnet-final-image", "743"),
+        ("ikea-manualbook", "Chair/reidar"),
+    ]
     s = pkg.sample("ikea-manualbook", "Chair/reidar")
     assert s.slug == "Chair--reidar" and s.evaluation_path.parent.name == "Chair--reidar"
     assert [p.name for p in s.pages] == ["1.png", "2.png"] and pkg.sample("partnet-none", "743").reference is None
@@ -56,7 +61,11 @@ def test_evaluation_round_trip(package_root, tmp_path):
     inputs = pkg.evaluation_inputs("partnet-none", "743")
     write_evaluation(tmp_path / "evaluation.json", inputs)
     again = read_evaluation(tmp_path / "evaluation.json", sample_id="743", parts=3)
-    assert np.array_equal(again.points, inputs.points) and again.key == inputs.key and again.provenance == inputs.provenance
+    assert (
+        np.array_equal(again.points, inputs.points)
+        and again.key == inputs.key
+        and again.provenance == inputs.provenance
+    )
     assert (tmp_path / "evaluation.json").read_text().endswith("}\n")
 
 
@@ -66,17 +75,20 @@ def _edit(path, change):
     path.write_text(json.dumps(value))
 
 
-@pytest.mark.parametrize("change,message", [
-    (lambda v: v["points"]["1"][0].__setitem__(0, float("inf")), "Infinity|non-finite"),
-    (lambda v: v["key"].update(sample_id="other"), "key.sample_id"),
-    (lambda v: v["key"].update(evaluation_protocol="assembly-evaluation-v2"), "evaluation_protocol"),
-    (lambda v: v["key"]["similarity"].update(threshold=0.001), "threshold"),
-    (lambda v: v["equivalence"].update(groups=[["0", "1"]]), "partition"),
-    (lambda v: v.update(scale_divisor=0), "scale_divisor"),
-    (lambda v: v.update(part_ids=["1", "0", "2"]), "part_ids"),
-    (lambda v: v["points"].update({"2": [[0, 0, 0]] * 999}), "1000"),
-    (lambda v: v["gt_poses"].update({"2": [0, 0, 0, 0, 0, 0, 0]}), "zero"),
-])
+@pytest.mark.parametrize(
+    "change,message",
+    [
+        (lambda v: v["points"]["1"][0].__setitem__(0, float("inf")), "Infinity|non-finite"),
+        (lambda v: v["key"].update(sample_id="other"), "key.sample_id"),
+        (lambda v: v["key"].update(evaluation_protocol="assembly-evaluation-v2"), "evaluation_protocol"),
+        (lambda v: v["key"]["similarity"].update(threshold=0.001), "threshold"),
+        (lambda v: v["equivalence"].update(groups=[["0", "1"]]), "partition"),
+        (lambda v: v.update(scale_divisor=0), "scale_divisor"),
+        (lambda v: v.update(part_ids=["1", "0", "2"]), "part_ids"),
+        (lambda v: v["points"].update({"2": [[0, 0, 0]] * 999}), "1000"),
+        (lambda v: v["gt_poses"].update({"2": [0, 0, 0, 0, 0, 0, 0]}), "zero"),
+    ],
+)
 def test_bad_evaluation_inputs(package_root, tmp_path, change, message):
     root = copy_package(package_root, tmp_path / "pkg")
     pkg = OfficialPackage(root, strict=False)
@@ -102,7 +114,9 @@ def test_bad_packages(package_root, tmp_path):
     (root / "partnet-none" / "task.txt").write_text("Another task.")
     with pytest.raises(PackageError, match="task text"):
         OfficialPackage(root, strict=False).configuration("partnet-none")
-    pages = root / "partnet-final-image/partnet-manualpa/prep-v1-s0-i0-fixture/cache/21905/reference/final-image/pages.json"
+    pages = (
+        root / "partnet-final-image/partnet-manualpa/prep-v1-s0-i0-fixture/cache/21905/reference/final-image/pages.json"
+    )
     _edit(pages, lambda v: v["pages"].reverse())
     with pytest.raises(PackageError, match="out of order"):
         OfficialPackage(root, strict=False).sample("partnet-final-image", "21905")

@@ -10,7 +10,17 @@ import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from aw.formats import PartTarget, SuiteEntry, SuiteManifest, Targets, Task, TaskPart, write_manifest, write_targets, write_task
+from aw.formats import (
+    PartTarget,
+    SuiteEntry,
+    SuiteManifest,
+    Targets,
+    Task,
+    TaskPart,
+    write_manifest,
+    write_targets,
+    write_task,
+)
 from aw.prepare.official_protocol import pose_of
 from aw.prompt import task_prompt
 from aw.sources.synthetic.builder import Builder
@@ -48,12 +58,32 @@ def make_fracture_suite(root: Path, objects=(("cylinder", 1), ("hex_prism", 2)))
         ids = ["fragment_a", "fragment_b"]
         for pid, m in zip(ids, baked):
             m.export(task_dir / "parts" / f"{pid}.obj")
-        write_task(task_dir, Task(task_id=task_id, source="fantastic_breaks", dataset="synthetic", category=category,
-                                  object_id=f"{category}_{seed}", condition="none", prompt=task_prompt("none"),
-                                  parts=[TaskPart(id=p, mesh=f"parts/{p}.obj") for p in ids]))
-        write_targets(root / "targets" / f"{task_id}.json",
-                      Targets(task_id=task_id, parts={p: PartTarget(pose=t.tolist()) for p, t in zip(ids, targets)}, scale=1.0))
-        entries.append(SuiteEntry(task_id=task_id, source="fantastic_breaks", condition="none", object_id=f"{category}_{seed}",
-                                  category=category, n_parts=2))
+        write_task(
+            task_dir,
+            Task(
+                task_id=task_id,
+                source="fantastic_breaks",
+                dataset="synthetic",
+                category=category,
+                object_id=f"{category}_{seed}",
+                condition="none",
+                prompt=task_prompt("none"),
+                parts=[TaskPart(id=p, mesh=f"parts/{p}.obj") for p in ids],
+            ),
+        )
+        write_targets(
+            root / "targets" / f"{task_id}.json",
+            Targets(task_id=task_id, parts={p: PartTarget(pose=t.tolist()) for p, t in zip(ids, targets)}, scale=1.0),
+        )
+        entries.append(
+            SuiteEntry(
+                task_id=task_id,
+                source="fantastic_breaks",
+                condition="none",
+                object_id=f"{category}_{seed}",
+                category=category,
+                n_parts=2,
+            )
+        )
     write_manifest(root, SuiteManifest(name="fractures", generator="tests/aw/refine/fracture_suite.py", tasks=entries))
     return root

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from fracture_suite import fragments
 from scipy.spatial.transform import Rotation
 
 from aw.formats import read_targets, read_task
@@ -16,7 +17,6 @@ from aw.refine.classical import _candidates, refine, segment_regions
 from aw.refine.plugins import resolve, run_refiner
 from aw.refine.runs import build_request
 from aw_eval.fracture import fracture_metrics_from_samples
-from fracture_suite import fragments
 
 
 def _task(suite, tid):
@@ -81,6 +81,8 @@ def test_more_than_two_fragments_fail_by_name(fracture_suite, tmp_path):
     request.meshes = request.meshes + [request.meshes[0]]
     request.mesh_paths = request.mesh_paths + [request.mesh_paths[0]]
     request.initial_poses = np.vstack([request.initial_poses, request.initial_poses[:1]])
-    with pytest.raises(RefinerError, match="refiner classical: ValueError: the classical refiner handles two-fragment "
-                                           "tasks, got 3 parts"):
+    with pytest.raises(
+        RefinerError,
+        match="refiner classical: ValueError: the classical refiner handles two-fragment tasks, got 3 parts",
+    ):
         run_refiner(resolve("classical"), request, tmp_path, 120)

@@ -30,17 +30,20 @@ def test_a_good_answer_comes_back_normalised():
     assert np.allclose(out[0, 3:], [1, 0, 0, 0]) and np.allclose(out[0, :3], [0.1, 0.2, 0.3])
 
 
-@pytest.mark.parametrize("poses, message", [
-    (identity_poses(1), "refiner r: returned 1 poses for 2 parts"),
-    (identity_poses(3), "refiner r: returned 3 poses for 2 parts"),
-    (np.zeros((2, 6)), "each pose needs 7 numbers"),
-    ([[np.nan, 0, 0, 1, 0, 0, 0], [0, 0, 0, 1, 0, 0, 0]], "non-finite pose for p0"),
-    ([[0, 0, 0, 1, 0, 0, 0], [0, 0, np.inf, 1, 0, 0, 0]], "non-finite pose for p1"),
-    ([[0, 0, 0, 0, 0, 0, 0], [0, 0, 0, 1, 0, 0, 0]], "zero quaternion for p0"),
-    ([[0, 0, 0, 1, 0, 0, 0], [0.01, 0, 0, 1, 0, 0, 0]], "moved the anchor p1"),
-    ([[0, 0, 0, 1, 0, 0, 0], [0, 0, 0, 0, 1, 0, 0]], "moved the anchor p1"),
-    ("nonsense", "refiner r: poses are not numbers"),
-])
+@pytest.mark.parametrize(
+    "poses, message",
+    [
+        (identity_poses(1), "refiner r: returned 1 poses for 2 parts"),
+        (identity_poses(3), "refiner r: returned 3 poses for 2 parts"),
+        (np.zeros((2, 6)), "each pose needs 7 numbers"),
+        ([[np.nan, 0, 0, 1, 0, 0, 0], [0, 0, 0, 1, 0, 0, 0]], "non-finite pose for p0"),
+        ([[0, 0, 0, 1, 0, 0, 0], [0, 0, np.inf, 1, 0, 0, 0]], "non-finite pose for p1"),
+        ([[0, 0, 0, 0, 0, 0, 0], [0, 0, 0, 1, 0, 0, 0]], "zero quaternion for p0"),
+        ([[0, 0, 0, 1, 0, 0, 0], [0.01, 0, 0, 1, 0, 0, 0]], "moved the anchor p1"),
+        ([[0, 0, 0, 1, 0, 0, 0], [0, 0, 0, 0, 1, 0, 0]], "moved the anchor p1"),
+        ("nonsense", "refiner r: poses are not numbers"),
+    ],
+)
 def test_bad_answers_are_named(poses, message):
     with pytest.raises(RefinerError, match=message.replace("(", r"\(")):
         check_poses("r", _request(), poses)

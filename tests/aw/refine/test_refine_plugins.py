@@ -49,13 +49,16 @@ def test_command_without_placeholders_gets_both_files_appended(request_, tmp_pat
     assert run_refiner(spec, _with(request_, behaviour="shift"), tmp_path, 60).shape == (2, 7)
 
 
-@pytest.mark.parametrize("behaviour, message", [
-    ("short", "refiner scripted_refiner.py: returned 1 poses for 2 parts (missing fragment_"),
-    ("nan", "refiner scripted_refiner.py: non-finite pose for fragment_"),
-    ("move_anchor", "refiner scripted_refiner.py: moved the anchor fragment_"),
-    ("fail", "refiner scripted_refiner.py: exited with code 3: scripted refiner: model weights not found"),
-    ("silent", "refiner scripted_refiner.py: wrote no result file refine-result.json"),
-])
+@pytest.mark.parametrize(
+    "behaviour, message",
+    [
+        ("short", "refiner scripted_refiner.py: returned 1 poses for 2 parts (missing fragment_"),
+        ("nan", "refiner scripted_refiner.py: non-finite pose for fragment_"),
+        ("move_anchor", "refiner scripted_refiner.py: moved the anchor fragment_"),
+        ("fail", "refiner scripted_refiner.py: exited with code 3: scripted refiner: model weights not found"),
+        ("silent", "refiner scripted_refiner.py: wrote no result file refine-result.json"),
+    ],
+)
 def test_bad_external_answers_are_named(request_, tmp_path, behaviour, message):
     spec = RefinerSpec("scripted_refiner.py", (sys.executable, str(SCRIPT), "{request}", "{result}"))
     with pytest.raises(RefinerError) as err:
@@ -94,7 +97,8 @@ def test_entry_point_plug_in_is_found_and_run_in_a_child_process(request_, tmp_p
         "def refine(request):\n"
         "    poses = np.array(request.initial_poses)\n"
         "    poses[1 - request.anchor, 2] += 0.125\n"
-        "    return poses if request.options.get('count', 2) == 2 else poses[:1]\n")
+        "    return poses if request.options.get('count', 2) == 2 else poses[:1]\n"
+    )
     monkeypatch.syspath_prepend(str(site))
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(site), os.environ.get("PYTHONPATH", "")]))
     assert "shifty" in available()

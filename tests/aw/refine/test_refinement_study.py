@@ -19,15 +19,38 @@ from aw_eval.report.refinement import render_refinement, write_refinement_plot
 
 SCRIPT = Path(__file__).with_name("scripted_refiner.py")
 TASKS = ["frac_cylinder_1", "frac_hex_prism_2"]
-SYSTEMS = {"agent": "idle", "refiner": "scripted", "agent_refiner": "idle-then-scripted",
-           "refiner_agent": "scripted-then-idle"}
+SYSTEMS = {
+    "agent": "idle",
+    "refiner": "scripted",
+    "agent_refiner": "idle-then-scripted",
+    "refiner_agent": "scripted-then-idle",
+}
 
 
 def _study(suite: Path, out: Path, behaviour: str, *extra: str) -> int:
     command = f"{shlex.quote(sys.executable)} {shlex.quote(str(SCRIPT))}"
-    return aw_run([str(suite), "--refinement-study", "--agent", "idle", "--refiner", "scripted", "--refiner-command",
-                   command, "--refiner-option", f"behaviour={behaviour}", "--refiner-option", "dx=0.125", "--out",
-                   str(out), "--jobs", "1", "--no-progress", *extra])
+    return aw_run(
+        [
+            str(suite),
+            "--refinement-study",
+            "--agent",
+            "idle",
+            "--refiner",
+            "scripted",
+            "--refiner-command",
+            command,
+            "--refiner-option",
+            f"behaviour={behaviour}",
+            "--refiner-option",
+            "dx=0.125",
+            "--out",
+            str(out),
+            "--jobs",
+            "1",
+            "--no-progress",
+            *extra,
+        ]
+    )
 
 
 @pytest.fixture(scope="module")
@@ -77,24 +100,29 @@ def test_score_section_table_pairs_and_plot(good, fracture_suite, tmp_path):
     assert by[("agent_refiner", "refiner", "pa")]["unchanged"] == 2
     assert by[("refiner_agent", "refiner", "cd")]["unchanged"] == 2
     text = render_refinement(section, "plots/x.png")
-    assert "| Refiner -> Agent | `scripted-then-idle` |" in text and "| Method | System | RE (deg) | TE (x100) |" in text
+    assert (
+        "| Refiner -> Agent | `scripted-then-idle` |" in text and "| Method | System | RE (deg) | TE (x100) |" in text
+    )
     assert "Failed runs" not in text
     name = write_refinement_plot(section, tmp_path)
     assert (tmp_path / name).stat().st_size > 1000
-
 
 
 def test_wrong_answers_fail_the_refiner_arms_and_keep_the_agent(fracture_suite, tmp_path, capsys):
     out = tmp_path / "runs"
     assert _study(fracture_suite, out, "nan") == 1
     err = capsys.readouterr().err.strip().splitlines()
-    assert err[-1] == ("aw-run: error: arms not complete: refiner, agent_refiner, refiner_agent (the others are "
-                       "written; see refinement_study.json)")
+    assert err[-1] == (
+        "aw-run: error: arms not complete: refiner, agent_refiner, refiner_agent (the others are "
+        "written; see refinement_study.json)"
+    )
     arms = {a["arm"]: a for a in json.loads((out / "refinement_study.json").read_text())["arms"]}
     assert arms["agent"]["status"] == "ok"
     assert arms["refiner"]["status"] == arms["agent_refiner"]["status"] == "failed"
     assert arms["refiner"]["failed_tasks"][TASKS[0]].startswith("refiner scripted: non-finite pose for fragment_")
-    assert arms["refiner_agent"]["failed_tasks"] == {t: "no start state: arm refiner failed on this task" for t in TASKS}
+    assert arms["refiner_agent"]["failed_tasks"] == {
+        t: "no start state: arm refiner failed on this task" for t in TASKS
+    }
     assert not (out / "scripted-then-idle").exists()  # the agent never ran from a failed refinement
     info = read_run_info(out / "scripted" / TASKS[0] / "run.json")
     assert info.ended == "error" and "non-finite pose" in info.error
@@ -108,20 +136,40 @@ def test_wrong_answers_fail_the_refiner_arms_and_keep_the_agent(fracture_suite, 
 
 def test_refiner_alone_past_its_time_limit(fracture_suite, tmp_path, capsys):
     command = f"{shlex.quote(sys.executable)} {shlex.quote(str(SCRIPT))}"
-    code = aw_run([str(fracture_suite), "--refiner-command", command, "--refiner-option", "behaviour=sleep",
-                   "--refiner-timeout", "1", "--tasks", TASKS[0], "--out", str(tmp_path / "runs"), "--no-progress"])
+    code = aw_run(
+        [
+            str(fracture_suite),
+            "--refiner-command",
+            command,
+            "--refiner-option",
+            "behaviour=sleep",
+            "--refiner-timeout",
+            "1",
+            "--tasks",
+            TASKS[0],
+            "--out",
+            str(tmp_path / "runs"),
+            "--no-progress",
+        ]
+    )
     captured = capsys.readouterr()
     assert code == 1
     assert f"{TASKS[0]}: refiner scripted_refiner.py: timed out after 1 s (killed)" in captured.out
     assert captured.err.strip().startswith("aw-run: error: the refiner failed on every task")
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--refiner", "nope", "--out", "x"], "aw-run: error: unknown refiner 'nope'; available: classical"),
-    (["--refiner", "classical", "--agent", "idle", "--out", "x"], "to compose it with an agent use --refinement-study"),
-    (["--refinement-study", "--refiner", "classical", "--out", "x"], "--refinement-study needs --agent NAME"),
-    (["--out", "x"], "give --agent NAME, --harness NAME or --refiner NAME"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--refiner", "nope", "--out", "x"], "aw-run: error: unknown refiner 'nope'; available: classical"),
+        (
+            ["--refiner", "classical", "--agent", "idle", "--out", "x"],
+            "to compose it with an agent use --refinement-study",
+        ),
+        (["--refinement-study", "--refiner", "classical", "--out", "x"], "--refinement-study needs --agent NAME"),
+        (["--out", "x"], "give --agent NAME, --harness NAME or --refiner NAME"),
+    ],
+)
 def test_usage_errors(fracture_suite, argv, message, capsys):
     assert aw_run([str(fracture_suite), *argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -144,15 +192,31 @@ def test_aw_score_outputs_carry_the_section(good, fracture_suite, tmp_path):
 
     from aw_eval.report import AnalysisSettings, write_outputs
 
-    res = write_outputs(table1_study(), tmp_path / "out", AnalysisSettings(n_draws=50, n_permutations=50),
-                        suite_dir=str(fracture_suite), runs_dir=str(good), plots=True, html=True)
+    res = write_outputs(
+        table1_study(),
+        tmp_path / "out",
+        AnalysisSettings(n_draws=50, n_permutations=50),
+        suite_dir=str(fracture_suite),
+        runs_dir=str(good),
+        plots=True,
+        html=True,
+    )
     md = (tmp_path / "out" / "report.md").read_text()
     assert "## Bidirectional refinement" in md and "| Agent -> Refiner | `idle-then-scripted` |" in md
-    assert "(plots/refinement_paired_cd.png)" in md and (tmp_path / "out" / "plots" / "refinement_paired_cd.png").is_file()
+    assert (
+        "(plots/refinement_paired_cd.png)" in md and (tmp_path / "out" / "plots" / "refinement_paired_cd.png").is_file()
+    )
     assert res["doc"]["refinement"]["matched"] == TASKS
     page = (tmp_path / "out" / "report.html").read_text()
     assert "Bidirectional refinement" in page and 'src="plots/refinement_paired_cd.png"' in page
     plain = tmp_path / "plain"
-    write_outputs(table1_study(), plain, AnalysisSettings(n_draws=50, n_permutations=50), suite_dir=str(fracture_suite),
-                  runs_dir=str(tmp_path), plots=False, html=False)  # no study file: no section
+    write_outputs(
+        table1_study(),
+        plain,
+        AnalysisSettings(n_draws=50, n_permutations=50),
+        suite_dir=str(fracture_suite),
+        runs_dir=str(tmp_path),
+        plots=False,
+        html=False,
+    )  # no study file: no section
     assert "Bidirectional refinement" not in (plain / "report.md").read_text()

@@ -115,8 +115,18 @@ def answer_probe(spec: dict, codex: bool) -> int:
         emit({"type": "item.completed", "item": {"id": "final", "type": "agent_message", "text": text}})
         emit({"type": "turn.completed", "usage": {"input_tokens": 10, "cached_input_tokens": 0, "output_tokens": 5}})
     else:
-        emit({"type": "result", "subtype": "success", "is_error": False, "result": text, "num_turns": 1,
-              "total_cost_usd": 0.0001, "usage": {"input_tokens": 10, "output_tokens": 5}, "session_id": "fake"})
+        emit(
+            {
+                "type": "result",
+                "subtype": "success",
+                "is_error": False,
+                "result": text,
+                "num_turns": 1,
+                "total_cost_usd": 0.0001,
+                "usage": {"input_tokens": 10, "output_tokens": 5},
+                "session_id": "fake",
+            }
+        )
     return 0
 
 
@@ -178,8 +188,16 @@ def main() -> int:
         emit({"type": "thread.started", "thread_id": "fake-thread"})
         emit({"type": "turn.started"})
     else:
-        emit({"type": "system", "subtype": "init", "model": spec["model"], "claude_code_version": "0.0-fake",
-              "mcp_servers": [{"name": spec["name"], "status": "connected"}], "session_id": "fake"})
+        emit(
+            {
+                "type": "system",
+                "subtype": "init",
+                "model": spec["model"],
+                "claude_code_version": "0.0-fake",
+                "mcp_servers": [{"name": spec["name"], "status": "connected"}],
+                "session_id": "fake",
+            }
+        )
 
     n = {"i": 0}
 
@@ -189,16 +207,48 @@ def main() -> int:
         usage["cached"] += 800
         usage["out"] += 50
         if codex:
-            item = {"id": f"item_{n['i']}", "type": "mcp_tool_call", "server": spec["name"], "tool": tool,
-                    "arguments": args, "status": "failed" if res.is_error else "completed"}
+            item = {
+                "id": f"item_{n['i']}",
+                "type": "mcp_tool_call",
+                "server": spec["name"],
+                "tool": tool,
+                "arguments": args,
+                "status": "failed" if res.is_error else "completed",
+            }
             emit({"type": "item.started", "item": {**item, "status": "in_progress"}})
             emit({"type": "item.completed", "item": item})
         else:
             mid = f"msg_{n['i']}"
-            emit({"type": "assistant", "message": {"id": mid, "role": "assistant", "model": spec["model"],
-                  "content": [{"type": "tool_use", "id": f"tu_{n['i']}", "name": f"mcp__{spec['name']}__{tool}", "input": args}],
-                  "usage": {"input_tokens": 200, "cache_read_input_tokens": 800, "output_tokens": 50}}})
-            emit({"type": "user", "message": {"role": "user", "content": [{"type": "tool_result", "tool_use_id": f"tu_{n['i']}", "is_error": bool(res.is_error)}]}})
+            emit(
+                {
+                    "type": "assistant",
+                    "message": {
+                        "id": mid,
+                        "role": "assistant",
+                        "model": spec["model"],
+                        "content": [
+                            {
+                                "type": "tool_use",
+                                "id": f"tu_{n['i']}",
+                                "name": f"mcp__{spec['name']}__{tool}",
+                                "input": args,
+                            }
+                        ],
+                        "usage": {"input_tokens": 200, "cache_read_input_tokens": 800, "output_tokens": 50},
+                    },
+                }
+            )
+            emit(
+                {
+                    "type": "user",
+                    "message": {
+                        "role": "user",
+                        "content": [
+                            {"type": "tool_result", "tool_use_id": f"tu_{n['i']}", "is_error": bool(res.is_error)}
+                        ],
+                    },
+                }
+            )
 
     calls = asyncio.run(play(spec["server"], log))
     report = f"Made {sum(1 for c in calls if c[0] in ('translate_objects', 'rotate_objects', 'set_object_pose'))} edits; uncertain about contacts."
@@ -208,12 +258,35 @@ def main() -> int:
         if failed:
             emit({"type": "turn.failed", "error": {"message": "fake failure"}})
         else:
-            emit({"type": "turn.completed", "usage": {"input_tokens": usage["in"], "cached_input_tokens": usage["cached"], "output_tokens": usage["out"]}})
+            emit(
+                {
+                    "type": "turn.completed",
+                    "usage": {
+                        "input_tokens": usage["in"],
+                        "cached_input_tokens": usage["cached"],
+                        "output_tokens": usage["out"],
+                    },
+                }
+            )
     else:
-        emit({"type": "result", "subtype": "error_during_execution" if failed else "success", "is_error": failed,
-              "result": report, "num_turns": len(calls), "duration_ms": 1234, "total_cost_usd": 0.0123,
-              "usage": {"input_tokens": 200 * len(calls), "cache_creation_input_tokens": 100, "cache_read_input_tokens": 800 * len(calls), "output_tokens": 50 * len(calls)},
-              "session_id": "fake"})
+        emit(
+            {
+                "type": "result",
+                "subtype": "error_during_execution" if failed else "success",
+                "is_error": failed,
+                "result": report,
+                "num_turns": len(calls),
+                "duration_ms": 1234,
+                "total_cost_usd": 0.0123,
+                "usage": {
+                    "input_tokens": 200 * len(calls),
+                    "cache_creation_input_tokens": 100,
+                    "cache_read_input_tokens": 800 * len(calls),
+                    "output_tokens": 50 * len(calls),
+                },
+                "session_id": "fake",
+            }
+        )
     return 1 if failed else 0
 
 

@@ -20,24 +20,38 @@ FAKE = Path(__file__).with_name("fake_harness.py")
 def fake_bin(tmp_path) -> Path:
     path = tmp_path / "bin" / "fake-harness"
     path.parent.mkdir()
-    path.write_text(f"#!/bin/sh\nexec {sys.executable} {FAKE} \"$@\"\n")
+    path.write_text(f'#!/bin/sh\nexec {sys.executable} {FAKE} "$@"\n')
     path.chmod(0o755)
     return path
 
 
 def _env(tmp_path: Path, **extra: str) -> dict[str, str]:
     """Our environment with a HOME of its own (no login files) and no API keys, plus ``extra``."""
-    env = {k: v for k, v in os.environ.items() if k not in (
-        "ANTHROPIC_API_KEY", "ANTHROPIC_AUTH_TOKEN", "CLAUDE_CODE_OAUTH_TOKEN", "CLAUDE_CODE_USE_BEDROCK",
-        "CLAUDE_CODE_USE_VERTEX", "OPENAI_API_KEY", "CODEX_API_KEY", "CLAUDE_CONFIG_DIR", "CODEX_HOME")}
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k
+        not in (
+            "ANTHROPIC_API_KEY",
+            "ANTHROPIC_AUTH_TOKEN",
+            "CLAUDE_CODE_OAUTH_TOKEN",
+            "CLAUDE_CODE_USE_BEDROCK",
+            "CLAUDE_CODE_USE_VERTEX",
+            "OPENAI_API_KEY",
+            "CODEX_API_KEY",
+            "CLAUDE_CONFIG_DIR",
+            "CODEX_HOME",
+        )
+    }
     env["HOME"] = str(tmp_path / "home")
     env.update(extra)
     return env
 
 
 def _aw_run(args: list[str], env: dict[str, str], cwd: Path | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "aw.runner.cli", *args], capture_output=True, text=True, env=env,
-                          cwd=cwd, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "aw.runner.cli", *args], capture_output=True, text=True, env=env, cwd=cwd, timeout=300
+    )
 
 
 @pytest.mark.parametrize("harness, key", [("claude-code", "ANTHROPIC_API_KEY"), ("codex", "OPENAI_API_KEY")])
@@ -62,7 +76,9 @@ def test_check_stops_at_the_first_failure_with_what_to_do(tiny_suite, tmp_path, 
     login.write_text("{}")
     assert credential_sources("codex", _env(tmp_path)) == [str(login)]
     # Logged out: the probe session reports it, and the fix says how to log in.
-    steps = check_harness("claude-code", str(fake_bin), task, env=_env(tmp_path, ANTHROPIC_API_KEY="x", FAKE_HARNESS_MODE="nologin"))
+    steps = check_harness(
+        "claude-code", str(fake_bin), task, env=_env(tmp_path, ANTHROPIC_API_KEY="x", FAKE_HARNESS_MODE="nologin")
+    )
     assert steps[-1].name == "probe" and not steps[-1].ok
     assert "Not logged in" in steps[-1].detail and "login" in steps[-1].fix
     assert "ended with success" not in steps[-1].detail
@@ -92,14 +108,37 @@ def test_find_binary_resolves_relative_paths_and_refuses_non_executables(tmp_pat
 
 def test_aw_run_check_alone_and_before_a_batch(tiny_suite, tmp_path, fake_bin):
     env = _env(tmp_path, ANTHROPIC_API_KEY="x")
-    ok = _aw_run([str(tiny_suite), "--harness", "claude-code", "--harness-bin", str(fake_bin), "--check",
-                  "--tasks", "tiny_table_none"], env)
+    ok = _aw_run(
+        [
+            str(tiny_suite),
+            "--harness",
+            "claude-code",
+            "--harness-bin",
+            str(fake_bin),
+            "--check",
+            "--tasks",
+            "tiny_table_none",
+        ],
+        env,
+    )
     assert ok.returncode == 0, ok.stderr
     assert "ok   probe" in ok.stderr
     # Not logged in: the batch stops before its first episode with one line naming the fix.
     out = tmp_path / "runs"
-    bad = _aw_run([str(tiny_suite), "--harness", "claude-code", "--harness-bin", str(fake_bin), "--out", str(out),
-                   "--tasks", "tiny_table_none"], {**env, "FAKE_HARNESS_MODE": "nologin"})
+    bad = _aw_run(
+        [
+            str(tiny_suite),
+            "--harness",
+            "claude-code",
+            "--harness-bin",
+            str(fake_bin),
+            "--out",
+            str(out),
+            "--tasks",
+            "tiny_table_none",
+        ],
+        {**env, "FAKE_HARNESS_MODE": "nologin"},
+    )
     assert bad.returncode == 1
     last = bad.stderr.strip().splitlines()[-1]
     assert last.startswith("aw-run: error: claude-code is not ready (probe") and "login" in last
@@ -109,8 +148,23 @@ def test_aw_run_check_alone_and_before_a_batch(tiny_suite, tmp_path, fake_bin):
 def test_aw_run_resolves_a_relative_harness_bin_and_exits_1_when_no_episode_finished(tiny_suite, tmp_path, fake_bin):
     env = _env(tmp_path, FAKE_HARNESS_MODE="fail")
     out = tmp_path / "runs"
-    proc = _aw_run([str(tiny_suite), "--harness", "codex", "--harness-bin", "bin/fake-harness", "--skip-check",
-                    "--out", str(out), "--tasks", "tiny_table_none", "--no-progress"], env, cwd=tmp_path)
+    proc = _aw_run(
+        [
+            str(tiny_suite),
+            "--harness",
+            "codex",
+            "--harness-bin",
+            "bin/fake-harness",
+            "--skip-check",
+            "--out",
+            str(out),
+            "--tasks",
+            "tiny_table_none",
+            "--no-progress",
+        ],
+        env,
+        cwd=tmp_path,
+    )
     assert proc.returncode == 1, proc.stdout + proc.stderr
     assert "no episode finished" in proc.stderr and "Traceback" not in proc.stderr
     assert (out / "codex" / "tiny_table_none" / "run.json").is_file()  # it ran: the relative path was found

@@ -27,7 +27,7 @@ FAKE = Path(__file__).with_name("fake_harness.py")
 def fake_bin(tmp_path) -> str:
     """An executable wrapper, as a real harness binary would be."""
     path = tmp_path / "fake-harness"
-    path.write_text(f"#!/bin/sh\nexec {sys.executable} {FAKE} \"$@\"\n")
+    path.write_text(f'#!/bin/sh\nexec {sys.executable} {FAKE} "$@"\n')
     path.chmod(0o755)
     return str(path)
 
@@ -36,9 +36,16 @@ def fake_bin(tmp_path) -> str:
 def test_stand_in_harness_episode_is_recorded_and_scorable(harness, tiny_suite, tmp_path, fake_bin):
     out = tmp_path / "runs"
     cfg = BatchConfig(
-        suite_dir=tiny_suite, system=f"fake-{harness}", out_dir=out, harness=harness, harness_bin=fake_bin,
-        harness_model="gpt-5" if harness == "codex" else None, tasks=["tiny_table_image"], jobs=1,
-        timeout_minutes=2.0, progress=False,
+        suite_dir=tiny_suite,
+        system=f"fake-{harness}",
+        out_dir=out,
+        harness=harness,
+        harness_bin=fake_bin,
+        harness_model="gpt-5" if harness == "codex" else None,
+        tasks=["tiny_table_image"],
+        jobs=1,
+        timeout_minutes=2.0,
+        progress=False,
     )
     (info,) = run_batch(cfg).runs
     run_dir = out / cfg.system / "tiny_table_image"
@@ -81,8 +88,15 @@ def test_scoring_the_stand_in_run(tiny_suite, tmp_path, fake_bin):
     from aw.formats.suite import suite_paths
 
     out = tmp_path / "runs"
-    cfg = BatchConfig(suite_dir=tiny_suite, system="fake", out_dir=out, harness="claude-code", harness_bin=fake_bin,
-                      tasks=["tiny_table_none"], progress=False)
+    cfg = BatchConfig(
+        suite_dir=tiny_suite,
+        system="fake",
+        out_dir=out,
+        harness="claude-code",
+        harness_bin=fake_bin,
+        tasks=["tiny_table_none"],
+        progress=False,
+    )
     (info,) = run_batch(cfg).runs
     assert info.ended == "finished", info.error
     task_dir, targets = suite_paths(tiny_suite, "tiny_table_none")
@@ -97,8 +111,16 @@ def test_scoring_the_stand_in_run(tiny_suite, tmp_path, fake_bin):
 def test_a_harness_that_hangs_is_killed_with_the_server_it_started(tiny_suite, tmp_path, fake_bin, monkeypatch):
     monkeypatch.setenv("FAKE_HARNESS_MODE", "hang")
     out = tmp_path / "runs"
-    cfg = BatchConfig(suite_dir=tiny_suite, system="hang", out_dir=out, harness="codex", harness_bin=fake_bin,
-                      tasks=["tiny_shelf_none"], timeout_minutes=0.25, progress=False)
+    cfg = BatchConfig(
+        suite_dir=tiny_suite,
+        system="hang",
+        out_dir=out,
+        harness="codex",
+        harness_bin=fake_bin,
+        tasks=["tiny_shelf_none"],
+        timeout_minutes=0.25,
+        progress=False,
+    )
     (info,) = run_batch(cfg).runs
     assert info.ended == "timeout"
     run_dir = out / "hang" / "tiny_shelf_none"
@@ -111,16 +133,30 @@ def test_a_harness_that_hangs_is_killed_with_the_server_it_started(tiny_suite, t
 
 def test_a_failing_harness_is_an_error_with_its_message(tiny_suite, tmp_path, fake_bin, monkeypatch):
     monkeypatch.setenv("FAKE_HARNESS_MODE", "fail")
-    cfg = BatchConfig(suite_dir=tiny_suite, system="fail", out_dir=tmp_path, harness="claude-code", harness_bin=fake_bin,
-                      tasks=["tiny_shelf_none"], progress=False)
+    cfg = BatchConfig(
+        suite_dir=tiny_suite,
+        system="fail",
+        out_dir=tmp_path,
+        harness="claude-code",
+        harness_bin=fake_bin,
+        tasks=["tiny_shelf_none"],
+        progress=False,
+    )
     (info,) = run_batch(cfg).runs
     assert info.ended == "error" and "error_during_execution" in info.error
     assert info.cost_usd == pytest.approx(0.0123)
 
 
 def test_missing_harness_binary_is_recorded_not_raised(tiny_suite, tmp_path):
-    cfg = BatchConfig(suite_dir=tiny_suite, system="nobin", out_dir=tmp_path, harness="claude-code",
-                      harness_bin=str(tmp_path / "no-such-claude"), tasks=["tiny_shelf_none"], progress=False)
+    cfg = BatchConfig(
+        suite_dir=tiny_suite,
+        system="nobin",
+        out_dir=tmp_path,
+        harness="claude-code",
+        harness_bin=str(tmp_path / "no-such-claude"),
+        tasks=["tiny_shelf_none"],
+        progress=False,
+    )
     (info,) = run_batch(cfg).runs
     assert info.ended == "error" and "no-such-claude" in info.error
 
@@ -129,7 +165,11 @@ def test_claude_transcript_without_result_sums_messages_once(tmp_path):
     """Killed at the limit: no result event; each message's usage counts once (stream-json
     repeats it per content block), and no cost is invented."""
     t = tmp_path / "t.jsonl"
-    msg = {"id": "m1", "usage": {"input_tokens": 10, "cache_read_input_tokens": 90, "output_tokens": 5}, "content": [{"type": "tool_use", "name": "mcp__assemblyworld__capture_scene"}]}
+    msg = {
+        "id": "m1",
+        "usage": {"input_tokens": 10, "cache_read_input_tokens": 90, "output_tokens": 5},
+        "content": [{"type": "tool_use", "name": "mcp__assemblyworld__capture_scene"}],
+    }
     t.write_text("\n".join(json.dumps({"type": "assistant", "message": msg}) for _ in range(2)) + "\nnot json\n")
     usage = HARNESSES["claude-code"].parse(t, HarnessOptions())
     assert usage.tokens.input == 100 and usage.tokens.output == 5
@@ -140,7 +180,15 @@ def test_claude_transcript_without_result_sums_messages_once(tmp_path):
 
 def test_codex_cost_is_none_for_an_unpriced_model_and_uses_a_given_table(tmp_path):
     t = tmp_path / "t.jsonl"
-    t.write_text(json.dumps({"type": "turn.completed", "usage": {"input_tokens": 1000, "cached_input_tokens": 400, "output_tokens": 100}}) + "\n")
+    t.write_text(
+        json.dumps(
+            {
+                "type": "turn.completed",
+                "usage": {"input_tokens": 1000, "cached_input_tokens": 400, "output_tokens": 100},
+            }
+        )
+        + "\n"
+    )
     usage = HARNESSES["codex"].parse(t, HarnessOptions(model="mystery-model"))
     assert usage.cost_usd is None and "mystery-model" in usage.extra["cost_note"]
     table = tmp_path / "prices.json"

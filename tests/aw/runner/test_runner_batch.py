@@ -37,7 +37,11 @@ def agent_runs(tiny_suite, tmp_path_factory):
 
     def one(agent: str):
         cfg = BatchConfig(
-            suite_dir=tiny_suite, system=agent, out_dir=out, agent=agent, jobs=2,
+            suite_dir=tiny_suite,
+            system=agent,
+            out_dir=out,
+            agent=agent,
+            jobs=2,
             tasks=["tiny_table_none", "tiny_shelf_none"] if agent == "oracle" else ["tiny_table_none"],
             progress=False,
         )
@@ -106,7 +110,9 @@ def test_heuristic_moves_parts_without_reading_targets(agent_runs, tiny_suite):
 
 def test_existing_runs_are_skipped_unless_overwrite(agent_runs, tiny_suite):
     out, _ = agent_runs
-    cfg = BatchConfig(suite_dir=tiny_suite, system="idle", out_dir=out, agent="idle", tasks=["tiny_table_none"], progress=False)
+    cfg = BatchConfig(
+        suite_dir=tiny_suite, system="idle", out_dir=out, agent="idle", tasks=["tiny_table_none"], progress=False
+    )
     res = run_batch(cfg)
     assert res.skipped == ["tiny_table_none"] and res.runs == []
 
@@ -117,18 +123,22 @@ def test_a_run_made_with_other_options_is_refused_not_reused(agent_runs, tiny_su
     before = (out / "oracle" / "tiny_table_none" / "run.json").read_bytes()
     assert aw_run([*base, "--agent", "oracle", "--system", "oracle", "--noise", "1.5"]) == 2
     err = capsys.readouterr().err
-    assert ("aw-run: error: " + str(out / "oracle") + " holds 2 runs made with other options (--noise not set there, "
-            "1.5 now); pass --system LABEL to run these options as another system, or --overwrite without --tasks "
-            "(or with --tasks also naming tiny_shelf_none) to replace them") in err
+    assert (
+        "aw-run: error: " + str(out / "oracle") + " holds 2 runs made with other options (--noise not set there, "
+        "1.5 now); pass --system LABEL to run these options as another system, or --overwrite without --tasks "
+        "(or with --tasks also naming tiny_shelf_none) to replace them"
+    ) in err
     assert aw_run([*base, "--agent", "idle", "--seed", "3"]) == 2
     assert "(--seed 0 there, 3 now)" in capsys.readouterr().err
     # another task under the same label, with other options: the system would mix two configurations
     other = [str(tiny_suite), "--out", str(out), "--tasks", "tiny_shelf_none", "--no-progress", "--agent", "idle"]
     for extra in ([], ["--overwrite"]):
         assert aw_run([*other, "--seed", "3", *extra]) == 2
-        assert ("holds 1 run made with other options (--seed 0 there, 3 now); pass --system LABEL to run these "
-                "options as another system, or --overwrite without --tasks (or with --tasks also naming "
-                "tiny_table_none) to replace them") in capsys.readouterr().err
+        assert (
+            "holds 1 run made with other options (--seed 0 there, 3 now); pass --system LABEL to run these "
+            "options as another system, or --overwrite without --tasks (or with --tasks also naming "
+            "tiny_table_none) to replace them"
+        ) in capsys.readouterr().err
     assert not (out / "idle" / "tiny_shelf_none").exists()
     assert (out / "oracle" / "tiny_table_none" / "run.json").read_bytes() == before
     # a run.json written before the settings were kept: its other fields still tell the options
@@ -192,8 +202,16 @@ def test_unknown_agent_options_are_refused_with_the_known_list(tiny_suite, tmp_p
     assert "unknown --agent-option edit for agent 'random'; known: edits" in err
     assert not (tmp_path / "o").exists()
     with pytest.raises(RunnerError, match="known: none"):
-        run_batch(BatchConfig(suite_dir=tiny_suite, system="x", out_dir=tmp_path / "o", agent="heuristic",
-                              agent_options={"views": 2}, progress=False))
+        run_batch(
+            BatchConfig(
+                suite_dir=tiny_suite,
+                system="x",
+                out_dir=tmp_path / "o",
+                agent="heuristic",
+                agent_options={"views": 2},
+                progress=False,
+            )
+        )
 
 
 def test_a_run_dir_a_live_server_records_into_is_left_untouched(tiny_suite, tmp_path):
@@ -202,15 +220,30 @@ def test_a_run_dir_a_live_server_records_into_is_left_untouched(tiny_suite, tmp_
     import sys
 
     run_dir = tmp_path / "o" / "idle" / "tiny_table_none"
-    hold = ("import sys, time; from aw.runlock import RunDirLock; RunDirLock(sys.argv[1], command='live-server')"
-            ".acquire(); print('locked', flush=True); time.sleep(120)")
-    proc = subprocess.Popen([sys.executable, "-c", hold, str(run_dir)], stdout=subprocess.PIPE, text=True,
-                            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    hold = (
+        "import sys, time; from aw.runlock import RunDirLock; RunDirLock(sys.argv[1], command='live-server')"
+        ".acquire(); print('locked', flush=True); time.sleep(120)"
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-c", hold, str(run_dir)],
+        stdout=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+    )
     try:
         assert proc.stdout.readline().strip() == "locked"
         (run_dir / "trajectory.jsonl").write_text("live\n")
-        res = run_batch(BatchConfig(suite_dir=tiny_suite, system="idle", out_dir=tmp_path / "o", agent="idle",
-                                    tasks=["tiny_table_none"], overwrite=True, progress=False))
+        res = run_batch(
+            BatchConfig(
+                suite_dir=tiny_suite,
+                system="idle",
+                out_dir=tmp_path / "o",
+                agent="idle",
+                tasks=["tiny_table_none"],
+                overwrite=True,
+                progress=False,
+            )
+        )
     finally:
         proc.kill()
         proc.wait()

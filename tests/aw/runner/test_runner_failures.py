@@ -47,8 +47,15 @@ def _leftovers(out) -> list[str]:
 def test_killed_agent_and_hung_server_are_recorded_and_the_batch_goes_on(tiny_suite, tmp_path):
     out = tmp_path / "runs"
     cfg = BatchConfig(
-        suite_dir=tiny_suite, system="random", out_dir=out, agent="random", jobs=3,
-        think_seconds=0.5, call_timeout=4.0, timeout_minutes=2.0, progress=False,
+        suite_dir=tiny_suite,
+        system="random",
+        out_dir=out,
+        agent="random",
+        jobs=3,
+        think_seconds=0.5,
+        call_timeout=4.0,
+        timeout_minutes=2.0,
+        progress=False,
     )
     base = out / "random"
     actions: dict[str, str] = {}
@@ -96,8 +103,15 @@ def test_killed_agent_and_hung_server_are_recorded_and_the_batch_goes_on(tiny_su
 def test_an_episode_over_its_wall_clock_limit_is_killed_as_timeout(tiny_suite, tmp_path):
     out = tmp_path / "runs"
     cfg = BatchConfig(
-        suite_dir=tiny_suite, system="slow", out_dir=out, agent="random", jobs=1,
-        tasks=["tiny_shelf_none"], think_seconds=5.0, timeout_minutes=0.3, progress=False,
+        suite_dir=tiny_suite,
+        system="slow",
+        out_dir=out,
+        agent="random",
+        jobs=1,
+        tasks=["tiny_shelf_none"],
+        think_seconds=5.0,
+        timeout_minutes=0.3,
+        progress=False,
     )
     res = run_batch(cfg)
     (info,) = res.runs
@@ -115,8 +129,15 @@ def test_a_server_that_cannot_start_is_an_error_with_its_message(tiny_suite, tmp
     suite = tmp_path / "suite"
     shutil.copytree(tiny_suite, suite)
     (suite / "tasks" / "tiny_shelf_none" / "task.json").write_text("{")
-    cfg = BatchConfig(suite_dir=suite, system="idle", out_dir=tmp_path / "runs", agent="idle", jobs=1,
-                      tasks=["tiny_shelf_none", "tiny_table_none"], progress=False)
+    cfg = BatchConfig(
+        suite_dir=suite,
+        system="idle",
+        out_dir=tmp_path / "runs",
+        agent="idle",
+        jobs=1,
+        tasks=["tiny_shelf_none", "tiny_table_none"],
+        progress=False,
+    )
     res = run_batch(cfg)
     ended = {r.task_id: r for r in res.runs}
     bad = ended["tiny_shelf_none"]
@@ -133,9 +154,21 @@ def test_ctrl_c_stops_every_episode_and_leaves_only_finished_runs(tiny_suite, tm
 
     out = tmp_path / "runs"
     proc = subprocess.Popen(
-        [str(Path(sys.executable).with_name("aw-run")), str(tiny_suite), "--agent", "random", "--think-seconds", "1",
-         "--out", str(out), "--jobs", "2", "--no-progress"],
-        stderr=subprocess.PIPE, text=True,
+        [
+            str(Path(sys.executable).with_name("aw-run")),
+            str(tiny_suite),
+            "--agent",
+            "random",
+            "--think-seconds",
+            "1",
+            "--out",
+            str(out),
+            "--jobs",
+            "2",
+            "--no-progress",
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),  # a shell's background jobs ignore it
     )
     _wait_for_calls(out / "random" / "tiny_table_none", 4)

@@ -20,11 +20,29 @@ def test_episodes_start_from_poses_files(tiny_suite, tmp_path):
     poses = {pid: [0.1 * k, -0.2, 0.05 * k, 0.0, 1.0, 0.0, 0.0] for k, pid in enumerate(ids)}
     starts = tmp_path / "starts"
     starts.mkdir()
-    (starts / f"{TASK}.json").write_text(json.dumps({"format": "assemblyworld.poses", "format_version": 1,
-                                                      "task_id": TASK, "poses": poses}))
+    (starts / f"{TASK}.json").write_text(
+        json.dumps({"format": "assemblyworld.poses", "format_version": 1, "task_id": TASK, "poses": poses})
+    )
     out = tmp_path / "runs"
-    assert aw_run([str(tiny_suite), "--agent", "idle", "--tasks", TASK, "--initial-poses", str(starts), "--out",
-                   str(out), "--no-progress", "--jobs", "1"]) == 0
+    assert (
+        aw_run(
+            [
+                str(tiny_suite),
+                "--agent",
+                "idle",
+                "--tasks",
+                TASK,
+                "--initial-poses",
+                str(starts),
+                "--out",
+                str(out),
+                "--no-progress",
+                "--jobs",
+                "1",
+            ]
+        )
+        == 0
+    )
     run = out / "idle" / TASK
     assert read_run_info(run / "run.json").extra["initial_poses"] == str((starts / f"{TASK}.json").resolve())
     traj = read_trajectory(run / "trajectory.jsonl")
@@ -36,10 +54,24 @@ def test_episodes_start_from_poses_files(tiny_suite, tmp_path):
 
 def test_a_task_without_a_start_state_is_refused_up_front(tiny_suite, tmp_path, capsys):
     (tmp_path / "empty").mkdir()
-    code = aw_run([str(tiny_suite), "--agent", "idle", "--tasks", TASK, "--initial-poses", str(tmp_path / "empty"),
-                   "--out", str(tmp_path / "runs"), "--no-progress"])
+    code = aw_run(
+        [
+            str(tiny_suite),
+            "--agent",
+            "idle",
+            "--tasks",
+            TASK,
+            "--initial-poses",
+            str(tmp_path / "empty"),
+            "--out",
+            str(tmp_path / "runs"),
+            "--no-progress",
+        ]
+    )
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1
-    assert err[0] == (f"aw-run: error: --initial-poses {tmp_path / 'empty'}: no start state for {TASK} "
-                      f"({TASK}/final.json or {TASK}.json)")
+    assert err[0] == (
+        f"aw-run: error: --initial-poses {tmp_path / 'empty'}: no start state for {TASK} "
+        f"({TASK}/final.json or {TASK}.json)"
+    )
     assert not (tmp_path / "runs" / "idle" / TASK).exists()

@@ -13,7 +13,17 @@ import numpy as np
 import trimesh
 from PIL import Image
 
-from aw.formats import PartTarget, SuiteEntry, SuiteManifest, Targets, Task, TaskPart, write_manifest, write_targets, write_task
+from aw.formats import (
+    PartTarget,
+    SuiteEntry,
+    SuiteManifest,
+    Targets,
+    Task,
+    TaskPart,
+    write_manifest,
+    write_targets,
+    write_task,
+)
 from aw.pose import invert_pose, matrices_to_poses
 from aw.prompt import task_prompt
 
@@ -114,6 +124,15 @@ def make_tiny_suite(root: Path, with_image: bool = True) -> Path:
             root / "targets" / f"{task_id}.json",
             Targets(task_id=task_id, parts={pid: PartTarget(pose=p) for pid, p in zip(ids, targets)}, scale=1.0),
         )
-        entries.append(SuiteEntry(task_id=task_id, source="partnet", condition=condition, object_id=f"tiny_{obj}", category=obj, n_parts=len(ids)))
+        entries.append(
+            SuiteEntry(
+                task_id=task_id,
+                source="partnet",
+                condition=condition,
+                object_id=f"tiny_{obj}",
+                category=obj,
+                n_parts=len(ids),
+            )
+        )
     write_manifest(root, SuiteManifest(name="tiny", generator="tests/aw/runner/tiny_suite.py", tasks=entries))
     return root

@@ -54,8 +54,16 @@ def random_rotation(rng) -> np.ndarray:
 
 
 # ---------------------------------------------------------------- PartNet (DGL / Manual-PA)
-def partnet_shape(root: Path, shape_id: str, n_parts: int, level: int = 3, seed: int = 0, n_points: int = 200,
-                  meshes: str | None = None, pages: int = 0) -> dict:
+def partnet_shape(
+    root: Path,
+    shape_id: str,
+    n_parts: int,
+    level: int = 3,
+    seed: int = 0,
+    n_points: int = 200,
+    meshes: str | None = None,
+    pages: int = 0,
+) -> dict:
     """``shape_data/<id>_level<k>.npy`` for a chair-like shape with ``n_parts`` parts (two boxes
     plus identical legs), Y up; ``meshes``: also write part meshes in the ``canonical`` or
     ``assembled`` frame. Returns the dict and the Z-up assembled boxes."""
@@ -120,7 +128,10 @@ def ikea_object(root: Path, category: str, name: str, n_parts: int, pages: int =
         "category": category,
         "name": name,
         "parts_ct": n_parts,
-        "steps": [{"step_id": 0, "page_id": 1, "parts": legs[:2] + ["0"]}, {"step_id": 1, "page_id": 2, "parts": ["0," + ",".join(legs), "1"]}],
+        "steps": [
+            {"step_id": 0, "page_id": 1, "parts": legs[:2] + ["0"]},
+            {"step_id": 1, "page_id": 2, "parts": ["0," + ",".join(legs), "1"]},
+        ],
         "connection_relation": [[0, int(x)] for x in legs] + [[0, 1]],
         "geometric_equivalence_relation": [legs] if len(legs) > 1 else [],
         "assembly_tree": {"0": {"children": legs}},
@@ -182,8 +193,9 @@ def fantastic_breaks_dataset(root: Path, objects: list[tuple[str, str]]) -> Path
 
 
 # ---------------------------------------------------------------- AssemblyBench
-def assemblybench_object(root: Path, category: str, name: str, n_parts: int, views: int = 2, layout: str = "folders",
-                         seed: int = 0) -> list[trimesh.Trimesh]:
+def assemblybench_object(
+    root: Path, category: str, name: str, n_parts: int, views: int = 2, layout: str = "folders", seed: int = 0
+) -> list[trimesh.Trimesh]:
     """Parts in local frames, per-view per-step poses, one diagram per step. Returns the
     assembled parts (Z up) as seen in view 0."""
     rng = np.random.default_rng(seed)
@@ -252,7 +264,10 @@ def rehosted_row(object_id: str, source: str, category: str, n_parts: int, pages
         "parts": parts,
         "parts_ct": n_parts,
         "geometric_equivalence_relation": [legs] if len(legs) > 1 else [],
-        "manual_pages": [{"page": k, "step": k, "image": {"bytes": png_bytes((0, 0, 40 * k)), "path": f"p{k}.png"}} for k in range(pages)],
+        "manual_pages": [
+            {"page": k, "step": k, "image": {"bytes": png_bytes((0, 0, 40 * k)), "path": f"p{k}.png"}}
+            for k in range(pages)
+        ],
         "up_axis": up_axis,
     }
 

@@ -44,7 +44,9 @@ def _score_oracle(task_dir: Path, targets_path: Path, targets, part_ids) -> None
 
     # fewer samples than the paper's 4096 -> 1000 keep the test fast; the protocol is otherwise the same
     settings = ProtocolSettings(n_surface=256, n_fps=64)
-    geom = load_task_geometry(task_dir, targets_path, cache_dir=task_dir.parent.parent / ".geometry_cache", settings=settings)
+    geom = load_task_geometry(
+        task_dir, targets_path, cache_dir=task_dir.parent.parent / ".geometry_cache", settings=settings
+    )
     poses = np.array([targets.parts[p].pose for p in geom.part_ids])
     res = score(geom, poses, mode="exact")
     assert res.pa == 1.0 and res.sr == 1.0, (res.pa, res.sr)

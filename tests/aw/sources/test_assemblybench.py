@@ -6,12 +6,11 @@ import json
 
 import numpy as np
 import pytest
+from dataset_fixtures import assemblybench_object
+from roundtrip import oracle_roundtrip
 
 from aw.formats import FormatError
 from aw.sources import assemblybench
-
-from dataset_fixtures import assemblybench_object
-from roundtrip import oracle_roundtrip
 
 
 @pytest.mark.parametrize("layout", ["folders", "json"])
@@ -34,7 +33,9 @@ def test_catalog_and_meta(tmp_path):
     # the same object name in two categories is qualified
     assert [(e.object_id, e.category, e.n_parts) for e in cat] == [("gears_g1", "gears", 3), ("valves_g1", "valves", 5)]
     assert assemblybench.load_object(*cat[1].args).object_id == "valves_g1"
-    (tmp_path / "gears" / "g1" / "meta.json").write_text(json.dumps({"category": "Gearbox", "equivalence": [["part0", "part2"]]}))
+    (tmp_path / "gears" / "g1" / "meta.json").write_text(
+        json.dumps({"category": "Gearbox", "equivalence": [["part0", "part2"]]})
+    )
     obj = assemblybench.load_object(tmp_path, "gears/g1")
     assert obj.category == "gearbox" and obj.equivalence == [["part0", "part2"]]
 
@@ -44,13 +45,19 @@ def _pose_file(root, view=0, step=-1):
     return files[step]
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda d: d.pop("part1"), r"final step of view 0: poses missing for parts \['part1'\]"),
-    (lambda d: d.update(part1=[0, 0, 0, 1, 0, 0]), r"poses.part1: expected \[tx, ty, tz, qw, qx, qy, qz\], got shape \(6,\)"),
-    (lambda d: d.update(part1=[0, 0, float("nan"), 1, 0, 0, 0]), r"poses.part1: non-finite values"),
-    (lambda d: d.update(part1=[0, 0, 0, 0, 0, 0, 0]), r"poses.part1: zero quaternion"),
-    (lambda d: d.update(ghost=[0, 0, 0, 1, 0, 0, 0]), r"poses for unknown parts \['ghost'\]"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda d: d.pop("part1"), r"final step of view 0: poses missing for parts \['part1'\]"),
+        (
+            lambda d: d.update(part1=[0, 0, 0, 1, 0, 0]),
+            r"poses.part1: expected \[tx, ty, tz, qw, qx, qy, qz\], got shape \(6,\)",
+        ),
+        (lambda d: d.update(part1=[0, 0, float("nan"), 1, 0, 0, 0]), r"poses.part1: non-finite values"),
+        (lambda d: d.update(part1=[0, 0, 0, 0, 0, 0, 0]), r"poses.part1: zero quaternion"),
+        (lambda d: d.update(ghost=[0, 0, 0, 1, 0, 0, 0]), r"poses for unknown parts \['ghost'\]"),
+    ],
+)
 def test_malformed_poses(tmp_path, edit, message):
     assemblybench_object(tmp_path, "pumps", "p", 3)
     f = _pose_file(tmp_path)

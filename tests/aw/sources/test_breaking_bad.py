@@ -4,21 +4,23 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from dataset_fixtures import breaking_bad_dataset, breaking_bad_h5, fractured_box
+from roundtrip import oracle_roundtrip
 
 from aw.formats import FormatError
 from aw.sources import breaking_bad
 
-from dataset_fixtures import breaking_bad_dataset, breaking_bad_h5, fractured_box
-from roundtrip import oracle_roundtrip
-
 
 @pytest.fixture
 def root(tmp_path):
-    return breaking_bad_dataset(tmp_path / "bb", [
-        ("everyday", "BeerBottle", "3f91158", "fractured_0", 3),
-        ("everyday", "BeerBottle", "3f91158", "fractured_12", 2),
-        ("artifact", "Vase", "a77", "mode_1", 4),
-    ])
+    return breaking_bad_dataset(
+        tmp_path / "bb",
+        [
+            ("everyday", "BeerBottle", "3f91158", "fractured_0", 3),
+            ("everyday", "BeerBottle", "3f91158", "fractured_12", 2),
+            ("artifact", "Vase", "a77", "mode_1", 4),
+        ],
+    )
 
 
 def test_folder_object_and_catalog(root):
@@ -37,21 +39,33 @@ def test_folder_object_and_catalog(root):
 
 
 def test_hdf5_variant(tmp_path):
-    path = breaking_bad_h5(tmp_path / "bb.hdf5", [("everyday/Cup/c1/fractured_0", 3), ("artifact/Bowl/b2/fractured_4", 2)])
+    path = breaking_bad_h5(
+        tmp_path / "bb.hdf5", [("everyday/Cup/c1/fractured_0", 3), ("artifact/Bowl/b2/fractured_4", 2)]
+    )
     cat = breaking_bad.hdf5_catalog(path)
-    assert [(e.object_id, e.category, e.n_parts) for e in cat] == [("Bowl_b2_fractured_4", "bowl", 2), ("Cup_c1_fractured_0", "cup", 3)]
+    assert [(e.object_id, e.category, e.n_parts) for e in cat] == [
+        ("Bowl_b2_fractured_4", "bowl", 2),
+        ("Cup_c1_fractured_0", "cup", 3),
+    ]
     obj = breaking_bad.load_hdf5_object(*cat[1].args)
     assert [p.name for p in obj.parts] == ["piece_0", "piece_1", "piece_2"]
     for part, piece in zip(obj.parts, fractured_box(3)):
         assert np.array_equal(part.mesh.vertices, piece.vertices) and np.array_equal(part.mesh.faces, piece.faces)
 
 
-@pytest.mark.parametrize("field, data, message", [
-    ("vertices", np.zeros((8, 2)), r"pieces/1.vertices: expected shape \(n, 3\), got \(8, 2\)"),
-    ("vertices", np.full((8, 3), np.inf), r"pieces/1.vertices: 8 non-finite vertices"),
-    ("faces", np.array([[0, 1, 2, 3]]), r"pieces/1.faces: expected triangles of shape \(m, 3\), got \(1, 4\) \(polygon faces\)"),
-    ("faces", np.array([[0, 1, 99]]), r"pieces/1.faces: vertex index out of range"),
-])
+@pytest.mark.parametrize(
+    "field, data, message",
+    [
+        ("vertices", np.zeros((8, 2)), r"pieces/1.vertices: expected shape \(n, 3\), got \(8, 2\)"),
+        ("vertices", np.full((8, 3), np.inf), r"pieces/1.vertices: 8 non-finite vertices"),
+        (
+            "faces",
+            np.array([[0, 1, 2, 3]]),
+            r"pieces/1.faces: expected triangles of shape \(m, 3\), got \(1, 4\) \(polygon faces\)",
+        ),
+        ("faces", np.array([[0, 1, 99]]), r"pieces/1.faces: vertex index out of range"),
+    ],
+)
 def test_malformed_hdf5(tmp_path, field, data, message):
     import h5py
 

@@ -7,14 +7,13 @@ import random
 from collections import Counter
 
 import pytest
+from dataset_fixtures import assemblybench_object, fantastic_breaks_dataset, ikea_dataset, partnet_dataset
 from PIL import Image
 
 from aw.cli.prepare import main
 from aw.formats import read_manifest, read_targets, read_task
 from aw.formats.suite import suite_paths
 from aw.sources.compose import BANDS, CatalogEntry, allocate, band_of, compose, sample_source, specs_for
-
-from dataset_fixtures import assemblybench_object, fantastic_breaks_dataset, ikea_dataset, partnet_dataset
 
 
 def _catalog(source, spec):
@@ -27,24 +26,48 @@ def _catalog(source, spec):
 
 
 def test_bands():
-    assert [band_of(n) for n in (1, 2, 5, 6, 10, 11, 20, 21)] == [None, "2-5", "2-5", "6-10", "6-10", "11-20", "11-20", None]
+    assert [band_of(n) for n in (1, 2, 5, 6, 10, 11, 20, 21)] == [
+        None,
+        "2-5",
+        "2-5",
+        "6-10",
+        "6-10",
+        "11-20",
+        "11-20",
+        None,
+    ]
     assert [b[0] for b in BANDS] == ["2-5", "6-10", "11-20"]
 
 
-@pytest.mark.parametrize("n, available, want", [
-    (20, {"a": 50, "b": 50, "c": 50}, {"a": 7, "b": 7, "c": 6}),
-    (20, {"a": 50, "b": 3, "c": 50}, {"a": 9, "b": 3, "c": 8}),
-    (20, {"a": 2, "b": 0, "c": 4}, {"a": 2, "b": 0, "c": 4}),
-    (3, {"a": 1, "b": 5, "c": 5}, {"a": 1, "b": 1, "c": 1}),
-    (2, {"a": 1, "b": 5, "c": 4}, {"a": 0, "b": 1, "c": 1}),
-])
+@pytest.mark.parametrize(
+    "n, available, want",
+    [
+        (20, {"a": 50, "b": 50, "c": 50}, {"a": 7, "b": 7, "c": 6}),
+        (20, {"a": 50, "b": 3, "c": 50}, {"a": 9, "b": 3, "c": 8}),
+        (20, {"a": 2, "b": 0, "c": 4}, {"a": 2, "b": 0, "c": 4}),
+        (3, {"a": 1, "b": 5, "c": 5}, {"a": 1, "b": 1, "c": 1}),
+        (2, {"a": 1, "b": 5, "c": 4}, {"a": 0, "b": 1, "c": 1}),
+    ],
+)
 def test_allocate(n, available, want):
     assert allocate(n, available) == want
 
 
 def test_stratified_counts_and_category_coverage():
-    cat = _catalog("partnet", {("chair", 3): 30, ("chair", 8): 30, ("chair", 15): 30, ("table", 4): 30, ("table", 9): 10,
-                               ("table", 14): 2, ("storage", 12): 5, ("chair", 25): 9, ("table", 1): 4})
+    cat = _catalog(
+        "partnet",
+        {
+            ("chair", 3): 30,
+            ("chair", 8): 30,
+            ("chair", 15): 30,
+            ("table", 4): 30,
+            ("table", 9): 10,
+            ("table", 14): 2,
+            ("storage", 12): 5,
+            ("chair", 25): 9,
+            ("table", 1): 4,
+        },
+    )
     chosen = sample_source(cat, 20, seed=0)
     assert len(chosen) == 20 and len({e.object_id for e in chosen}) == 20
     bands = Counter(band_of(e.n_parts) for e in chosen)
@@ -56,7 +79,11 @@ def test_stratified_counts_and_category_coverage():
     assert abs(per_band_cat[("2-5", "chair")] - per_band_cat[("2-5", "table")]) == 1
     assert per_band_cat[("6-10", "chair")] + per_band_cat[("6-10", "table")] == 7
     assert abs(per_band_cat[("6-10", "chair")] - per_band_cat[("6-10", "table")]) == 1
-    assert per_band_cat[("11-20", "chair")] == 2 and per_band_cat[("11-20", "table")] == 2 and per_band_cat[("11-20", "storage")] == 2
+    assert (
+        per_band_cat[("11-20", "chair")] == 2
+        and per_band_cat[("11-20", "table")] == 2
+        and per_band_cat[("11-20", "storage")] == 2
+    )
     # deterministic, independent of catalog order; another seed draws other objects
     shuffled = list(cat)
     random.Random(5).shuffle(shuffled)
@@ -66,8 +93,20 @@ def test_stratified_counts_and_category_coverage():
 
 def test_category_coverage_across_bands():
     # one object per band; categories a, b, c: each band's single draw goes to a category not yet taken
-    cat = _catalog("ikea_manual", {("a", 3): 5, ("b", 3): 5, ("c", 3): 5, ("a", 7): 5, ("b", 7): 5, ("c", 7): 5,
-                                   ("a", 13): 5, ("b", 13): 5, ("c", 13): 5})
+    cat = _catalog(
+        "ikea_manual",
+        {
+            ("a", 3): 5,
+            ("b", 3): 5,
+            ("c", 3): 5,
+            ("a", 7): 5,
+            ("b", 7): 5,
+            ("c", 7): 5,
+            ("a", 13): 5,
+            ("b", 13): 5,
+            ("c", 13): 5,
+        },
+    )
     for seed in range(6):
         chosen = sample_source(cat, 3, seed=seed)
         assert sorted(e.category for e in chosen) == ["a", "b", "c"]
@@ -84,7 +123,14 @@ def test_fantastic_breaks_by_category_only():
 
 
 def test_composition_specs():
-    comp = compose({"partnet": _catalog("partnet", {("chair", 4): 3}), "assemblybench": _catalog("assemblybench", {("gear", 5): 2})}, 2, seed=0)
+    comp = compose(
+        {
+            "partnet": _catalog("partnet", {("chair", 4): 3}),
+            "assemblybench": _catalog("assemblybench", {("gear", 5): 2}),
+        },
+        2,
+        seed=0,
+    )
     specs, sources = specs_for(comp)
     assert sources == ["partnet", "partnet", "assemblybench", "assemblybench"]
     assert [s.conditions for s in specs] == [("none", "image")] * 2 + [("manual",)] * 2
@@ -96,7 +142,9 @@ def test_composition_specs():
 @pytest.fixture
 def datasets(tmp_path):
     root = tmp_path / "data"
-    partnet_dataset(root / "pn", {"Chair": [("11", 3), ("12", 7), ("13", 12)], "Table": [("21", 4), ("22", 8)]}, pages=2)
+    partnet_dataset(
+        root / "pn", {"Chair": [("11", 3), ("12", 7), ("13", 12)], "Table": [("21", 4), ("22", 8)]}, pages=2
+    )
     ikea_dataset(root / "ik", [("Chair", "a", 3), ("Table", "b", 6), ("Bench", "c", 4)], pages=3)
     assemblybench_object(root / "ab", "gear", "g1", 3)
     assemblybench_object(root / "ab", "valve", "v1", 4)
@@ -105,9 +153,27 @@ def datasets(tmp_path):
 
 
 def _args(root, out, *extra):
-    return ["compose", "--out", str(out), "--partnet", str(root / "pn"), "--ikea-manual", str(root / "ik"),
-            "--assemblybench", str(root / "ab"), "--fantastic-breaks", str(root / "fb"), "--per-source", "2",
-            "--jobs", "1", "--no-progress", "--protocol", "native", *extra]
+    return [
+        "compose",
+        "--out",
+        str(out),
+        "--partnet",
+        str(root / "pn"),
+        "--ikea-manual",
+        str(root / "ik"),
+        "--assemblybench",
+        str(root / "ab"),
+        "--fantastic-breaks",
+        str(root / "fb"),
+        "--per-source",
+        "2",
+        "--jobs",
+        "1",
+        "--no-progress",
+        "--protocol",
+        "native",
+        *extra,
+    ]
 
 
 def test_compose_cli_builds_the_benchmark(datasets, tmp_path, capsys):
@@ -124,7 +190,9 @@ def test_compose_cli_builds_the_benchmark(datasets, tmp_path, capsys):
     # PartNet objects twice, identical geometry, layout and targets; image = the final page
     pn_tasks = [t for t in manifest.tasks if t.source == "partnet"]
     for object_id in {t.object_id for t in pn_tasks}:
-        none_t, image_t = (next(t for t in pn_tasks if t.object_id == object_id and t.condition == c) for c in ("none", "image"))
+        none_t, image_t = (
+            next(t for t in pn_tasks if t.object_id == object_id and t.condition == c) for c in ("none", "image")
+        )
         (nd, nt), (idir, it) = suite_paths(out, none_t.task_id), suite_paths(out, image_t.task_id)
         assert read_targets(nt).parts == read_targets(it).parts
         for f in (nd / "parts").iterdir():
@@ -155,7 +223,7 @@ def test_compose_cli_dry_run_and_errors(datasets, tmp_path, capsys):
     assert '"per_source": 2' in capsys.readouterr().out
     assert main(["compose", "--out", str(tmp_path / "x")]) == 2  # a usage error
     assert "no dataset given" in capsys.readouterr().err
-    (datasets / "ik" / "main_data.json").write_text("[{\"name\": \"a\"}]")
+    (datasets / "ik" / "main_data.json").write_text('[{"name": "a"}]')
     assert main(_args(datasets, tmp_path / "y")) == 1
     assert "main_data.json: [0].category: missing" in capsys.readouterr().err
 
@@ -163,16 +231,42 @@ def test_compose_cli_dry_run_and_errors(datasets, tmp_path, capsys):
 def test_compose_cli_rehosted_rows_join_their_source(tmp_path):
     from dataset_fixtures import rehosted_row, write_rehosted
 
-    write_rehosted(tmp_path / "dl" / "a.parquet", [rehosted_row("c1", "PartNet", "Chair", 4, pages=2),
-                                                     rehosted_row("c2", "partnet", "Table", 7, pages=2),
-                                                     rehosted_row("m1", "fantastic_breaks", "Mug", 2, pages=0)])
+    write_rehosted(
+        tmp_path / "dl" / "a.parquet",
+        [
+            rehosted_row("c1", "PartNet", "Chair", 4, pages=2),
+            rehosted_row("c2", "partnet", "Table", 7, pages=2),
+            rehosted_row("m1", "fantastic_breaks", "Mug", 2, pages=0),
+        ],
+    )
     out = tmp_path / "suite"
-    assert main(["compose", "--out", str(out), "--rehosted", str(tmp_path / "dl"), "--per-source", "5", "--jobs", "1", "--no-progress",
-                 "--protocol", "native"]) == 0
+    assert (
+        main(
+            [
+                "compose",
+                "--out",
+                str(out),
+                "--rehosted",
+                str(tmp_path / "dl"),
+                "--per-source",
+                "5",
+                "--jobs",
+                "1",
+                "--no-progress",
+                "--protocol",
+                "native",
+            ]
+        )
+        == 0
+    )
     tasks = read_manifest(out).tasks
     assert sorted((t.source, t.object_id, t.condition) for t in tasks) == [
-        ("fantastic_breaks", "m1", "none"), ("partnet", "c1", "image"), ("partnet", "c1", "none"),
-        ("partnet", "c2", "image"), ("partnet", "c2", "none")]
+        ("fantastic_breaks", "m1", "none"),
+        ("partnet", "c1", "image"),
+        ("partnet", "c1", "none"),
+        ("partnet", "c2", "image"),
+        ("partnet", "c2", "none"),
+    ]
     image = next(t for t in tasks if t.object_id == "c1" and t.condition == "image")
     ref = Image.open(suite_paths(out, image.task_id)[0] / "references" / "01.png")
     assert ref.getpixel((0, 0)) == (0, 0, 40)  # the final page (page 1 of 0..1)

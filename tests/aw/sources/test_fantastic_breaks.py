@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from dataset_fixtures import fantastic_breaks_dataset, fractured_box
+from roundtrip import oracle_roundtrip
 
 from aw.formats import FormatError
 from aw.sources import fantastic_breaks
-
-from dataset_fixtures import fantastic_breaks_dataset, fractured_box
-from roundtrip import oracle_roundtrip
 
 
 @pytest.fixture
@@ -19,7 +18,11 @@ def root(tmp_path):
 
 def test_load_and_catalog(root):
     cat = fantastic_breaks.catalog(root)
-    assert [(e.object_id, e.category, e.n_parts) for e in cat] == [("mug_mug_01", "mug", 2), ("mug_mug_03", "mug", 2), ("plate_p1", "plate", 2)]
+    assert [(e.object_id, e.category, e.n_parts) for e in cat] == [
+        ("mug_mug_01", "mug", 2),
+        ("mug_mug_03", "mug", 2),
+        ("plate_p1", "plate", 2),
+    ]
     obj = fantastic_breaks.load_object(*cat[0].args)
     assert (obj.source, obj.category) == ("fantastic_breaks", "mug") and not obj.references
     assert [p.name for p in obj.parts] == ["broken", "restoration"]
@@ -36,9 +39,11 @@ def test_malformed(root):
     with pytest.raises(FormatError, match=r"meta_0.npz: cannot be read as .npz"):
         fantastic_breaks.load_object(root, "Plate/p1")
     (d / "meta_0.npz").unlink()
-    (d / "model_r_0.ply").write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-                                     "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
-                                     "0 0 0\n1 0 nan\n0 1 0\n3 0 1 2\n")
+    (d / "model_r_0.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        "0 0 0\n1 0 nan\n0 1 0\n3 0 1 2\n"
+    )
     with pytest.raises(FormatError, match="non-finite") as exc:
         fantastic_breaks.load_object(root, "Plate/p1")
     assert "model_r_0.ply" in str(exc.value)

@@ -34,21 +34,33 @@ def make_chair(root, name="chair", meta=None, suffix=".obj"):
 @pytest.fixture
 def src(tmp_path):
     root = tmp_path / "objects"
-    make_chair(root, "a_chair", meta={
-        "category": "chair", "source": "partnet", "conditions": ["none", "image"],
-        "equivalence": [["leg1", "leg2", "leg3", "leg4"]], "steps": [["leg1", "leg2", "leg3", "leg4"], ["seat", "back"]],
-    })
+    make_chair(
+        root,
+        "a_chair",
+        meta={
+            "category": "chair",
+            "source": "partnet",
+            "conditions": ["none", "image"],
+            "equivalence": [["leg1", "leg2", "leg3", "leg4"]],
+            "steps": [["leg1", "leg2", "leg3", "leg4"], ["seat", "back"]],
+        },
+    )
     make_chair(root, "c_chair", meta={"condition": "manual"})
     d = make_chair(root, "b_chair", suffix=".ply")
     Image.new("RGB", (20, 10), (9, 9, 9)).save(d / "photo.png")
-    (d / "meta.json").write_text(json.dumps({"object_id": "chair-b", "references": {"image": ["photo.png"]}, "up_axis": "y"}))
+    (d / "meta.json").write_text(
+        json.dumps({"object_id": "chair-b", "references": {"image": ["photo.png"]}, "up_axis": "y"})
+    )
     return root
 
 
 def test_scan_and_load(src):
     found = scan_folder(src)
     assert [(f.object_id, f.conditions) for f in found] == [
-        ("a_chair", ["none", "image"]), ("chair-b", ["image"]), ("c_chair", ["manual"])]
+        ("a_chair", ["none", "image"]),
+        ("chair-b", ["image"]),
+        ("c_chair", ["manual"]),
+    ]
     a = load_object(found[0].path)
     assert a.source == "partnet" and a.category == "chair" and a.dataset == "folder"
     assert sorted(p.name for p in a.parts) == ["back", "leg1", "leg2", "leg3", "leg4", "seat"]

@@ -6,12 +6,11 @@ import json
 
 import numpy as np
 import pytest
+from dataset_fixtures import box, chair_boxes, ikea_dataset
+from roundtrip import oracle_roundtrip
 
 from aw.formats import FormatError
 from aw.sources import ikea_manual
-
-from dataset_fixtures import box, chair_boxes, ikea_dataset
-from roundtrip import oracle_roundtrip
 
 
 @pytest.fixture
@@ -21,7 +20,12 @@ def root(tmp_path):
 
 def test_load_object(root):
     obj = ikea_manual.load_object(root, "Chair/applaro")
-    assert (obj.source, obj.dataset, obj.category, obj.object_id) == ("ikea_manual", "ikea_manual", "chair", "chair_applaro")
+    assert (obj.source, obj.dataset, obj.category, obj.object_id) == (
+        "ikea_manual",
+        "ikea_manual",
+        "chair",
+        "chair_applaro",
+    )
     assert [p.name for p in obj.parts] == ["0", "1", "2", "3", "4"]
     # Y-up files came out Z-up: each part sits where the Z-up chair has it
     for part, (size, centre) in zip(obj.parts, chair_boxes(3)):
@@ -48,7 +52,10 @@ def test_pages_in_natural_order_and_missing_pages(root):
 
 def test_catalog(root):
     cat = ikea_manual.catalog(root)
-    assert [(e.object_id, e.category, e.n_parts) for e in cat] == [("chair_applaro", "chair", 5), ("table_lack", "table", 3)]
+    assert [(e.object_id, e.category, e.n_parts) for e in cat] == [
+        ("chair_applaro", "chair", 5),
+        ("table_lack", "table", 3),
+    ]
     assert ikea_manual.load_object(*cat[1].args).n_parts == 3
 
 
@@ -60,14 +67,20 @@ def _edit(root, fn):
     return path
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda d: d[0].update(parts_ct=7), r"part meshes \['5', '6'\] missing"),
-    (lambda d: d[0].update(parts_ct=4), r"mesh files \['4'\] are not parts 0..3"),
-    (lambda d: d[0].update(parts_ct="5"), r"main_data.json: \[0\].parts_ct: expected a positive integer"),
-    (lambda d: d[0].update(geometric_equivalence_relation=[["2", "9"]]), r"\[0\].geometric_equivalence_relation\[0\]: unknown part ids \['9'\]"),
-    (lambda d: d[0]["steps"].append({"parts": ["12"]}), r"\[0\].steps\[2\].parts: unknown part ids \['12'\]"),
-    (lambda d: d[0].pop("name"), r"\[0\].name: missing"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda d: d[0].update(parts_ct=7), r"part meshes \['5', '6'\] missing"),
+        (lambda d: d[0].update(parts_ct=4), r"mesh files \['4'\] are not parts 0..3"),
+        (lambda d: d[0].update(parts_ct="5"), r"main_data.json: \[0\].parts_ct: expected a positive integer"),
+        (
+            lambda d: d[0].update(geometric_equivalence_relation=[["2", "9"]]),
+            r"\[0\].geometric_equivalence_relation\[0\]: unknown part ids \['9'\]",
+        ),
+        (lambda d: d[0]["steps"].append({"parts": ["12"]}), r"\[0\].steps\[2\].parts: unknown part ids \['12'\]"),
+        (lambda d: d[0].pop("name"), r"\[0\].name: missing"),
+    ],
+)
 def test_malformed_main_data(root, edit, message):
     _edit(root, edit)
     with pytest.raises(FormatError, match=message):

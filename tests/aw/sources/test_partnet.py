@@ -6,12 +6,11 @@ import os
 
 import numpy as np
 import pytest
+from dataset_fixtures import partnet_dataset, partnet_shape
+from roundtrip import oracle_roundtrip
 
 from aw.formats import FormatError
 from aw.sources import partnet
-
-from dataset_fixtures import partnet_dataset, partnet_shape
-from roundtrip import oracle_roundtrip
 
 
 def _close(a, b, tol=1e-6):
@@ -48,7 +47,11 @@ def test_catalog_reads_split_lists(tmp_path):
     root = partnet_dataset(tmp_path / "pn", {"Chair": [("11", 3), ("12", 7)], "StorageFurniture": [("31", 12)]})
     (root / "Chair.train.npy").write_bytes((root / "Chair.test.npy").read_bytes())
     cat = partnet.catalog(root)
-    assert [(e.object_id, e.category, e.n_parts) for e in cat] == [("11", "chair", 3), ("12", "chair", 7), ("31", "storage", 12)]
+    assert [(e.object_id, e.category, e.n_parts) for e in cat] == [
+        ("11", "chair", 3),
+        ("12", "chair", 7),
+        ("31", "storage", 12),
+    ]
     obj = partnet.load_object(*cat[2].args)
     assert obj.category == "storage" and obj.n_parts == 12
     assert [e.object_id for e in partnet.catalog(root, categories=["storage"])] == ["31"]
@@ -74,13 +77,16 @@ def _write(tmp_path, **changes):
     return tmp_path / "shape_data" / "9_level3.npy"
 
 
-@pytest.mark.parametrize("changes, field", [
-    ({"part_pcs": np.zeros((3, 10, 2))}, "part_pcs: expected shape"),
-    ({"part_poses": np.zeros((3, 6))}, "part_poses: expected shape (3, 7)"),
-    ({"part_poses": np.tile([0, 0, 0, 0, 0, 0, 0.0], (3, 1))}, "part_poses: zero quaternion"),
-    ({"geo_part_ids": np.array([1, 2])}, "geo_part_ids: expected 3 entries"),
-    ({"part_pcs": None}, "part_pcs: missing"),
-])
+@pytest.mark.parametrize(
+    "changes, field",
+    [
+        ({"part_pcs": np.zeros((3, 10, 2))}, "part_pcs: expected shape"),
+        ({"part_poses": np.zeros((3, 6))}, "part_poses: expected shape (3, 7)"),
+        ({"part_poses": np.tile([0, 0, 0, 0, 0, 0, 0.0], (3, 1))}, "part_poses: zero quaternion"),
+        ({"geo_part_ids": np.array([1, 2])}, "geo_part_ids: expected 3 entries"),
+        ({"part_pcs": None}, "part_pcs: missing"),
+    ],
+)
 def test_malformed_shape_files(tmp_path, changes, field):
     path = _write(tmp_path, **changes)
     with pytest.raises(FormatError) as exc:

@@ -4,31 +4,44 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from dataset_fixtures import box, chair_boxes, png_bytes, quad_box, rehosted_row, write_rehosted
+from roundtrip import oracle_roundtrip
 
 from aw.formats import FormatError
 from aw.sources import rehosted
 from aw.sources.meshdata import triangulate_polygons
 
-from dataset_fixtures import box, chair_boxes, png_bytes, quad_box, rehosted_row, write_rehosted
-from roundtrip import oracle_roundtrip
-
 
 @pytest.fixture
 def download(tmp_path):
     root = tmp_path / "dl"
-    write_rehosted(root / "data" / "partnet-00000-of-00002.parquet",
-                   [rehosted_row("chair_1", "PartNet", "Chair", 6, pages=3), rehosted_row("t2", "IKEA-Manual", "Table", 3, up_axis="y")],
-                   row_group_size=1)
-    write_rehosted(root / "data" / "partnet-00001-of-00002.arrow", [rehosted_row("g3", "assemblybench", "Gear", 4)], fmt="arrow-file")
-    write_rehosted(root / "data" / "z.arrow", [rehosted_row("f4", "fantastic_breaks", "Mug", 2, pages=0)], fmt="arrow-stream")
+    write_rehosted(
+        root / "data" / "partnet-00000-of-00002.parquet",
+        [
+            rehosted_row("chair_1", "PartNet", "Chair", 6, pages=3),
+            rehosted_row("t2", "IKEA-Manual", "Table", 3, up_axis="y"),
+        ],
+        row_group_size=1,
+    )
+    write_rehosted(
+        root / "data" / "partnet-00001-of-00002.arrow",
+        [rehosted_row("g3", "assemblybench", "Gear", 4)],
+        fmt="arrow-file",
+    )
+    write_rehosted(
+        root / "data" / "z.arrow", [rehosted_row("f4", "fantastic_breaks", "Mug", 2, pages=0)], fmt="arrow-stream"
+    )
     return root
 
 
 def test_catalog_and_rows(download):
     cat = rehosted.catalog(download)
     assert [(e.source, e.object_id, e.category, e.n_parts) for e in cat] == [
-        ("partnet", "chair_1", "chair", 6), ("ikea_manual", "t2", "table", 3),
-        ("assemblybench", "g3", "gear", 4), ("fantastic_breaks", "f4", "mug", 2)]
+        ("partnet", "chair_1", "chair", 6),
+        ("ikea_manual", "t2", "table", 3),
+        ("assemblybench", "g3", "gear", 4),
+        ("fantastic_breaks", "f4", "mug", 2),
+    ]
     objs = [rehosted.load_row(*e.args) for e in cat]
     chair = objs[0]
     assert chair.source == "partnet" and chair.dataset == "rehosted:partnet"
@@ -70,15 +83,27 @@ def _bad_row(**changes):
     return row
 
 
-@pytest.mark.parametrize("changes, message", [
-    ({"part1_faces": [[0, 1, 3, 2], [4, 6]]}, r"row 0.parts\[1\].faces\[1\]: a face needs at least 3 vertices, got 2"),
-    ({"part1_faces": [[0, 1]] * 6}, r"row 0.parts\[1\].faces: expected faces of at least 3 vertices, got shape \(6, 2\)"),
-    ({"part1_faces": [[0, 1, 2, 42]]}, r"row 0.parts\[1\].faces: vertex index out of range"),
-    ({"part1_vertices": [[0.0, 1.0]] * 8}, r"row 0.parts\[1\].vertices: expected shape \(n, 3\), got \(8, 2\)"),
-    ({"part1_vertices": [[0.0, float("nan"), 1.0]] * 8}, r"row 0.parts\[1\].vertices: 8 non-finite vertices"),
-    ({"parts_ct": 4}, r"row 0.parts_ct: says 4 but the row has 3 parts"),
-    ({"geometric_equivalence_relation": [["2", "7"]]}, r"row 0.geometric_equivalence_relation\[0\]: unknown part ids \['7'\]"),
-])
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        (
+            {"part1_faces": [[0, 1, 3, 2], [4, 6]]},
+            r"row 0.parts\[1\].faces\[1\]: a face needs at least 3 vertices, got 2",
+        ),
+        (
+            {"part1_faces": [[0, 1]] * 6},
+            r"row 0.parts\[1\].faces: expected faces of at least 3 vertices, got shape \(6, 2\)",
+        ),
+        ({"part1_faces": [[0, 1, 2, 42]]}, r"row 0.parts\[1\].faces: vertex index out of range"),
+        ({"part1_vertices": [[0.0, 1.0]] * 8}, r"row 0.parts\[1\].vertices: expected shape \(n, 3\), got \(8, 2\)"),
+        ({"part1_vertices": [[0.0, float("nan"), 1.0]] * 8}, r"row 0.parts\[1\].vertices: 8 non-finite vertices"),
+        ({"parts_ct": 4}, r"row 0.parts_ct: says 4 but the row has 3 parts"),
+        (
+            {"geometric_equivalence_relation": [["2", "7"]]},
+            r"row 0.geometric_equivalence_relation\[0\]: unknown part ids \['7'\]",
+        ),
+    ],
+)
 def test_malformed_rows(tmp_path, changes, message):
     path = write_rehosted(tmp_path / "bad.parquet", [_bad_row(**changes)])
     with pytest.raises(FormatError, match=message) as exc:
@@ -113,15 +138,28 @@ def _official_assemblybench_row():
     """A row in the official AssemblyBench schema: local part meshes, view/step poses, diagrams."""
     v, f = quad_box((0.2, 0.1, 0.05), (0, 0, 0))
     turn = [0.9238795325112867, 0.0, 0.0, 0.3826834323650898]  # 45 degrees about Z
-    pages = [{"kind": "diagram", "view_id": v_id, "step_id": step, "image": {"bytes": png_bytes((step, int(v_id), 9)), "path": None}}
-             for step in (1, 2) for v_id in ("0", "1")] + [{"kind": "photo", "view_id": "0", "step_id": 2,
-                                                            "image": {"bytes": png_bytes((1, 1, 1)), "path": None}}]
+    pages = [
+        {
+            "kind": "diagram",
+            "view_id": v_id,
+            "step_id": step,
+            "image": {"bytes": png_bytes((step, int(v_id), 9)), "path": None},
+        }
+        for step in (1, 2)
+        for v_id in ("0", "1")
+    ] + [{"kind": "photo", "view_id": "0", "step_id": 2, "image": {"bytes": png_bytes((1, 1, 1)), "path": None}}]
     return {
-        "object_id": "gearbox_7", "parts_ct": 2, "steps": [{"step_id": 1}, {"step_id": 2}],
+        "object_id": "gearbox_7",
+        "parts_ct": 2,
+        "steps": [{"step_id": 1}, {"step_id": 2}],
         "parts": [{"part_id": "a", "vertices": v, "faces": f}, {"part_id": "b", "vertices": v, "faces": f}],
-        "poses": {"0": {"1": {"a": [0, 0, 0, 1, 0, 0, 0], "b": None},
-                        "2": {"a": [0, 0, 0, 1, 0, 0, 0], "b": [0.3, 0.0, 0.0, *turn]}},
-                  "1": {"2": {"a": [9, 9, 9, 1, 0, 0, 0], "b": [9, 9, 9, 1, 0, 0, 0]}}},
+        "poses": {
+            "0": {
+                "1": {"a": [0, 0, 0, 1, 0, 0, 0], "b": None},
+                "2": {"a": [0, 0, 0, 1, 0, 0, 0], "b": [0.3, 0.0, 0.0, *turn]},
+            },
+            "1": {"2": {"a": [9, 9, 9, 1, 0, 0, 0], "b": [9, 9, 9, 1, 0, 0, 0]}},
+        },
         "manual_pages": pages,
     }
 
@@ -129,8 +167,9 @@ def _official_assemblybench_row():
 def test_official_rows_source_from_path_poses_and_diagrams(tmp_path):
     from aw.prepare.official_task import official_sample
 
-    path = write_rehosted(tmp_path / "datasets--AssemblyWorld--assemblybench" / "data" / "test.parquet",
-                          [_official_assemblybench_row()])
+    path = write_rehosted(
+        tmp_path / "datasets--AssemblyWorld--assemblybench" / "data" / "test.parquet", [_official_assemblybench_row()]
+    )
     (entry,) = rehosted.catalog(tmp_path / "datasets--AssemblyWorld--assemblybench")
     assert (entry.source, entry.object_id) == ("assemblybench", "gearbox_7")
     obj = rehosted.load_row(*entry.args)
@@ -142,7 +181,9 @@ def test_official_rows_source_from_path_poses_and_diagrams(tmp_path):
     official = official_sample(obj)
     assert official.dataset == "AssemblyWorld/assemblybench" and official.sample_id == "gearbox_7"
     part_b = official.parts[1]
-    assert np.array_equal(part_b.vertices, np.asarray(_official_assemblybench_row()["parts"][1]["vertices"], dtype=float))
+    assert np.array_equal(
+        part_b.vertices, np.asarray(_official_assemblybench_row()["parts"][1]["vertices"], dtype=float)
+    )
     assert np.allclose(part_b.pose, [0.3, 0, 0, 0.9238795325112867, 0, 0, 0.3826834323650898])
     assert rehosted.source_of_download(tmp_path / "ikea-manual" / "x.parquet") == "ikea_manual"
     assert rehosted.category_of(None, "Bench/applaro") == "bench" and rehosted.category_of("Chair", "x/y") == "chair"

@@ -31,7 +31,9 @@ def test_part_counts_follow_the_bands(blocks):
         if block != "fantastic_breaks":
             counts = [o.n_parts for o in objs]
             assert min(counts) <= 5 and max(counts) >= 11
-            assert len({o.category for o in objs}) == len(BLOCKS[block].categories) or len(objs) < len(BLOCKS[block].categories)
+            assert len({o.category for o in objs}) == len(BLOCKS[block].categories) or len(objs) < len(
+                BLOCKS[block].categories
+            )
 
 
 def test_every_category_meets_every_band():

@@ -87,7 +87,9 @@ def test_objects_without_upright_members_or_that_would_fall_keep_z():
 def test_a_bar_broken_in_two_lying_along_y_keeps_z():
     halves = [_box((0.04, 0.3, 0.04), (0, -0.15, 0.02)), _box((0.04, 0.3, 0.04), (0, 0.15, 0.02))]
     got = guess_up_axis(halves)
-    assert got.axis == "z" and got.reason == "2 parts stand along Y, 0 along Z, but end to end, not side by side; kept Z"
+    assert (
+        got.axis == "z" and got.reason == "2 parts stand along Y, 0 along Z, but end to end, not side by side; kept Z"
+    )
 
 
 def test_the_synthetic_benchmark_objects_all_keep_z():
@@ -107,7 +109,9 @@ def test_load_object_turns_y_up_upright_and_respects_overrides(tmp_path):
     np.testing.assert_allclose(ext, [W, W, H], atol=2e-3)  # standing: 0.094 tall
     forced = load_object(d, up_axis="z")
     assert forced.meta["up_axis"] == {"axis": "z", "how": "--up-axis"}
-    np.testing.assert_allclose(np.ptp(np.concatenate([p.mesh.vertices for p in forced.parts]), axis=0), [W, H, W], atol=2e-3)
+    np.testing.assert_allclose(
+        np.ptp(np.concatenate([p.mesh.vertices for p in forced.parts]), axis=0), [W, H, W], atol=2e-3
+    )
     m = write_object(tmp_path, "stool-meta", y_up_stool(), meta={"up_axis": "z"})
     assert load_object(m, up_axis="y").meta["up_axis"] == {"axis": "z", "how": "meta.json up_axis"}
     a = write_object(tmp_path, "stool-auto", y_up_stool(), meta={"up_axis": "auto"})
@@ -130,10 +134,18 @@ def test_aw_prepare_folder_stands_y_up_furniture_and_says_so(tmp_path, capsys):
     for t in read_manifest(out).tasks:  # every assembled target stands 0.094 tall, 0.163 wide
         task_dir, targets_path = suite_paths(out, t.task_id)
         task, targets = read_task(task_dir), read_targets(targets_path)
-        v = np.concatenate([apply_pose(np.asarray(targets.parts[p.id].pose), m.vertices)
-                            for p, m in zip(task.parts, load_task_meshes(task))])
+        v = np.concatenate(
+            [
+                apply_pose(np.asarray(targets.parts[p.id].pose), m.vertices)
+                for p, m in zip(task.parts, load_task_meshes(task))
+            ]
+        )
         ext = np.ptp(v, axis=0)
-        assert ext[2] == pytest.approx(ext[0] * H / W, rel=0.03) and ext[1] == pytest.approx(ext[0], rel=0.03), t.task_id
-    assert main(["folder", str(src), "--out", str(tmp_path / "lying"), "--up-axis", "z", "--jobs", "1",
-                 "--no-progress"]) == 0
+        assert ext[2] == pytest.approx(ext[0] * H / W, rel=0.03) and ext[1] == pytest.approx(ext[0], rel=0.03), (
+            t.task_id
+        )
+    assert (
+        main(["folder", str(src), "--out", str(tmp_path / "lying"), "--up-axis", "z", "--jobs", "1", "--no-progress"])
+        == 0
+    )
     assert "stool: up axis Z (--up-axis)" in capsys.readouterr().err

@@ -54,12 +54,22 @@ def test_missing_runs_count_zero_and_scd_uses_scored_attempts_only():
 
 def test_resources_are_arithmetic_means_over_available_records():
     entries = paper_entries(n_objects=1)
-    runs = {("A", e.task_id): run_from_errors("A", e.task_id, [0.0], end_t=600.0, call_t=np.arange(5.0))
-            for e in entries}
-    infos = {("A", entries[0].task_id): RunInfo(system="A", task_id=entries[0].task_id, wall_seconds=120.0, mcp_calls=10,
-                                                tokens=TokenUsage(input=1_000_000, output=500_000), cost_usd=3.0),
-             ("A", entries[1].task_id): RunInfo(system="A", task_id=entries[1].task_id, ended="timeout",
-                                                tokens=TokenUsage(total=2_500_000), cost_usd=1.0)}
+    runs = {
+        ("A", e.task_id): run_from_errors("A", e.task_id, [0.0], end_t=600.0, call_t=np.arange(5.0)) for e in entries
+    }
+    infos = {
+        ("A", entries[0].task_id): RunInfo(
+            system="A",
+            task_id=entries[0].task_id,
+            wall_seconds=120.0,
+            mcp_calls=10,
+            tokens=TokenUsage(input=1_000_000, output=500_000),
+            cost_usd=3.0,
+        ),
+        ("A", entries[1].task_id): RunInfo(
+            system="A", task_id=entries[1].task_id, ended="timeout", tokens=TokenUsage(total=2_500_000), cost_usd=1.0
+        ),
+    }
     study = make_study(entries, runs, infos)
     r = resources(study)["A"]
     # time: 2 min from run.json, the other 4 tasks from the trajectory (10 min)
@@ -74,8 +84,17 @@ def test_resources_are_arithmetic_means_over_available_records():
 def test_a_suite_of_variants_only_still_reports():
     from aw.formats import SuiteEntry
 
-    e = [SuiteEntry(task_id="v", source="partnet", condition="none", object_id="o", n_parts=2, variant="layout",
-                    base_task_id="absent")]
+    e = [
+        SuiteEntry(
+            task_id="v",
+            source="partnet",
+            condition="none",
+            object_id="o",
+            n_parts=2,
+            variant="layout",
+            base_task_id="absent",
+        )
+    ]
     study = make_study(e, {("A", "v"): run_from_errors("A", "v", [0.0, 0.0])})
     doc = build_results(study, AnalysisSettings(n_draws=10, n_permutations=10))
     md = render_markdown(doc)
@@ -90,6 +109,10 @@ def test_bold_marks_only_a_real_best_among_systems_that_achieved_something():
     assert bold_best(["5"], [5.0]) == ["5"]  # one system: no best
     assert bold_best(["2", "9"], [2.0, 9.0], higher=True) == ["2", "**9**"]
     # the idle system's 18 calls are fewest, but it achieved nothing
-    assert bold_best(["18", "40", "55"], [18, 40, 55], higher=False, eligible=[False, True, True]) == ["18", "**40**", "55"]
+    assert bold_best(["18", "40", "55"], [18, 40, 55], higher=False, eligible=[False, True, True]) == [
+        "18",
+        "**40**",
+        "55",
+    ]
     assert paper(85.35) == "85.35" and paper(0) == "0.00" and paper(80) == "80.00"
     assert threshold_label(0.00316228) == "0.0032" and threshold_label(0.01) == "0.01"

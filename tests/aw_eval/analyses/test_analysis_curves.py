@@ -67,8 +67,12 @@ def test_study_curves_end_at_the_table_values():
     assert pa_decreases(study)["A"] == {**zero, "decreases": 1, "with_assignment_change": 1}
     r.ck_drop_index, r.ck_drop_assignment_changed = np.array([0]), np.array([True])
     r.ck_drop_persist_alignment, r.ck_drop_persist_both = np.array([False]), np.array([True])
-    assert pa_decreases(study)["A"] == {"decreases": 1, "with_assignment_change": 1, "persist_alignment_fixed": 0,
-                                        "persist_both_fixed": 1}
+    assert pa_decreases(study)["A"] == {
+        "decreases": 1,
+        "with_assignment_change": 1,
+        "persist_alignment_fixed": 0,
+        "persist_both_fixed": 1,
+    }
 
 
 def test_calls_before_the_clock_start_have_negative_times():

@@ -12,12 +12,24 @@ I, O, M, X = 0, 1, 2, 3
 
 
 def _evals():
-    a = EvalCalls(call_t=np.arange(10.0), call_kind=np.array([I, I, O, M, M, O, X, M, O, O], np.int8),
-                  edit_call=np.array([3, 4, 7]), edit_translation=np.array([0.2, 0.05, 0.4]),
-                  edit_rotation_deg=np.array([0.1, 30.0, 0.0]), edit_revisit=np.array([False, True, False]), weight=0.75)
-    b = EvalCalls(call_t=np.array([0.0, 0.5, 10.0]), call_kind=np.array([I, M, O], np.int8), edit_call=np.array([1]),
-                  edit_translation=np.array([0.6]), edit_rotation_deg=np.array([0.0]), edit_revisit=np.array([False]),
-                  weight=0.25)
+    a = EvalCalls(
+        call_t=np.arange(10.0),
+        call_kind=np.array([I, I, O, M, M, O, X, M, O, O], np.int8),
+        edit_call=np.array([3, 4, 7]),
+        edit_translation=np.array([0.2, 0.05, 0.4]),
+        edit_rotation_deg=np.array([0.1, 30.0, 0.0]),
+        edit_revisit=np.array([False, True, False]),
+        weight=0.75,
+    )
+    b = EvalCalls(
+        call_t=np.array([0.0, 0.5, 10.0]),
+        call_kind=np.array([I, M, O], np.int8),
+        edit_call=np.array([1]),
+        edit_translation=np.array([0.6]),
+        edit_rotation_deg=np.array([0.0]),
+        edit_revisit=np.array([False]),
+        weight=0.25,
+    )
     return [a, b]
 
 
@@ -45,8 +57,15 @@ def test_activity_shares_weighted_within_active_bins():
 
 
 def test_empty_bins_are_omitted():
-    ev = EvalCalls(np.array([0.0, 10.0]), np.array([I, O], np.int8), np.zeros(0, int), np.zeros(0), np.zeros(0),
-                   np.zeros(0, bool), 1.0)
+    ev = EvalCalls(
+        np.array([0.0, 10.0]),
+        np.array([I, O], np.int8),
+        np.zeros(0, int),
+        np.zeros(0),
+        np.zeros(0),
+        np.zeros(0, bool),
+        1.0,
+    )
     shares, active = activity_shares([ev])
     assert np.isnan(shares[4]).all() and active[4] == 0
 

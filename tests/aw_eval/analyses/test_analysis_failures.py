@@ -16,8 +16,16 @@ def test_each_class_in_the_papers_order():
     offset = [0.0, 5.0, 3.5, 0.5, 0.05, 0.1, 0.5, 0.0]
     moved = [True, False, True, True, True, True, True, False]
     cl = classify_parts(errors, centred, offset, moved)
-    assert [CLASSES[c] for c in cl] == ["correct", "never_moved", "far_displaced", "translation_dominated",
-                                        "near_threshold", "orientation_dominated", "mixed", "correct"]
+    assert [CLASSES[c] for c in cl] == [
+        "correct",
+        "never_moved",
+        "far_displaced",
+        "translation_dominated",
+        "near_threshold",
+        "orientation_dominated",
+        "mixed",
+        "correct",
+    ]
 
 
 def test_cutoffs_are_inclusive_as_stated():
@@ -29,9 +37,11 @@ def test_cutoffs_are_inclusive_as_stated():
 def test_part_vs_task_pooled_fractions():
     t = CLASSES.index("translation_dominated")
     m = CLASSES.index("mixed")
-    runs = [np.array([0, t, t, m]),  # 2 of 3 wrong parts
-            np.array([t, m, m, m, m]),  # 1 of 5
-            np.array([0, 0])]  # success: not a failed task
+    runs = [
+        np.array([0, t, t, m]),  # 2 of 3 wrong parts
+        np.array([t, m, m, m, m]),  # 1 of 5
+        np.array([0, 0]),
+    ]  # success: not a failed task
     part, task, n_failed, n_wrong = translation_fractions(runs)
     assert (n_failed, n_wrong) == (2, 8)
     assert part == pytest.approx(100 * 3 / 8)
@@ -42,8 +52,9 @@ def test_failure_analysis_grid_and_counts():
     entries = paper_entries(n_objects=1, n_parts=3)
     runs = {}
     for e in entries:
-        runs[("A", e.task_id)] = run_from_errors("A", e.task_id, [0.0, 0.3, 0.3], centred=[0, 0.008, 0.03],
-                                                 offset=[0, 0.15, 0.15])
+        runs[("A", e.task_id)] = run_from_errors(
+            "A", e.task_id, [0.0, 0.3, 0.3], centred=[0, 0.008, 0.03], offset=[0, 0.15, 0.15]
+        )
     study = make_study(entries, runs)
     f = failure_analysis(study)["systems"]["A"]
     assert f["failed_tasks"] == 5 and f["wrong_parts"] == 10

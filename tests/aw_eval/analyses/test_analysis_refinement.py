@@ -18,15 +18,28 @@ ARMS = {"agent": "a", "refiner": "r", "agent_refiner": "a-then-r", "refiner_agen
 
 @pytest.fixture(scope="module")
 def suite(tmp_path_factory):
-    return box_suite(tmp_path_factory.mktemp("refinement") / "suite", objects_per_source=2, n_parts=2,
-                     blocks=(("fantastic_breaks", ("none",)),))
+    return box_suite(
+        tmp_path_factory.mktemp("refinement") / "suite",
+        objects_per_source=2,
+        n_parts=2,
+        blocks=(("fantastic_breaks", ("none",)),),
+    )
 
 
 def _study(runs, tasks):
     runs.mkdir(parents=True, exist_ok=True)
-    (runs / "refinement_study.json").write_text(json.dumps({
-        "format": "assemblyworld.refinement-study", "format_version": 1, "agent": "a", "refiner": "r", "tasks": tasks,
-        "arms": [{"arm": k, "system": v} for k, v in ARMS.items()]}))
+    (runs / "refinement_study.json").write_text(
+        json.dumps(
+            {
+                "format": "assemblyworld.refinement-study",
+                "format_version": 1,
+                "agent": "a",
+                "refiner": "r",
+                "tasks": tasks,
+                "arms": [{"arm": k, "system": v} for k, v in ARMS.items()],
+            }
+        )
+    )
 
 
 def test_arms_scored_matched_and_failures_named(suite, tmp_path):
@@ -39,8 +52,10 @@ def test_arms_scored_matched_and_failures_named(suite, tmp_path):
         write_scripted_run(runs / "r" / tid, suite, tid, system="r", inspect_moves=False)  # exact
         write_scripted_run(runs / "a-then-r" / tid, suite, tid, system="a-then-r", inspect_moves=False)
     write_scripted_run(runs / "r-then-a" / ids[0], suite, ids[0], system="r-then-a", inspect_moves=False)
-    write_run_info(runs / "r-then-a" / ids[1] / "run.json",
-                   RunInfo(system="r-then-a", task_id=ids[1], ended="crashed", error="agent raised KeyError\ntrace"))
+    write_run_info(
+        runs / "r-then-a" / ids[1] / "run.json",
+        RunInfo(system="r-then-a", task_id=ids[1], ended="crashed", error="agent raised KeyError\ntrace"),
+    )
     section = refinement_study(suite, runs)
     assert section["tasks"] == 2 and section["matched"] == [ids[0]]
     assert section["failures"]["refiner_agent"] == {ids[1]: "crashed: agent raised KeyError"}

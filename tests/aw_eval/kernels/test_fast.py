@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import numpy as np
+from eval_helpers import close, small_task
+
 import aw_eval
-from aw_eval.kernels import fast
 from aw_eval.fixtures import random_checkpoints
+from aw_eval.kernels import fast
 from aw_eval.registration import escalate, near_threshold, register_fast
 from aw_eval.results import ScoreResult
-from eval_helpers import close, small_task
 
 
 def _result(errors, scd):
@@ -144,7 +145,9 @@ def test_escalation_starts_from_a_warm_registration_in_the_same_basin():
     ck0, ck1 = geom.checkpoint(cks[0]), geom.checkpoint(cks[1])
     prev = escalate(geom, ck0, register_fast(geom, ck0))
     reg = register_fast(geom, ck1)
-    assert fast.same_basin(prev.rotation, prev.translation, reg.rotation, reg.translation, fast.FAST.warm_deg, fast.FAST.warm_t)
+    assert fast.same_basin(
+        prev.rotation, prev.translation, reg.rotation, reg.translation, fast.FAST.warm_deg, fast.FAST.warm_t
+    )
     st = geom.settings
     full = geom.index().assembly_problem(ck1.poses, ck1.rotations, ck1.parts, geom.divisor)
     from_warm = full.run(prev.rotation, prev.translation, st.max_iters, st.tol)
@@ -152,8 +155,13 @@ def test_escalation_starts_from_a_warm_registration_in_the_same_basin():
     want = from_warm if from_warm.objective < reg.scd else reg
     assert got.scd == min(from_warm.objective, reg.scd) and np.array_equal(got.rotation, want.rotation)
     # a registration of another basin is ignored: the refinement starts at the fast transform
-    far = Registration(prev.scd, prev.rotation @ np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
-                       prev.translation, 0, None)
+    far = Registration(
+        prev.scd,
+        prev.rotation @ np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]),
+        prev.translation,
+        0,
+        None,
+    )
     alone = escalate(geom, ck1, reg)
     ignored = escalate(geom, ck1, reg, warm=far)
     assert ignored.scd == alone.scd and np.array_equal(ignored.rotation, alone.rotation)

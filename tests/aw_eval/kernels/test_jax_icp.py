@@ -18,7 +18,9 @@ def _clouds(seed: int, n: int = 40):
     target = rng.normal(size=(n, 3)) * [1.0, 0.5, 0.2]
     q = rng.normal(size=3) * 0.4
     c, s = np.cos(q), np.sin(q)
-    rot = np.array([[c[0], -s[0], 0], [s[0], c[0], 0], [0, 0, 1]]) @ np.array([[1, 0, 0], [0, c[1], -s[1]], [0, s[1], c[1]]])
+    rot = np.array([[c[0], -s[0], 0], [s[0], c[0], 0], [0, 0, 1]]) @ np.array(
+        [[1, 0, 0], [0, c[1], -s[1]], [0, s[1], c[1]]]
+    )
     pred = (target - 0.3) @ rot + rng.normal(size=(n, 3)) * 0.02
     return pred, target
 
@@ -77,10 +79,16 @@ def test_leaf_lookup_with_its_fallback_is_the_brute_force_first_minimum(candidat
     ref[65:70] = ref[:5]  # duplicates across parts: the lower index (part 0) must win
     parts = ref.reshape(3, 60, 3)
     leaves = build_part_leaves(parts, leaf=4)
-    x = np.concatenate([ref[rng.integers(180, size=150)] + rng.normal(size=(150, 3)) * 0.01,
-                        rng.uniform(-1.2, 1.2, (100, 3)), rng.normal(size=(6, 3)) * 30.0, ref[:10],
-                        # far above the sheet: many boxes within float32's rounding of each other
-                        np.c_[rng.uniform(-1, 1, (8, 2)), np.full(8, 1e3)]]).reshape(2, -1, 3)
+    x = np.concatenate(
+        [
+            ref[rng.integers(180, size=150)] + rng.normal(size=(150, 3)) * 0.01,
+            rng.uniform(-1.2, 1.2, (100, 3)),
+            rng.normal(size=(6, 3)) * 30.0,
+            ref[:10],
+            # far above the sheet: many boxes within float32's rounding of each other
+            np.c_[rng.uniform(-1, 1, (8, 2)), np.full(8, 1e3)],
+        ]
+    ).reshape(2, -1, 3)
     idx, brute = nearest_in_leaves(x, ref, leaves, candidates=candidates)
     want = brute_first_min(x.reshape(-1, 3), ref).reshape(idx.shape)
     assert np.array_equal(idx, want)
@@ -142,12 +150,26 @@ def test_a_call_holds_memory_in_proportion_to_its_lanes_points(monkeypatch):
     target = index.target
     init, round_ = jax_icp._compiled_round.__wrapped__(100, 1e-9, 8, True)
     dev = lambda a: jnp.asarray(a)  # noqa: E731
-    common = (dev(target[None]), dev(target), tuple(map(dev, target_leaves)), tuple(map(dev, part_leaves)),
-              dev(np.zeros((1, parts, 3, 4))), dev(np.zeros(lanes, np.int32)))
+    common = (
+        dev(target[None]),
+        dev(target),
+        tuple(map(dev, target_leaves)),
+        tuple(map(dev, part_leaves)),
+        dev(np.zeros((1, parts, 3, 4))),
+        dev(np.zeros(lanes, np.int32)),
+    )
     rot, trans = dev(np.tile(np.eye(3), (lanes, 1, 1))), dev(np.zeros((lanes, 3)))
     m = len(target)
-    state = (dev(np.ones(lanes, bool)), dev(np.zeros(lanes, np.int64)), dev(np.zeros(lanes)),
-             dev(np.zeros((lanes, m), np.int32)), dev(np.zeros((lanes, m), np.int32)), dev(np.zeros(lanes)), rot, trans)
+    state = (
+        dev(np.ones(lanes, bool)),
+        dev(np.zeros(lanes, np.int64)),
+        dev(np.zeros(lanes)),
+        dev(np.zeros((lanes, m), np.int32)),
+        dev(np.zeros((lanes, m), np.int32)),
+        dev(np.zeros(lanes)),
+        rot,
+        trans,
+    )
     allowed = lanes * jax_icp.LANE_FLOATS * (m + m) * 8 + 8 * 4 * (1 << 16)
     for compiled in (init.lower(*common, rot, trans).compile(), round_.lower(*common, state).compile()):
         used = compiled.memory_analysis()

@@ -93,7 +93,9 @@ def test_part_leaves_index_the_joined_clouds_and_one_part_answers_all():
     for q in range(3):
         assert set(leaves.index[q].ravel().tolist()) == set(range(50 * q, 50 * q + 50))
     ref = parts.reshape(-1, 3)
-    x = np.concatenate([ref[rng.integers(150, size=300)] + rng.normal(size=(300, 3)) * 0.01, rng.normal(size=(50, 3)) * 20])
+    x = np.concatenate(
+        [ref[rng.integers(150, size=300)] + rng.normal(size=(300, 3)) * 0.01, rng.normal(size=(50, 3)) * 20]
+    )
     idx, ok = leaf_lookup(leaves, np.broadcast_to(x, (3,) + x.shape), x, ref, candidates=4)
     assert np.array_equal(idx[ok], brute_first_min(x, ref)[ok]) and ok.mean() > 0.5
     assert not np.any(idx[ok] >= 100)  # part 2 duplicates part 0: never the first minimum

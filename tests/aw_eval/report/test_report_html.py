@@ -18,8 +18,20 @@ from aw_eval.cli import main
 from aw_eval.study.fixtures import box_suite, write_scripted_run
 
 CHROMIUM = "/usr/bin/chromium"
-OPTS = ["--protocol-setting", "n_surface=256", "--protocol-setting", "n_fps=64", "--bootstrap", "200", "--permutations", "500",
-        "--no-progress", "--no-plots", "--jobs", "1"]
+OPTS = [
+    "--protocol-setting",
+    "n_surface=256",
+    "--protocol-setting",
+    "n_fps=64",
+    "--bootstrap",
+    "200",
+    "--permutations",
+    "500",
+    "--no-progress",
+    "--no-plots",
+    "--jobs",
+    "1",
+]
 TASK = "partnet-box000-none"
 
 
@@ -29,17 +41,27 @@ def report(tmp_path_factory):
     suite = box_suite(root / "suite", objects_per_source=1, n_parts=[3, 2, 3, 2])
     runs = root / "runs"
     write_scripted_run(runs / "alpha" / TASK, suite, TASK, system="alpha", inspect_moves=False)
-    write_scripted_run(runs / "beta" / TASK, suite, TASK, system="beta", correct=["p01"], wrong_offset=0.5,
-                       inspect_moves=False)
-    write_scripted_run(runs / "alpha" / "fantastic_breaks-box000-none", suite, "fantastic_breaks-box000-none",
-                       system="alpha", inspect_moves=False)
+    write_scripted_run(
+        runs / "beta" / TASK, suite, TASK, system="beta", correct=["p01"], wrong_offset=0.5, inspect_moves=False
+    )
+    write_scripted_run(
+        runs / "alpha" / "fantastic_breaks-box000-none",
+        suite,
+        "fantastic_breaks-box000-none",
+        system="alpha",
+        inspect_moves=False,
+    )
     # names with digits (the demo's oracles) and a calibration role; gamma leaves one part 0.3 off
     # and the global registration then counts none of its parts
-    for name, kw in (("oracle-noise0.5", {}), ("oracle-noise1.5", {"correct": ["p01", "p02"], "wrong_offset": 0.05}),
-                     ("gamma", {"correct": ["p01", "p02"], "wrong_offset": 0.3})):
+    for name, kw in (
+        ("oracle-noise0.5", {}),
+        ("oracle-noise1.5", {"correct": ["p01", "p02"], "wrong_offset": 0.05}),
+        ("gamma", {"correct": ["p01", "p02"], "wrong_offset": 0.3}),
+    ):
         agent = "heuristic" if name == "gamma" else "oracle"
-        write_scripted_run(runs / name / TASK, suite, TASK, system=name, inspect_moves=False, run_info={"agent": agent},
-                           **kw)
+        write_scripted_run(
+            runs / name / TASK, suite, TASK, system=name, inspect_moves=False, run_info={"agent": agent}, **kw
+        )
     out = root / "out"
     assert main([str(suite), str(runs), "--out", str(out), *OPTS]) == 0
     return {"root": root, "suite": suite, "runs": runs, "out": out}
@@ -56,7 +78,7 @@ def test_page_and_its_folder(report):
     assert "Table 1: benchmark results" in page and "Table A-11" in page  # everything report.md has
     assert page.count('<section class="card"') == 5  # every task, run or not
     renders = list((files / "renders").iterdir())
-    assert renders and all(f'report_files/renders/{p.name}' in page for p in renders)
+    assert renders and all(f"report_files/renders/{p.name}" in page for p in renders)
     assert len(list((files / "viewer").iterdir())) == 2  # the two tasks with runs
 
 
@@ -85,7 +107,8 @@ def test_cards_built_by_worker_processes_are_the_same(report):
     assert main([str(report["suite"]), str(report["runs"]), "--out", str(other), *OPTS, "--jobs", "2"]) == 0
     assert cards(other) == cards(report["out"])
     assert sorted(p.name for p in (other / "report_files" / "renders").iterdir()) == sorted(
-        p.name for p in (report["out"] / "report_files" / "renders").iterdir())
+        p.name for p in (report["out"] / "report_files" / "renders").iterdir()
+    )
 
 
 @pytest.fixture(scope="module")
@@ -151,7 +174,9 @@ def test_page_in_chromium(report, browser):
     viewer = card.locator(".viewer")
     final_x = _state_x(page)
     final_shot = viewer.screenshot()
-    page.eval_on_selector(f"#task-{TASK} .viewer-slider", "s => { s.value = '0'; s.dispatchEvent(new Event('input')); }")
+    page.eval_on_selector(
+        f"#task-{TASK} .viewer-slider", "s => { s.value = '0'; s.dispatchEvent(new Event('input')); }"
+    )
     page.wait_for_selector(f"#task-{TASK} .viewer[data-state='0']")
     first_x = _state_x(page)
     assert first_x != final_x
@@ -203,8 +228,11 @@ def test_every_table_sorts_on_every_column_stably(report, browser):
     tables = page.evaluate(_TABLES)
     texts = sorted({c[2] for t in tables for r in t for c in r})
     # the browser's own collator (numeric, case-insensitive) fixes the natural order of the texts
-    ranked = page.evaluate("""ts => { const c = new Intl.Collator(undefined, {numeric: true, sensitivity: 'base'});
-        return ts.slice().sort((a, b) => c.compare(a, b) || (a < b ? -1 : a > b ? 1 : 0)); }""", texts)
+    ranked = page.evaluate(
+        """ts => { const c = new Intl.Collator(undefined, {numeric: true, sensitivity: 'base'});
+        return ts.slice().sort((a, b) => c.compare(a, b) || (a < b ? -1 : a > b ? 1 : 0)); }""",
+        texts,
+    )
     rank = {t: i for i, t in enumerate(ranked)}
     checked = 0
     for ti, rows in enumerate(tables):
@@ -221,8 +249,13 @@ def test_every_table_sorts_on_every_column_stably(report, browser):
     # Table 1's System column: text order, the oracles' digits read as numbers within the name
     t1 = "h2#table-1-benchmark-results ~ .tablewrap table"
     page.click(f"{t1} th >> nth=0")
-    assert _cells(page, t1, 0) == ["alpha", "beta", "gamma", "oracle-noise0.5 (calibration)",
-                                   "oracle-noise1.5 (calibration)"]
+    assert _cells(page, t1, 0) == [
+        "alpha",
+        "beta",
+        "gamma",
+        "oracle-noise0.5 (calibration)",
+        "oracle-noise1.5 (calibration)",
+    ]
     page.close()
 
 

@@ -17,9 +17,11 @@ from aw_eval.study.model import RunScore
 
 
 def test_markdown_tables_become_sortable_with_the_same_cells():
-    md = ("# Title\n\nSome `code` and **bold**.\n\n" +
-          md_table(["System", "SR", "95% CI"], [["a", "**59.40**", "[1.0, 2.0]"], ["b", "7.500", "–"]]) +
-          "\n\n- **missing** (1):\n  - a / t1: no run\n- next\n\n![quality](plots/q.png)")
+    md = (
+        "# Title\n\nSome `code` and **bold**.\n\n"
+        + md_table(["System", "SR", "95% CI"], [["a", "**59.40**", "[1.0, 2.0]"], ["b", "7.500", "–"]])
+        + "\n\n- **missing** (1):\n  - a / t1: no run\n- next\n\n![quality](plots/q.png)"
+    )
     out = markdown_to_html(md)
     assert '<h1 id="title">Title</h1>' in out
     assert "<code>code</code>" in out and "<strong>bold</strong>" in out
@@ -51,8 +53,12 @@ def _rotation(axis, angle):
 def test_aligned_poses_apply_the_saved_registration_in_world_units():
     rng = np.random.default_rng(0)
     pts = rng.normal(size=(2, 20, 3))
-    poses = np.array([[0.3, -0.2, 0.5, *matrix_to_quat(_rotation([0, 1, 1], 0.7))],
-                      [1.0, 0.0, 0.0, *matrix_to_quat(_rotation([1, 0, 0], -0.4))]])
+    poses = np.array(
+        [
+            [0.3, -0.2, 0.5, *matrix_to_quat(_rotation([0, 1, 1], 0.7))],
+            [1.0, 0.0, 0.0, *matrix_to_quat(_rotation([1, 0, 0], -0.4))],
+        ]
+    )
     rot, trans, divisor = _rotation([1, 2, 3], 1.1), np.array([0.05, -0.1, 0.2]), 2.5
     moved = apply_pose(aligned_poses(poses, rot, trans, divisor), pts)
     # the evaluator's map: normalized points x / d go to R (x / d) + t
@@ -116,10 +122,21 @@ def test_viewer_meshes_are_decimated_below_the_cap():
 
 
 def test_filmstrip_states_are_the_curves_checkpoints():
-    r = RunScore(system="s", task_id="t", status="scored", pa=1.0, sr=1.0, scd=0.0,
-                 ck_seq=np.array([0, 2, 5]), ck_t=np.array([0.0, 10.0, 30.0]), ck_pa=np.array([0.0, 0.5, 1.0]),
-                 ck_sr=np.zeros(3), ck_sra=np.zeros(3), ck_scd=np.array([3.0, 2.0, 0.0]),
-                 call_t=np.array([0.0, 5.0, 10.0, 20.0, 30.0, 40.0]))
+    r = RunScore(
+        system="s",
+        task_id="t",
+        status="scored",
+        pa=1.0,
+        sr=1.0,
+        scd=0.0,
+        ck_seq=np.array([0, 2, 5]),
+        ck_t=np.array([0.0, 10.0, 30.0]),
+        ck_pa=np.array([0.0, 0.5, 1.0]),
+        ck_sr=np.zeros(3),
+        ck_sra=np.zeros(3),
+        ck_scd=np.array([3.0, 2.0, 0.0]),
+        call_t=np.array([0.0, 5.0, 10.0, 20.0, 30.0, 40.0]),
+    )
     idx = normalized_states(r)
     assert idx[0] == 0 and idx[-1] is None and idx[3] == 1 and idx[8] == 2
     pa = normalized_values(r, "pa")
@@ -164,8 +181,9 @@ def test_a_card_explains_parts_in_place_that_the_global_registration_does_not_co
     s = _scene()
     final = s.target_poses.copy()
     final[1] = [0, 0, 0, 1, 0, 0, 0]  # p02 left at its initial pose (0.15 below its target: not placed)
-    score = RunScore(system="agent", task_id="t", status="scored", pa=0.0, sr=0.0, scd=0.3,
-                     moved=np.array([True, False]))
+    score = RunScore(
+        system="agent", task_id="t", status="scored", pa=0.0, sr=0.0, scd=0.3, moved=np.array([True, False])
+    )
     view = RunView("agent", score, np.zeros((0, 2, 7)), final, recorded_final=final)
     hint = registration_hint(s, view, 0.01)
     assert hint.startswith("agent: 1 of 2 parts lie at their targets as placed, yet PA is 0.0%.")

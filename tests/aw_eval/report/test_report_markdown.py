@@ -36,8 +36,9 @@ def _study(n_objects: int, systems=SYSTEMS, blocks=None):
     for s, (agent, errors, wall, calls) in systems.items():
         for e in entries:
             runs[(s, e.task_id)] = run_from_errors(s, e.task_id, errors)
-            infos[(s, e.task_id)] = RunInfo(system=s, task_id=e.task_id, agent=agent or "", wall_seconds=wall,
-                                            mcp_calls=calls)
+            infos[(s, e.task_id)] = RunInfo(
+                system=s, task_id=e.task_id, agent=agent or "", wall_seconds=wall, mcp_calls=calls
+            )
     return make_study(entries, runs, infos)
 
 
@@ -67,13 +68,26 @@ def test_roles_come_from_the_run_json_agent_else_from_baseline_names():
 
     assert set(ROLES) == set(AGENTS) and all(ROLES[a] == "calibration" for a in NEEDS_TARGETS)
     roles = system_roles(_study(1))
-    assert roles == {"heuristic": "system", "mine": "system", "oracle-noise0.5": "calibration", "oracle": "calibration",
-                     "idle": "floor"}
+    assert roles == {
+        "heuristic": "system",
+        "mine": "system",
+        "oracle-noise0.5": "calibration",
+        "oracle": "calibration",
+        "idle": "floor",
+    }
     # an own system named like nothing known is real; a run.json agent outranks the name
-    named = {"idle-views3": (None, GOOD, 1.0, 1), "random": (None, GOOD, 1.0, 1), "oracles-fan": (None, GOOD, 1.0, 1),
-             "idle-but-oracle": ("oracle", GOOD, 1.0, 1)}
-    assert system_roles(_study(1, named)) == {"idle-views3": "floor", "random": "floor", "oracles-fan": "system",
-                                              "idle-but-oracle": "calibration"}
+    named = {
+        "idle-views3": (None, GOOD, 1.0, 1),
+        "random": (None, GOOD, 1.0, 1),
+        "oracles-fan": (None, GOOD, 1.0, 1),
+        "idle-but-oracle": ("oracle", GOOD, 1.0, 1),
+    }
+    assert system_roles(_study(1, named)) == {
+        "idle-views3": "floor",
+        "random": "floor",
+        "oracles-fan": "system",
+        "idle-but-oracle": "calibration",
+    }
 
 
 def test_only_real_systems_are_bolded_and_the_others_are_marked(small):
@@ -99,7 +113,10 @@ def test_report_opens_with_how_to_read_it(small):
     assert heads[0] == "How to read this"
     how = _section(md, "How to read this")
     lines = how.strip().splitlines()
-    assert lines[0].startswith("- **Headline: Overall SR**") and "heuristic 0.00% (95% CI [0.0, 0.0]; PA 50.00%)" in lines[0]
+    assert (
+        lines[0].startswith("- **Headline: Overall SR**")
+        and "heuristic 0.00% (95% CI [0.0, 0.0]; PA 50.00%)" in lines[0]
+    )
     assert "mine 0.00%" in lines[0]
     assert "oracle" not in lines[0] and "idle" not in lines[0]  # the headline is about real systems only
     for metric in ("**PA**", "**SR**", "**SR^a**", "**SCD**"):
@@ -115,8 +132,10 @@ def test_a_study_too_small_for_its_tests_says_so_next_to_them(small):
     assert u["n_objects"] == 3 and u["family_size"] == 20  # 10 pairs x SR and PA
     assert u["min_p_holm"] == 1.0  # 20 x 2^-2
     how = _section(md, "How to read this")
-    assert "- **Warning:** 3 tasks: the tests have no power: with 3 objects the smallest p_Holm any result could give " \
-           "is 1.000 (20 comparisons)" in how
+    assert (
+        "- **Warning:** 3 tasks: the tests have no power: with 3 objects the smallest p_Holm any result could give "
+        "is 1.000 (20 comparisons)" in how
+    )
     pairs = _section(md, "Table A-4: paired system differences")
     assert "1.000" in pairs and "**Too few objects for these tests: with 3 objects" in pairs
 
@@ -154,18 +173,23 @@ def test_table1_caption_is_short_and_says_only_what_is_missing(small):
     full = _study(1, {"a": ("heuristic", GOOD, 1.0, 1)})
     for r in full.runs.values():
         r.info.tokens, r.info.cost_usd = TokenUsage(total=10), 0.5
-    caption = _section(render_markdown(build_results(full, FAST)), "Table 1: benchmark results").strip().split("\n\n")[-1]
+    caption = (
+        _section(render_markdown(build_results(full, FAST)), "Table 1: benchmark results").strip().split("\n\n")[-1]
+    )
     assert caption.endswith("Bold: best among real systems.")
     some = _study(1, {"a": ("heuristic", GOOD, 1.0, 1), "b": ("heuristic", GOOD, 1.0, 1)})
     for (s, t), r in some.runs.items():
         r.info.cost_usd = 0.5 if s == "a" or t.startswith("partnet") else None
-    caption = _section(render_markdown(build_results(some, FAST)), "Table 1: benchmark results").strip().split("\n\n")[-1]
+    caption = (
+        _section(render_markdown(build_results(some, FAST)), "Table 1: benchmark results").strip().split("\n\n")[-1]
+    )
     assert caption.endswith("Not recorded: tokens. Means over fewer runs: cost (b 2/5).")
 
 
 def test_counts_are_plural_only_when_more_than_one():
-    one = _study(1, {"a": ("heuristic", GOOD, 1.0, 1), "b": ("heuristic", BAD, 1.0, 1)},
-                 blocks={("ikea_manual", "manual")})
+    one = _study(
+        1, {"a": ("heuristic", GOOD, 1.0, 1), "b": ("heuristic", BAD, 1.0, 1)}, blocks={("ikea_manual", "manual")}
+    )
     md = render_markdown(build_results(one, FAST))
     assert "1 task: the tests have no power: with 1 object the smallest" in md
 
