@@ -43,25 +43,28 @@ def register_synthetic(sub) -> None:
         "--blocks",
         default=None,
         metavar="B1,B2",
-        help="comma-separated subset of partnet, ikea_manual, assemblybench, fantastic_breaks",
+        help="comma-separated subset of partnet, ikea_manual, assemblybench, fantastic_breaks (the default: all "
+        "four), or of the refiners' benchmark families breaks_planar, breaks_noisy, breaks_eroded, breaks_pieces "
+        "(built only when named)",
     )
     p.set_defaults(func=_cmd_synthetic)
 
 
 def _cmd_synthetic(args: argparse.Namespace) -> int:
-    from aw.sources.synthetic import BLOCKS, plan
+    from aw.sources.synthetic import BLOCKS, FAMILIES, plan
 
     if args.per_source < 1:
         raise UsageError("--per-source must be >= 1")
+    known = {**BLOCKS, **FAMILIES}
     blocks = list(BLOCKS) if not args.blocks else [b.strip() for b in args.blocks.split(",") if b.strip()]
-    unknown = [b for b in blocks if b not in BLOCKS]
+    unknown = [b for b in blocks if b not in known]
     if unknown or not blocks:
-        raise UsageError(f"unknown block(s) {unknown}; choose from {', '.join(BLOCKS)}")
+        raise UsageError(f"unknown block(s) {unknown}; choose from {', '.join(known)}")
     loader = "aw.sources.synthetic:generate_object"
     specs, sources, ids = [], [], []
     n = args.per_source
     for block in blocks:
-        conds = BLOCKS[block].conditions
+        conds = known[block].conditions
         for i in range(n):
             donor_index = (i + 1) % n if n > 1 else 1
             donor = ObjectSpec(loader, (block, donor_index, args.seed))
@@ -119,7 +122,7 @@ def _cmd_folder(args: argparse.Namespace) -> int:
         donor_j = next((j for j in same if j > i), same[0] if same else None)
         donor = ObjectSpec(loader, (found[donor_j].path, args.source, args.up_axis)) if donor_j is not None else None
         specs.append(ObjectSpec(loader, (f.path, args.source, args.up_axis), tuple(f.conditions), donor))
-    check_unique_task_ids([(s, f.object_id, f.conditions) for s, f in zip(sources, found)])
+    check_unique_task_ids([(s, f.object_id, f.conditions) for s, f in zip(sources, found, strict=True)])
     # load every object once here: bad meshes and objects that cannot be assessed are reported
     # before any work is done, and the up axis chosen for each is said
     for f in found:

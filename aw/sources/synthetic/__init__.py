@@ -10,6 +10,9 @@ assemblybench      flange couplings, pillow blocks, gear  3-20        manual (on
 fantastic_breaks   solids broken along a rough surface    2           none
 =================  =====================================  ==========  =====================
 
+Beside them, built only when named, the refiners' benchmark families
+(:mod:`aw.sources.synthetic.families`: planar cuts, noisy and eroded breaks, 3-5 pieces).
+
 Object ``index`` of a block takes the part-count band ``index % 3`` (2-5, 6-10, 11-20; clipped
 to what the category can build) and a category that cycles so that every category meets every
 band. Everything is drawn from ``numpy.random.default_rng([seed, block number, index])``; a
@@ -25,13 +28,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from aw.assembly import AssembledObject
+from aw.sources.synthetic import families as _families
 from aw.sources.synthetic import fracture as _fracture
 from aw.sources.synthetic import furniture as _furniture
 from aw.sources.synthetic import industrial as _industrial
 from aw.sources.synthetic.builder import Builder
 from aw.sources.synthetic.checks import accidental_twins
 
-__all__ = ["BLOCKS", "BANDS", "Block", "generate_object", "generate_block", "iter_suite_objects"]
+__all__ = ["BLOCKS", "BANDS", "FAMILIES", "Block", "generate_object", "generate_block", "iter_suite_objects"]
 
 BANDS: tuple[tuple[int, int], ...] = ((2, 5), (6, 10), (11, 20))
 _MAX_ATTEMPTS = 20
@@ -50,6 +54,13 @@ BLOCKS: dict[str, Block] = {
     "assemblybench": Block("assemblybench", tuple(_industrial.CATEGORIES), ("manual",)),
     "fantastic_breaks": Block("fantastic_breaks", _fracture.CATEGORIES, ("none",)),
 }
+# the refiners' benchmark families: built when named, never by default
+FAMILIES: dict[str, Block] = {name: Block(name, cats, ("none",)) for name, cats in _families.FAMILIES.items()}
+
+
+def _code(block: str) -> int:
+    """The block's number in the random streams (families after the blocks, from 10)."""
+    return list(BLOCKS).index(block) if block in BLOCKS else 10 + list(FAMILIES).index(block)
 
 
 def _part_range(block: str, category: str) -> tuple[int, int]:
@@ -61,11 +72,13 @@ def _part_range(block: str, category: str) -> tuple[int, int]:
 
 
 def plan(block: str, index: int, seed: int = 0) -> tuple[str, int]:
-    """(category, part count) of object ``index`` of ``block``."""
-    if block not in BLOCKS:
-        raise ValueError(f"unknown block {block!r}; choose from {sorted(BLOCKS)}")
+    """(category, part count) of object ``index`` of ``block`` (one of the blocks or families)."""
+    if block not in BLOCKS and block not in FAMILIES:
+        raise ValueError(f"unknown block {block!r}; choose from {sorted(BLOCKS) + sorted(FAMILIES)}")
     if index < 0:
         raise ValueError("index must be >= 0")
+    if block in FAMILIES:
+        return _families.family_plan(block, index)
     cats = BLOCKS[block].categories
     category = cats[(index % 3 + index // 3) % len(cats)]
     lo_c, hi_c = _part_range(block, category)
@@ -77,9 +90,11 @@ def plan(block: str, index: int, seed: int = 0) -> tuple[str, int]:
     return category, int(rng.integers(lo, hi + 1))
 
 
-def _build(block: str, category: str, n: int, rng: np.random.Generator) -> Builder:
+def _build(block: str, index: int, category: str, n: int, rng: np.random.Generator) -> Builder:
     b = Builder(category)
-    if block == "fantastic_breaks":
+    if block in FAMILIES:
+        _families.build_family(b, block, index, rng)
+    elif block == "fantastic_breaks":
         _fracture.fracture(b, category, rng)
     elif block == "assemblybench":
         _industrial.assembly(b, category, n, rng)
@@ -92,10 +107,10 @@ def _build(block: str, category: str, n: int, rng: np.random.Generator) -> Build
 def generate_object(block: str, index: int, seed: int = 0) -> AssembledObject:
     """Object ``index`` of ``block`` for ``seed`` (same arguments, same object)."""
     category, n = plan(block, index, seed)
-    code = list(BLOCKS).index(block)
+    code = _code(block)
     for attempt in range(_MAX_ATTEMPTS):
         rng = np.random.default_rng([seed, code, index, attempt])
-        b = _build(block, category, n, rng)
+        b = _build(block, index, category, n, rng)
         if b.n_parts != n:
             raise RuntimeError(f"generator {block}/{category} made {b.n_parts} parts instead of {n}")
         obj = b.build(
