@@ -1,0 +1,148 @@
+"""Fitting one fragment's surface onto another's: ICP restricted to the contact, the symmetric
+ICP of two planar faces (the compiled kernel of :mod:`aw.kernels.icp`), and the in-plane turn
+that lays one planar face's outline on the other's.
+
+Poses here are ``(R (3, 3), t (3,))`` mapping the moving cloud's frame into the fixed one's.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from aw.kernels.icp import ICPProblem
+from aw.refine.classical.contact import OPPOSED
+from aw.refine.classical.surface import Cloud
+
+__all__ = ["chamfer_rms", "contact_icp", "facing", "inplane_turns", "symmetric_icp"]
+
+ICP_ITERATIONS = 30
+POINT_WEIGHT = 0.2  # a weak point-to-point term keeps flat stretches from sliding freely
+INPLANE_STEP_DEG = 5.0
+
+
+def rotvec_matrix(w: np.ndarray) -> np.ndarray:
+    """The rotation ``(3, 3)`` of the rotation vector ``w (3,)`` (Rodrigues)."""
+    angle = float(np.linalg.norm(w))
+    if angle < 1e-15:
+        return np.eye(3)
+    k = w / angle
+    cross = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * cross + (1.0 - np.cos(angle)) * cross @ cross
+
+
+def _step(p: np.ndarray, q: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """The small motion ``(rotation vector, translation) (6,)`` moving ``p (n, 3)`` onto the
+    tangent planes ``(q, m)`` (point-to-plane) and, weighted by ``POINT_WEIGHT``, onto ``q``
+    (point-to-point): the 6 x 6 normal equations summed directly."""
+    w2 = POINT_WEIGHT**2
+    n = len(p)
+    pm = np.cross(p, m)
+    jac = np.hstack([pm, m])
+    r_plane = np.einsum("ij,ij->i", q - p, m)
+    r_point = q - p
+    hess = jac.T @ jac
+    grad = jac.T @ r_plane
+    sp = p.sum(0)
+    skew = np.array([[0.0, -sp[2], sp[1]], [sp[2], 0.0, -sp[0]], [-sp[1], sp[0], 0.0]])
+    hess[:3, :3] += w2 * (np.einsum("ij,ij->", p, p) * np.eye(3) - p.T @ p)
+    hess[:3, 3:] += w2 * skew
+    hess[3:, :3] -= w2 * skew
+    hess[3:, 3:] += w2 * n * np.eye(3)
+    grad[:3] += w2 * np.cross(p, r_point).sum(0)
+    grad[3:] += w2 * r_point.sum(0)
+    try:
+        return np.linalg.solve(hess, grad)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(hess, grad, rcond=None)[0]
+
+
+def contact_icp(
+    src: Cloud,
+    dst: Cloud,
+    rot: np.ndarray,
+    shift: np.ndarray,
+    radius: float,
+    floor: float,
+    iterations: int = ICP_ITERATIONS,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Move ``src`` onto ``dst``: point-to-plane with a weak point-to-point term, pairs only
+    between opposed normals within a radius that shrinks from ``radius`` to ``floor``."""
+    for _ in range(iterations):
+        p = src.points @ rot.T + shift
+        n = src.normals @ rot.T
+        d, j = dst.tree.query(p, distance_upper_bound=radius)
+        ok = np.isfinite(d)
+        ok[ok] &= np.einsum("ij,ij->i", n[ok], dst.normals[j[ok]]) < OPPOSED
+        if ok.sum() < 12:
+            break
+        x = _step(p[ok], dst.points[j[ok]], dst.normals[j[ok]])
+        step = rotvec_matrix(x[:3])
+        rot, shift = step @ rot, step @ shift + x[3:]
+        radius = max(floor, 0.7 * radius)
+        if np.linalg.norm(x) < 1e-9:
+            break
+    return rot, shift
+
+
+def symmetric_icp(
+    src: np.ndarray, dst: np.ndarray, rot: np.ndarray, shift: np.ndarray, size: float, iterations: int = ICP_ITERATIONS
+) -> tuple[np.ndarray, np.ndarray]:
+    """The symmetric point-to-point ICP (every point of both sets paired with its nearest in the
+    other) of ``src (k, 3)`` onto ``dst (m, 3)``: on the outlines of two planar faces of the same
+    shape it lays one on the other. Coordinates are divided by ``size`` for the kernel."""
+    problem = ICPProblem(src / size, dst / size)
+    result = problem.run(rot, shift / size, iterations, 1e-12)
+    return result.rotation, result.translation * size
+
+
+def facing(src_normal: np.ndarray, dst_normal: np.ndarray) -> np.ndarray:
+    """A rotation ``(3, 3)`` turning ``src_normal`` against ``dst_normal``."""
+    return Rotation.align_vectors([-dst_normal], [src_normal])[0].as_matrix()
+
+
+def _plane_axes(normal: np.ndarray) -> np.ndarray:
+    helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = np.cross(normal, helper)
+    u /= np.linalg.norm(u)
+    return np.column_stack([u, np.cross(normal, u)])
+
+
+def inplane_turns(
+    src: np.ndarray,
+    dst: np.ndarray,
+    src_centre: np.ndarray,
+    dst_centre: np.ndarray,
+    src_normal: np.ndarray,
+    dst_normal: np.ndarray,
+    keep: int = 2,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Starts ``(R, t)`` laying the planar outline ``src (k, 3)`` on the planar outline ``dst
+    (m, 3)``: normals opposed, centres together, and the ``keep`` turns about the normal (of
+    every ``INPLANE_STEP_DEG``) whose outlines agree best (2-D chamfer)."""
+    face = facing(src_normal, dst_normal)
+    axes = _plane_axes(dst_normal)
+    flat_dst = (dst - dst_centre) @ axes
+    tree = cKDTree(flat_dst)
+    flat_src = (src - src_centre) @ face.T @ axes
+    found = []
+    for angle in np.radians(np.arange(0.0, 360.0, INPLANE_STEP_DEG)):
+        c, s = np.cos(angle), np.sin(angle)
+        moved = flat_src @ np.array([[c, s], [-s, c]])
+        there = tree.query(moved)[0]
+        back = cKDTree(moved).query(flat_dst)[0]
+        found.append((float(np.mean(there**2) + np.mean(back**2)), angle))
+    found.sort()
+    starts = []
+    for _, angle in found[:keep]:
+        rot = Rotation.from_rotvec(angle * dst_normal).as_matrix() @ face
+        starts.append((rot, dst_centre - rot @ src_centre))
+    return starts
+
+
+def chamfer_rms(src: np.ndarray, dst: np.ndarray) -> float:
+    """Root mean square of the nearest-neighbour distances both ways between two point sets."""
+    there = cKDTree(dst).query(src)[0]
+    back = cKDTree(src).query(dst)[0]
+    return float(np.sqrt(0.5 * (np.mean(there**2) + np.mean(back**2))))

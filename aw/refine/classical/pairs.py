@@ -1,0 +1,187 @@
+"""Registering one fragment onto another: the global search over pairs of candidate regions, and
+the score that ranks its answers.
+
+For every pair of candidate regions (one of each fragment) of compatible areas and extents:
+
+- two planar regions (planar cuts): normals opposed, centroids together, the in-plane turns whose
+  outlines agree best (:func:`fit.inplane_turns`), each refined by the symmetric ICP of the two
+  outlines (the compiled kernel of :mod:`aw.kernels.icp`);
+- otherwise (rough breaks): the other region's mean normal against the anchor's at
+  ``IN_PLANE_STEPS`` turns about it, each refined by ICP restricted to the two regions.
+
+The best ``FINE_STARTS`` are refined again on denser samples. A fit's score is the area in
+contact (the smaller of the two regions' areas in contact, over the smaller fragment's area),
+scaled down by how far two planar outlines still miss each other and up by ``RUGGED_FACTOR``
+when both regions are rough (two congruent flat faces, the end caps of a prism, meet as well as
+a break does; a rough break seldom meets anything but its match), less twice the share of either
+fragment sunk into the other.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from aw.refine.classical.contact import Tolerance, contact_share, coverage, inverse, sunk_share, tolerance
+from aw.refine.classical.fit import chamfer_rms, contact_icp, facing, inplane_turns, rotvec_matrix, symmetric_icp
+from aw.refine.classical.surface import Cloud, Fragment, Region
+
+__all__ = ["Fit", "refine_pair", "register_pair", "score_fit"]
+
+IN_PLANE_STEPS = 24
+COARSE_ITERATIONS = 15
+FINE_STARTS = 4
+RUGGED_FACTOR = 1.25
+AREA_RATIO = {True: 1.6, False: 2.5}  # the largest area ratio of two regions that may meet (planar, rough)
+EXTENT_RATIO = 1.4  # the largest ratio of two rough regions' principal extents
+ROUGH_PAIRS = 8  # rough pairs searched per pair of fragments, the most alike first
+SAG_MISMATCH = 0.5  # of the larger sag: how far two rough regions' sags may fail to cancel
+SAME_DEG = 5.0
+OUTLINE_SHARE = 0.2  # of eps: the outline misfit that halves a planar fit's score
+SAG_FLOOR = 0.01  # of the object's size: sags this small always cancel (near-flat breaks)
+
+
+@dataclass
+class Fit:
+    """``other``'s frame -> ``anchor``'s: ``x_anchor = rot @ x_other + shift``; its score and the
+    pair of regions it was found on (``None`` for a refined start)."""
+
+    rot: np.ndarray
+    shift: np.ndarray
+    score: float
+    regions: tuple[int, int] | None = None
+
+    def inverse(self) -> Fit:
+        regions = None if self.regions is None else (self.regions[1], self.regions[0])
+        return Fit(self.rot.T, -self.rot.T @ self.shift, self.score, regions)
+
+
+def score_fit(a: Fragment, b: Fragment, ra: Region, rb: Region, rot, shift, tol: Tolerance, fine: bool) -> float:
+    """The score of ``b`` placed by ``(rot, shift)`` against ``a`` on the regions ``ra``, ``rb``
+    (``fine``: on the dense samples, else on the coarse ones)."""
+    sa, sb = (ra.fine, rb.fine) if fine else (ra.coarse, rb.coarse)
+    move = (rot, shift)
+    back = inverse(move)
+    touching = min(contact_share(sa, sb, tol, back) * ra.area, contact_share(sb, sa, tol, move) * rb.area)
+    value = touching / min(a.mesh.area, b.mesh.area)
+    if ra.planar and rb.planar:
+        value *= _outline_fit(ra, rb, rot, shift, tol)
+    elif not ra.planar and not rb.planar:
+        value *= RUGGED_FACTOR
+    body_a, body_b = (a.body, b.body) if fine else (a.coarse_body, b.coarse_body)
+    sunk = max(sunk_share(body_b, body_a, tol, move), sunk_share(body_a, body_b, tol, back))
+    return value - 2.0 * sunk
+
+
+def _outline_fit(ra: Region, rb: Region, rot: np.ndarray, shift: np.ndarray, tol: Tolerance) -> float:
+    """How well two planar outlines meet, in [0, 1]: ``1 / (1 + (misfit / (OUTLINE_SHARE * eps))^2)``
+    (the misfit: root mean square distance of the outlines) times the square of the mean
+    agreement of the walls they meet (the normals across each outline sample and its nearest in
+    the other): at a cut the walls run on from one fragment into the other; a half-turned face of
+    the same outline leaves a crease."""
+    moved = rb.outline @ rot.T + shift
+    misfit = 1.0 / (1.0 + (chamfer_rms(ra.outline, moved) / (OUTLINE_SHARE * tol.eps)) ** 2)
+    j = cKDTree(moved).query(ra.outline)[1]
+    walls = float(np.mean(np.einsum("ij,ij->i", ra.rim_normals, rb.rim_normals[j] @ rot.T)))
+    return misfit * max(0.0, walls) ** 2
+
+
+def _mismatch(ra: Region, rb: Region, size: float) -> float | None:
+    """How unlike two regions are for meeting (0: alike), or ``None`` when they cannot meet: areas
+    (and, for rough regions, principal extents) too different, or two bulges (outer surfaces:
+    a break's bulge is its match's hollow)."""
+    planar = ra.planar and rb.planar
+    area = np.log(max(ra.area, rb.area) / min(ra.area, rb.area))
+    if area > np.log(AREA_RATIO[planar]):
+        return None
+    if planar:
+        return float(area) if len(ra.outline) and len(rb.outline) else None
+    extents = np.log(
+        np.maximum(ra.extents[:2], rb.extents[:2]) / np.maximum(np.minimum(ra.extents[:2], rb.extents[:2]), 1e-12)
+    )
+    if extents.max() > np.log(EXTENT_RATIO):
+        return None
+    sag = abs(ra.sag + rb.sag)
+    if sag > max(SAG_MISMATCH * max(abs(ra.sag), abs(rb.sag)), SAG_FLOOR * size):
+        return None
+    return float(area + extents.sum() + sag / (SAG_FLOOR * size))
+
+
+def register_pair(a: Fragment, b: Fragment) -> list[Fit]:
+    """Fits of ``b`` onto ``a`` from the global search, best first."""
+    tol = tolerance(a, b)
+    size = max(a.size, b.size)
+    found: list[tuple[float, int, int, int, np.ndarray, np.ndarray]] = []
+    planar, rough = [], []
+    for ia, ra in enumerate(a.regions):
+        for ib, rb in enumerate(b.regions):
+            mismatch = _mismatch(ra, rb, size)
+            if mismatch is not None:
+                (planar if ra.planar and rb.planar else rough).append((mismatch, ia, ib))
+    # every planar pair (cheap), and the most alike rough pairs
+    for _, ia, ib in planar + sorted(rough)[:ROUGH_PAIRS]:
+        ra, rb = a.regions[ia], b.regions[ib]
+        for rot, shift in _starts(ra, rb, tol, size):
+            found.append((score_fit(a, b, ra, rb, rot, shift, tol, fine=False), len(found), ia, ib, rot, shift))
+    found.sort(key=lambda x: (-x[0], x[1]))
+    chosen: list[tuple[int, int, np.ndarray, np.ndarray]] = []
+    for _, _, ia, ib, rot, shift in found:  # distinct starts only: one basin refined once
+        if not any(_same(rot, shift, r, t, tol.eps) for _, _, r, t in chosen):
+            chosen.append((ia, ib, rot, shift))
+        if len(chosen) == FINE_STARTS:
+            break
+    fits: list[Fit] = []
+    for fit in sorted((_fine(a, b, ia, ib, rot, shift, tol) for ia, ib, rot, shift in chosen), key=lambda f: -f.score):
+        if not any(_same(fit.rot, fit.shift, f.rot, f.shift, tol.eps) for f in fits):
+            fits.append(fit)
+    return fits
+
+
+def _starts(ra: Region, rb: Region, tol: Tolerance, size: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Coarse placements of region ``rb`` against ``ra``: outlines laid on each other (two
+    planar regions), else turns about the facing normals, each refined on the coarse samples."""
+    if ra.planar and rb.planar:
+        turns = inplane_turns(rb.outline, ra.outline, rb.centroid, ra.centroid, rb.normal, ra.normal)
+        return [symmetric_icp(rb.outline, ra.outline, rot, shift, size) for rot, shift in turns]
+    face = facing(rb.normal, ra.normal)
+    out = []
+    for angle in np.arange(IN_PLANE_STEPS) * 2 * np.pi / IN_PLANE_STEPS:
+        rot = rotvec_matrix(angle * ra.normal) @ face
+        shift = ra.coarse.points.mean(0) - rot @ rb.coarse.points.mean(0)
+        out.append(contact_icp(rb.coarse, ra.coarse, rot, shift, 0.5 * size, tol.eps, COARSE_ITERATIONS))
+    return out
+
+
+def _same(rot, shift, rot2, shift2, eps: float) -> bool:
+    """Two placements within ``SAME_DEG`` and ``eps`` of each other."""
+    cos = (np.trace(rot.T @ rot2) - 1) / 2
+    return bool(cos > np.cos(np.radians(SAME_DEG)) and np.linalg.norm(shift - shift2) < eps)
+
+
+def _fine(a: Fragment, b: Fragment, ia: int, ib: int, rot, shift, tol: Tolerance) -> Fit:
+    """A fit refined on the regions' dense samples."""
+    ra, rb = a.regions[ia], b.regions[ib]
+    if ra.planar and rb.planar:
+        rot, shift = symmetric_icp(rb.outline, ra.outline, rot, shift, max(a.size, b.size))
+    else:
+        rot, shift = contact_icp(rb.fine, ra.fine, rot, shift, 4 * tol.eps, tol.eps)
+    return Fit(rot, shift, score_fit(a, b, ra, rb, rot, shift, tol, fine=True), (ia, ib))
+
+
+def _union(fragment: Fragment) -> Cloud:
+    regions = fragment.regions
+    return Cloud(np.vstack([r.fine.points for r in regions]), np.vstack([r.fine.normals for r in regions]))
+
+
+def refine_pair(a: Fragment, b: Fragment, rot: np.ndarray, shift: np.ndarray, radius: float) -> Fit:
+    """``b`` refined from a given placement: ICP on all candidate regions of both (within
+    ``radius`` at first), then on the pair of regions that meet best there."""
+    if not a.regions or not b.regions:
+        return Fit(rot, shift, -np.inf)
+    tol = tolerance(a, b)
+    rot, shift = contact_icp(_union(b), _union(a), rot, shift, radius, tol.eps)
+    pairs = [(ia, ib) for ia in range(len(a.regions)) for ib in range(len(b.regions))]
+    ia, ib = max(pairs, key=lambda p: coverage(a.regions[p[0]].fine, b.regions[p[1]].fine, tol, (rot, shift)))
+    return _fine(a, b, ia, ib, rot, shift, tol)
