@@ -42,7 +42,7 @@ def assemble(fragments: list[Fragment], anchor: int, log: Callable[[str], None])
     fits: dict[tuple[int, int], list[Fit]] = {}
     for i in range(n):
         for j in range(i + 1, n):
-            found = register_pair(fragments[i], fragments[j])
+            found = register_pair(fragments[i], fragments[j], partial=n > 2)
             fits[(i, j)] = found
             fits[(j, i)] = [f.inverse() for f in found]
     poses: dict[int, Pose] = {anchor: (np.eye(3), np.zeros(3))}

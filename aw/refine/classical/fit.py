@@ -15,11 +15,12 @@ from aw.kernels.icp import ICPProblem
 from aw.refine.classical.contact import OPPOSED
 from aw.refine.classical.surface import Cloud
 
-__all__ = ["chamfer_rms", "contact_icp", "facing", "inplane_turns", "symmetric_icp"]
+__all__ = ["chamfer_rms", "contact_icp", "facing", "inplane_turns", "partial_placements", "plane_axes", "symmetric_icp"]
 
 ICP_ITERATIONS = 30
 POINT_WEIGHT = 0.2  # a weak point-to-point term keeps flat stretches from sliding freely
 INPLANE_STEP_DEG = 5.0
+VOTERS = 120  # outline points of each face that vote in partial_placements
 
 
 def rotvec_matrix(w: np.ndarray) -> np.ndarray:
@@ -102,7 +103,7 @@ def facing(src_normal: np.ndarray, dst_normal: np.ndarray) -> np.ndarray:
     return Rotation.align_vectors([-dst_normal], [src_normal])[0].as_matrix()
 
 
-def _plane_axes(normal: np.ndarray) -> np.ndarray:
+def plane_axes(normal: np.ndarray) -> np.ndarray:
     helper = np.array([1.0, 0.0, 0.0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     u = np.cross(normal, helper)
     u /= np.linalg.norm(u)
@@ -122,7 +123,7 @@ def inplane_turns(
     (m, 3)``: normals opposed, centres together, and the ``keep`` turns about the normal (of
     every ``INPLANE_STEP_DEG``) whose outlines agree best (2-D chamfer)."""
     face = facing(src_normal, dst_normal)
-    axes = _plane_axes(dst_normal)
+    axes = plane_axes(dst_normal)
     flat_dst = (dst - dst_centre) @ axes
     tree = cKDTree(flat_dst)
     flat_src = (src - src_centre) @ face.T @ axes
@@ -146,3 +147,69 @@ def chamfer_rms(src: np.ndarray, dst: np.ndarray) -> float:
     there = cKDTree(dst).query(src)[0]
     back = cKDTree(src).query(dst)[0]
     return float(np.sqrt(0.5 * (np.mean(there**2) + np.mean(back**2))))
+
+
+def _rot2(angle: float) -> np.ndarray:
+    """The 2-D rotation by ``angle`` acting on row vectors (``x @ _rot2(a)``)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, s], [-s, c]])
+
+
+def _icp_2d(src: np.ndarray, dst: np.ndarray, angle: float, shift: np.ndarray, radius: float, floor: float):
+    """Trimmed 2-D ICP of the points ``src (k, 2)`` onto ``dst (m, 2)``: only pairs within a
+    radius shrinking from ``radius`` to ``floor``; returns the refined ``(angle, shift (2,))``."""
+    tree = cKDTree(dst)
+    for _ in range(ICP_ITERATIONS):
+        moved = src @ _rot2(angle) + shift
+        d, j = tree.query(moved, distance_upper_bound=radius)
+        ok = np.isfinite(d)
+        if ok.sum() < 6:
+            break
+        p, q = moved[ok], dst[j[ok]]
+        pc, qc = p.mean(0), q.mean(0)
+        a, b = p - pc, q - qc
+        turn = np.arctan2(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]), np.sum(a * b))
+        angle += turn
+        shift = (shift - pc) @ _rot2(turn) + qc
+        radius = max(floor, 0.7 * radius)
+        if abs(turn) < 1e-9:
+            break
+    return angle, shift
+
+
+def partial_placements(
+    small: np.ndarray,
+    big: np.ndarray,
+    small_centre: np.ndarray,
+    big_centre: np.ndarray,
+    small_normal: np.ndarray,
+    big_normal: np.ndarray,
+    cell: float,
+    keep: int = 2,
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Placements ``(R, t)`` of a planar face (outline ``small (k, 3)``) on part of a larger
+    coplanar face (outline ``big (m, 3)``), normals opposed: where a break of one fragment meets
+    the breaks of two others, each holds only part of it, and only part of the smaller outline
+    lies on the larger. For every turn of ``INPLANE_STEP_DEG``, each pair of outline points votes
+    for the shift that would lay one on the other (bins of ``cell``); the ``keep`` turns with the
+    most votes are refined by a trimmed 2-D ICP of the outlines."""
+    face = facing(small_normal, big_normal)
+    axes = plane_axes(big_normal)
+    step = max(1, len(small) // VOTERS), max(1, len(big) // VOTERS)
+    flat_small = (small @ face.T @ axes)[:: step[0]]
+    flat_big = (big @ axes)[:: step[1]]
+    votes = []
+    for angle in np.radians(np.arange(0.0, 360.0, INPLANE_STEP_DEG)):
+        diff = (flat_big[None, :, :] - (flat_small @ _rot2(angle))[:, None, :]).reshape(-1, 2)
+        bins = np.floor(diff / cell).astype(np.int64)
+        keys, inverse, counts = np.unique(bins, axis=0, return_inverse=True, return_counts=True)
+        top = int(np.argmax(counts))
+        votes.append((int(counts[top]), angle, diff[inverse.ravel() == top].mean(0)))
+    votes.sort(key=lambda v: -v[0])
+    out = []
+    for _, angle, shift in votes[:keep]:
+        angle, shift = _icp_2d(flat_small, flat_big, angle, shift, 2 * cell, 0.5 * cell)
+        rot = rotvec_matrix(angle * big_normal) @ face
+        height = (big_centre - rot @ small_centre) @ big_normal
+        out.append((rot, axes @ shift + height * big_normal))
+    return out

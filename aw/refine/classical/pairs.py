@@ -24,8 +24,25 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from aw.refine.classical.contact import Tolerance, contact_share, coverage, inverse, sunk_share, tolerance
-from aw.refine.classical.fit import chamfer_rms, contact_icp, facing, inplane_turns, rotvec_matrix, symmetric_icp
+from aw.refine.classical.contact import (
+    IDENTITY,
+    Tolerance,
+    contact_share,
+    coverage,
+    inverse,
+    objective,
+    sunk_share,
+    tolerance,
+)
+from aw.refine.classical.fit import (
+    chamfer_rms,
+    contact_icp,
+    facing,
+    inplane_turns,
+    partial_placements,
+    rotvec_matrix,
+    symmetric_icp,
+)
 from aw.refine.classical.surface import Cloud, Fragment, Region
 
 __all__ = ["Fit", "refine_pair", "register_pair", "score_fit"]
@@ -37,9 +54,15 @@ RUGGED_FACTOR = 1.25
 AREA_RATIO = {True: 1.6, False: 2.5}  # the largest area ratio of two regions that may meet (planar, rough)
 EXTENT_RATIO = 1.4  # the largest ratio of two rough regions' principal extents
 ROUGH_PAIRS = 8  # rough pairs searched per pair of fragments, the most alike first
+PARTIAL_ROUGH_PAIRS = 3  # the same with three or more fragments (each search is dearer)
 SAG_MISMATCH = 0.5  # of the larger sag: how far two rough regions' sags may fail to cancel
 SAME_DEG = 5.0
 OUTLINE_SHARE = 0.2  # of eps: the outline misfit that halves a planar fit's score
+PARTIAL_RATIO = 1.3  # two regions' area ratio above which one may meet only part of the other
+PARTIAL_AREA_RATIO = 5.0  # the largest area ratio of two regions that may meet, with three or more fragments
+PARTIAL_CENTRES = 2
+POLISH = 0.3  # of eps: the pairing radius that local refinement ends with
+PARTIAL_STEPS = 12  # turns tried at each of those centres
 SAG_FLOOR = 0.01  # of the object's size: sags this small always cancel (near-flat breaks)
 
 
@@ -78,50 +101,70 @@ def score_fit(a: Fragment, b: Fragment, ra: Region, rb: Region, rot, shift, tol:
 def _outline_fit(ra: Region, rb: Region, rot: np.ndarray, shift: np.ndarray, tol: Tolerance) -> float:
     """How well two planar outlines meet, in [0, 1]: ``1 / (1 + (misfit / (OUTLINE_SHARE * eps))^2)``
     (the misfit: root mean square distance of the outlines) times the square of the mean
-    agreement of the walls they meet (the normals across each outline sample and its nearest in
-    the other): at a cut the walls run on from one fragment into the other; a half-turned face of
-    the same outline leaves a crease."""
+    agreement of the walls they meet (the absolute cosine of the normals across each outline
+    sample and its nearest in the other): at a cut the walls run on from one fragment into the
+    other (or, inside a break, face each other); a half-turned face of the same outline leaves a
+    crease. Faces of unlike areas (a break split between two
+    fragments) are judged on the part of the smaller outline that lies on the larger one, the
+    score scaled by that part's share."""
     moved = rb.outline @ rot.T + shift
-    misfit = 1.0 / (1.0 + (chamfer_rms(ra.outline, moved) / (OUTLINE_SHARE * tol.eps)) ** 2)
-    j = cKDTree(moved).query(ra.outline)[1]
-    walls = float(np.mean(np.einsum("ij,ij->i", ra.rim_normals, rb.rim_normals[j] @ rot.T)))
-    return misfit * max(0.0, walls) ** 2
+    if not _partial(ra, rb):
+        misfit = 1.0 / (1.0 + (chamfer_rms(ra.outline, moved) / (OUTLINE_SHARE * tol.eps)) ** 2)
+        j = cKDTree(moved).query(ra.outline)[1]
+        walls = float(np.mean(np.abs(np.einsum("ij,ij->i", ra.rim_normals, rb.rim_normals[j] @ rot.T))))
+        return misfit * walls**2
+    small, small_walls, big, big_walls = (ra.outline, ra.rim_normals, moved, rb.rim_normals @ rot.T)
+    if rb.area < ra.area:
+        small, small_walls, big, big_walls = big, big_walls, small, small_walls
+    d, j = cKDTree(big).query(small)
+    on = d < OUTLINE_SHARE * tol.eps * 2
+    if not on.any():
+        return 0.0
+    misfit = 1.0 / (1.0 + (np.sqrt(np.mean(d[on] ** 2)) / (OUTLINE_SHARE * tol.eps)) ** 2)
+    walls = float(np.mean(np.abs(np.einsum("ij,ij->i", small_walls[on], big_walls[j[on]]))))
+    return float(on.mean()) * misfit * walls**2
 
 
-def _mismatch(ra: Region, rb: Region, size: float) -> float | None:
+def _partial(ra: Region, rb: Region) -> bool:
+    return max(ra.area, rb.area) > PARTIAL_RATIO * min(ra.area, rb.area)
+
+
+def _mismatch(ra: Region, rb: Region, size: float, partial: bool) -> float | None:
     """How unlike two regions are for meeting (0: alike), or ``None`` when they cannot meet: areas
     (and, for rough regions, principal extents) too different, or two bulges (outer surfaces:
-    a break's bulge is its match's hollow)."""
+    a break's bulge is its match's hollow). ``partial``: with three or more fragments a break
+    can meet part of another, so areas may differ more and extents are not compared."""
     planar = ra.planar and rb.planar
     area = np.log(max(ra.area, rb.area) / min(ra.area, rb.area))
-    if area > np.log(AREA_RATIO[planar]):
+    if area > np.log(PARTIAL_AREA_RATIO if partial else AREA_RATIO[planar]):
         return None
     if planar:
         return float(area) if len(ra.outline) and len(rb.outline) else None
     extents = np.log(
         np.maximum(ra.extents[:2], rb.extents[:2]) / np.maximum(np.minimum(ra.extents[:2], rb.extents[:2]), 1e-12)
     )
-    if extents.max() > np.log(EXTENT_RATIO):
+    if not partial and extents.max() > np.log(EXTENT_RATIO):
         return None
     sag = abs(ra.sag + rb.sag)
     if sag > max(SAG_MISMATCH * max(abs(ra.sag), abs(rb.sag)), SAG_FLOOR * size):
         return None
-    return float(area + extents.sum() + sag / (SAG_FLOOR * size))
+    return float(area + (0.0 if partial else extents.sum()) + sag / (SAG_FLOOR * size))
 
 
-def register_pair(a: Fragment, b: Fragment) -> list[Fit]:
-    """Fits of ``b`` onto ``a`` from the global search, best first."""
+def register_pair(a: Fragment, b: Fragment, partial: bool = False) -> list[Fit]:
+    """Fits of ``b`` onto ``a`` from the global search, best first. ``partial``: look for breaks
+    that meet only part of each other too (objects of three or more fragments)."""
     tol = tolerance(a, b)
     size = max(a.size, b.size)
     found: list[tuple[float, int, int, int, np.ndarray, np.ndarray]] = []
     planar, rough = [], []
     for ia, ra in enumerate(a.regions):
         for ib, rb in enumerate(b.regions):
-            mismatch = _mismatch(ra, rb, size)
+            mismatch = _mismatch(ra, rb, size, partial)
             if mismatch is not None:
                 (planar if ra.planar and rb.planar else rough).append((mismatch, ia, ib))
     # every planar pair (cheap), and the most alike rough pairs
-    for _, ia, ib in planar + sorted(rough)[:ROUGH_PAIRS]:
+    for _, ia, ib in planar + sorted(rough)[: PARTIAL_ROUGH_PAIRS if partial else ROUGH_PAIRS]:
         ra, rb = a.regions[ia], b.regions[ib]
         for rot, shift in _starts(ra, rb, tol, size):
             found.append((score_fit(a, b, ra, rb, rot, shift, tol, fine=False), len(found), ia, ib, rot, shift))
@@ -141,17 +184,47 @@ def register_pair(a: Fragment, b: Fragment) -> list[Fit]:
 
 def _starts(ra: Region, rb: Region, tol: Tolerance, size: float) -> list[tuple[np.ndarray, np.ndarray]]:
     """Coarse placements of region ``rb`` against ``ra``: outlines laid on each other (two
-    planar regions), else turns about the facing normals, each refined on the coarse samples."""
+    planar regions; on part of the larger outline when the areas differ), else turns about the
+    facing normals, each refined on the coarse samples; when the areas differ, the smaller
+    region's centre also goes to ``PARTIAL_CENTRES`` spread points of the larger region."""
     if ra.planar and rb.planar:
+        if _partial(ra, rb):
+            return partial_placements(
+                rb.outline, ra.outline, rb.centroid, ra.centroid, rb.normal, ra.normal, OUTLINE_SHARE * tol.eps
+            )
         turns = inplane_turns(rb.outline, ra.outline, rb.centroid, ra.centroid, rb.normal, ra.normal)
         return [symmetric_icp(rb.outline, ra.outline, rot, shift, size) for rot, shift in turns]
     face = facing(rb.normal, ra.normal)
+    centre_b = rb.coarse.points.mean(0)
+    centres = [ra.coarse.points.mean(0)]
+    if ra.area > PARTIAL_RATIO * rb.area:
+        centres += list(_spread(ra.coarse.points, PARTIAL_CENTRES))
     out = []
-    for angle in np.arange(IN_PLANE_STEPS) * 2 * np.pi / IN_PLANE_STEPS:
-        rot = rotvec_matrix(angle * ra.normal) @ face
-        shift = ra.coarse.points.mean(0) - rot @ rb.coarse.points.mean(0)
-        out.append(contact_icp(rb.coarse, ra.coarse, rot, shift, 0.5 * size, tol.eps, COARSE_ITERATIONS))
+    for k, centre in enumerate(centres):
+        steps = IN_PLANE_STEPS if k == 0 else PARTIAL_STEPS
+        for angle in np.arange(steps) * 2 * np.pi / steps:
+            rot = rotvec_matrix(angle * ra.normal) @ face
+            shift = centre - rot @ centre_b
+            out.append(contact_icp(rb.coarse, ra.coarse, rot, shift, 0.5 * size, tol.eps, COARSE_ITERATIONS))
+    if rb.area > PARTIAL_RATIO * ra.area:  # the smaller region is the anchor's: move the other's spread points onto it
+        for centre in _spread(rb.coarse.points, PARTIAL_CENTRES):
+            for angle in np.arange(PARTIAL_STEPS) * 2 * np.pi / PARTIAL_STEPS:
+                rot = rotvec_matrix(angle * ra.normal) @ face
+                shift = ra.coarse.points.mean(0) - rot @ centre
+                out.append(contact_icp(rb.coarse, ra.coarse, rot, shift, 0.5 * size, tol.eps, COARSE_ITERATIONS))
     return out
+
+
+def _spread(points: np.ndarray, count: int) -> np.ndarray:
+    """``count`` points of ``points (n, 3)`` far apart (farthest-point sampling from the one
+    farthest from the mean)."""
+    chosen = [int(np.argmax(np.linalg.norm(points - points.mean(0), axis=1)))]
+    dist = np.linalg.norm(points - points[chosen[0]], axis=1)
+    for _ in range(count - 1):
+        chosen.append(int(np.argmax(dist)))
+        dist = np.minimum(dist, np.linalg.norm(points - points[chosen[-1]], axis=1))
+    # halfway to the mean: a part of a break lies inside it, not on its rim
+    return 0.5 * (points[chosen] + points.mean(0))
 
 
 def _same(rot, shift, rot2, shift2, eps: float) -> bool:
@@ -163,7 +236,9 @@ def _same(rot, shift, rot2, shift2, eps: float) -> bool:
 def _fine(a: Fragment, b: Fragment, ia: int, ib: int, rot, shift, tol: Tolerance) -> Fit:
     """A fit refined on the regions' dense samples."""
     ra, rb = a.regions[ia], b.regions[ib]
-    if ra.planar and rb.planar:
+    if ra.planar and rb.planar and _partial(ra, rb):
+        pass  # the trimmed outline ICP of partial_placements is as fine as it gets
+    elif ra.planar and rb.planar:
         rot, shift = symmetric_icp(rb.outline, ra.outline, rot, shift, max(a.size, b.size))
     else:
         rot, shift = contact_icp(rb.fine, ra.fine, rot, shift, 4 * tol.eps, tol.eps)
@@ -177,11 +252,19 @@ def _union(fragment: Fragment) -> Cloud:
 
 def refine_pair(a: Fragment, b: Fragment, rot: np.ndarray, shift: np.ndarray, radius: float) -> Fit:
     """``b`` refined from a given placement: ICP on all candidate regions of both (within
-    ``radius`` at first), then on the pair of regions that meet best there."""
+    ``radius`` at first), then also on the pair of regions that meet best there; of the two, the
+    one with the higher fracture objective (:func:`contact.objective`)."""
     if not a.regions or not b.regions:
         return Fit(rot, shift, -np.inf)
     tol = tolerance(a, b)
-    rot, shift = contact_icp(_union(b), _union(a), rot, shift, radius, tol.eps)
+    union_a, union_b = _union(a), _union(b)
+    rot, shift = contact_icp(union_b, union_a, rot, shift, radius, tol.eps)
+    rot, shift = contact_icp(union_b, union_a, rot, shift, tol.eps, POLISH * tol.eps)  # only the closest pairs
     pairs = [(ia, ib) for ia in range(len(a.regions)) for ib in range(len(b.regions))]
     ia, ib = max(pairs, key=lambda p: coverage(a.regions[p[0]].fine, b.regions[p[1]].fine, tol, (rot, shift)))
-    return _fine(a, b, ia, ib, rot, shift, tol)
+    paired = _fine(a, b, ia, ib, rot, shift, tol)
+    tols = {(0, 1): tol}
+    whole = objective([a, b], [IDENTITY, (rot, shift)], tols)
+    if objective([a, b], [IDENTITY, (paired.rot, paired.shift)], tols) > whole:
+        return paired
+    return Fit(rot, shift, whole, None)

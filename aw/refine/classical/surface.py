@@ -192,10 +192,11 @@ def _components(mesh: trimesh.Trimesh, faces: np.ndarray) -> list[np.ndarray]:
 
 
 def _planar_parts(mesh: trimesh.Trimesh, normals: np.ndarray, faces: np.ndarray, flat: float) -> list[np.ndarray]:
-    """A smooth region split into its large planar parts and the rest: where a break meets the
-    object's surface at a shallow angle the two run into one region; the planar part of it (the
-    faces within ``PLANE_DEG`` of the region's most common normal and within ``flat`` of one
-    plane) is a cut face of its own."""
+    """The large planar parts of a smooth region that is not planar as a whole: where a break
+    meets the object's surface at a shallow angle the two run into one region, and a planar
+    part of it (faces within ``PLANE_DEG`` of a common normal and within ``flat`` of one plane)
+    may be a cut face of its own; the region stays a candidate too (a rough break with flat
+    stretches is one break)."""
     out = []
     rest = faces
     area = mesh.area_faces
@@ -218,7 +219,7 @@ def _planar_parts(mesh: trimesh.Trimesh, normals: np.ndarray, faces: np.ndarray,
             break
         out.append(best_part)
         rest = np.setdiff1d(rest, best_part)
-    return out + ([rest] if len(out) == 0 else _components(mesh, rest))
+    return out
 
 
 def _noise(body: Cloud, k: int = 12) -> float:
@@ -241,7 +242,7 @@ def fragment(vertices: np.ndarray, faces: np.ndarray, size: float, rng: np.rando
     for f in segment_regions(mesh, normals):
         if mesh.area_faces[f].sum() < MIN_REGION_SHARE * mesh.area:
             break
-        parts += _planar_parts(mesh, normals, f, PLANAR_RMS * size + 3.0 * noise)
+        parts += [f, *_planar_parts(mesh, normals, f, PLANAR_RMS * size + 3.0 * noise)]
     parts.sort(key=lambda f: -mesh.area_faces[f].sum())
     regions = []
     for f in parts:
