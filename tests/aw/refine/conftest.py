@@ -15,3 +15,10 @@ from fracture_suite import make_fracture_suite  # noqa: E402
 @pytest.fixture(scope="session")
 def fracture_suite(tmp_path_factory) -> Path:
     return make_fracture_suite(tmp_path_factory.mktemp("fractures") / "suite")
+
+
+@pytest.fixture(scope="session")
+def break_suite(tmp_path_factory) -> Path:
+    """Objects of the refiners' break families: two planar cuts and a 3-piece break."""
+    objects = (("breaks_planar/0", 0), ("breaks_planar/2", 0), ("breaks_pieces/3", 0))
+    return make_fracture_suite(tmp_path_factory.mktemp("breaks") / "suite", objects)

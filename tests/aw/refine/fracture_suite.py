@@ -1,6 +1,7 @@
-"""A small two-fragment fracture suite for refiner tests, written with the project's own
-generator (:func:`aw.sources.synthetic.fracture.fracture`) and format writers: each fragment is
-baked at a random rotation and a scattered position, its target pose undoing that."""
+"""Small fracture suites for refiner tests, written with the project's own generators
+(:func:`aw.sources.synthetic.fracture.fracture`, the break families of
+:mod:`aw.sources.synthetic.families`) and format writers: each fragment is baked at a random
+rotation and a scattered position, its target pose undoing that."""
 
 from __future__ import annotations
 
@@ -23,15 +24,21 @@ from aw.formats import (
 )
 from aw.prepare.official_protocol import pose_of
 from aw.prompt import task_prompt
+from aw.sources.synthetic import generate_object
 from aw.sources.synthetic.builder import Builder
 from aw.sources.synthetic.fracture import fracture
 
 
 def fragments(category: str, seed: int) -> list[trimesh.Trimesh]:
-    """The two assembled fragments of a ``category`` solid, scaled to about unit size."""
-    b = Builder(category)
-    fracture(b, category, np.random.default_rng(seed))
-    meshes = [p.mesh for p in b.parts]
+    """The two assembled fragments of a ``category`` solid, scaled to about unit size;
+    ``category`` ``FAMILY/INDEX`` (``breaks_planar/3``): object ``INDEX`` of a break family."""
+    if "/" in category:
+        family, index = category.split("/")
+        meshes = [p.mesh for p in generate_object(family, int(index), seed).parts]
+    else:
+        b = Builder(category)
+        fracture(b, category, np.random.default_rng(seed))
+        meshes = [p.mesh for p in b.parts]
     size = float(np.ptp(np.vstack([m.vertices for m in meshes]), axis=0).max())
     return [trimesh.Trimesh(np.asarray(m.vertices) / size, m.faces, process=False) for m in meshes]
 
@@ -51,12 +58,12 @@ def make_fracture_suite(root: Path, objects=(("cylinder", 1), ("hex_prism", 2)))
     rng = np.random.default_rng(7)
     entries = []
     for category, seed in objects:
-        task_id = f"frac_{category}_{seed}"
+        task_id = f"frac_{category.replace('/', '_')}_{seed}"
         task_dir = root / "tasks" / task_id
         (task_dir / "parts").mkdir(parents=True)
         baked, targets = bake(fragments(category, seed), rng)
-        ids = ["fragment_a", "fragment_b"]
-        for pid, m in zip(ids, baked):
+        ids = [f"fragment_{c}" for c in "abcdefgh"[: len(baked)]]
+        for pid, m in zip(ids, baked, strict=True):
             m.export(task_dir / "parts" / f"{pid}.obj")
         write_task(
             task_dir,
@@ -64,8 +71,8 @@ def make_fracture_suite(root: Path, objects=(("cylinder", 1), ("hex_prism", 2)))
                 task_id=task_id,
                 source="fantastic_breaks",
                 dataset="synthetic",
-                category=category,
-                object_id=f"{category}_{seed}",
+                category=category.split("/")[0],
+                object_id=f"{category.replace('/', '_')}_{seed}",
                 condition="none",
                 prompt=task_prompt("none"),
                 parts=[TaskPart(id=p, mesh=f"parts/{p}.obj") for p in ids],
@@ -73,16 +80,20 @@ def make_fracture_suite(root: Path, objects=(("cylinder", 1), ("hex_prism", 2)))
         )
         write_targets(
             root / "targets" / f"{task_id}.json",
-            Targets(task_id=task_id, parts={p: PartTarget(pose=t.tolist()) for p, t in zip(ids, targets)}, scale=1.0),
+            Targets(
+                task_id=task_id,
+                parts={p: PartTarget(pose=t.tolist()) for p, t in zip(ids, targets, strict=True)},
+                scale=1.0,
+            ),
         )
         entries.append(
             SuiteEntry(
                 task_id=task_id,
                 source="fantastic_breaks",
                 condition="none",
-                object_id=f"{category}_{seed}",
-                category=category,
-                n_parts=2,
+                object_id=f"{category.replace('/', '_')}_{seed}",
+                category=category.split("/")[0],
+                n_parts=len(baked),
             )
         )
     write_manifest(root, SuiteManifest(name="fractures", generator="tests/aw/refine/fracture_suite.py", tasks=entries))

@@ -1,6 +1,6 @@
-"""The classical refiner on real generated fractures: the global search puts the fragments
-back together from a random layout, local refinement pulls a near start onto the fit, and a task
-it cannot handle fails by name."""
+"""The classical refiner on real generated breaks: the global search puts rough breaks, planar
+cuts and a 3-piece break back together from a scattered layout, local refinement pulls a near
+start onto the fit, and a start it cannot improve comes back unchanged with a line saying so."""
 
 from __future__ import annotations
 
@@ -12,9 +12,8 @@ from scipy.spatial.transform import Rotation
 
 from aw.formats import read_targets, read_task
 from aw.prepare.official_protocol import pose_of, rotation_of
-from aw.refine.base import RefinerError
-from aw.refine.classical import _candidates, refine, segment_regions
-from aw.refine.plugins import resolve, run_refiner
+from aw.refine.classical import refine
+from aw.refine.classical.surface import fragment
 from aw.refine.runs import build_request
 from aw_eval.fracture import fracture_metrics_from_samples
 
@@ -25,64 +24,95 @@ def _task(suite, tid):
     return task, np.array([targets.parts[p].pose for p in task.part_ids])
 
 
+def _metrics(request, poses, target):
+    return fracture_metrics_from_samples(request.points, poses, target, 1.0)
+
+
 @pytest.mark.parametrize("tid", ["frac_cylinder_1", "frac_hex_prism_2"])
-def test_global_search_reassembles_two_fragments(fracture_suite, tid):
+def test_global_search_reassembles_a_rough_break(fracture_suite, tid):
     task, target = _task(fracture_suite, tid)
     request = build_request(task, fracture_suite, None)
     poses = refine(request)
     assert np.array_equal(poses[request.anchor], request.initial_poses[request.anchor])
-    m = fracture_metrics_from_samples(request.points, poses, target, 1.0)
-    start = fracture_metrics_from_samples(request.points, request.initial_poses, target, 1.0)
+    m = _metrics(request, poses, target)
     assert m.pa == 1.0 and m.re < 2.0 and m.te < 0.01, (m.re, m.te, m.pa)
-    assert start.pa < 1.0  # the layout itself is not assembled
+    assert _metrics(request, request.initial_poses, target).pa < 1.0  # the layout itself is not assembled
 
 
-def test_local_refinement_pulls_a_near_start_onto_the_fit(fracture_suite):
-    task, target = _task(fracture_suite, "frac_hex_prism_2")
-    request = build_request(task, fracture_suite, None)
+@pytest.mark.parametrize("tid", ["frac_breaks_planar_0_0", "frac_breaks_planar_2_0"])
+def test_global_search_assembles_a_planar_cut_within_2_degrees(break_suite, tid):
+    """A low-poly blob and a chamfered brick cut by a plane: the cut faces are planar, and so
+    are many of the brick's other faces."""
+    task, target = _task(break_suite, tid)
+    request = build_request(task, break_suite, None)
+    m = _metrics(request, refine(request), target)
+    assert m.pa == 1.0 and m.part_re.max() < 2.0 and m.te < 0.01, (m.part_re, m.te)
+
+
+def test_a_three_piece_break_has_every_piece_placed(break_suite):
+    task, target = _task(break_suite, "frac_breaks_pieces_3_0")
+    request = build_request(task, break_suite, None)
+    assert len(request.part_ids) == 3
+    m = _metrics(request, refine(request), target)
+    assert m.pa == 1.0 and m.part_re.max() < 5.0, m.part_re
+
+
+def _near(request, target, degrees, shift):
+    """The target assembly with the non-anchor fragment turned by ``degrees`` and moved by ``shift``."""
     a, b = request.anchor, 1 - request.anchor
-    # the other fragment where the target puts it relative to the anchor, then 8 degrees and a shift off
     ra, rb = rotation_of(target[a, 3:]), rotation_of(target[b, 3:])
     rel_r, rel_t = ra.T @ rb, ra.T @ (target[b, :3] - target[a, :3])
-    nudge = Rotation.from_rotvec(np.radians(8) * np.array([0.6, 0.8, 0.0])).as_matrix()
+    nudge = Rotation.from_rotvec(np.radians(degrees) * np.array([0.6, 0.8, 0.0])).as_matrix()
     start = np.array(request.initial_poses)
-    start[b] = pose_of(rel_t + np.array([0.02, -0.01, 0.015]), nudge @ rel_r)
-    near = build_request(task, fracture_suite, {p: list(q) for p, q in zip(task.part_ids, start)})
+    start[b] = pose_of(rel_t + np.asarray(shift), nudge @ rel_r)
+    return start
+
+
+def test_local_refinement_pulls_a_near_start_onto_the_fit(fracture_suite, capsys):
+    task, target = _task(fracture_suite, "frac_hex_prism_2")
+    request = build_request(task, fracture_suite, None)
+    start = _near(request, target, 8, [0.02, -0.01, 0.015])
+    near = build_request(task, fracture_suite, {p: list(q) for p, q in zip(task.part_ids, start, strict=True)})
     assert near.given_initial_poses
-    before = fracture_metrics_from_samples(near.points, start, target, 1.0)
-    after = fracture_metrics_from_samples(near.points, refine(near), target, 1.0)
+    before = _metrics(near, start, target)
+    after = _metrics(near, refine(near), target)
     assert after.re < 1.0 and after.te < 0.005 and after.re < before.re / 4, (before.re, after.re, after.te)
+    assert "classical: fracture objective" in capsys.readouterr().out
+
+
+def test_a_start_it_cannot_improve_comes_back_unchanged_and_it_says_so(fracture_suite, capsys):
+    """The other fragment far from the anchor: nothing to fit it to within reach of the local
+    ICP, so the fracture objective does not improve and the start comes back as it was."""
+    task, target = _task(fracture_suite, "frac_cylinder_1")
+    request = build_request(task, fracture_suite, None)
+    start = _near(request, target, 3, [3.0, 0.0, 0.0])
+    far = build_request(task, fracture_suite, {p: list(q) for p, q in zip(task.part_ids, start, strict=True)})
+    poses = refine(far)
+    assert np.array_equal(poses, far.initial_poses)
+    assert "classical: kept the start state" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("category", ["hex_prism", "bar", "cylinder"])
-def test_the_break_is_one_candidate_region(category):
+def test_the_rough_break_is_one_candidate_region_and_not_planar(category):
     """The generator writes the lower fragment's faces as bottom cap, break, wall; the break's
-    faces (a polar grid of 10 rings of 48) must come out as a non-planar candidate region (most
-    of it: where the height field is clipped it folds sharply), and the flat cap must not."""
+    faces (a polar grid of 10 rings of 48) must come out as a rough candidate region (most of
+    it: where the height field is clipped it folds sharply), and the flat cap as a planar one."""
     a, _ = fragments(category, 2)
-    mesh = trimesh.Trimesh(a.vertices, a.faces, process=True)
-    assert len(mesh.faces) == len(a.faces)
-    regions = segment_regions(mesh)
-    assert sorted(np.concatenate(regions).tolist()) == list(range(len(a.faces)))  # a partition
+    frag = fragment(np.asarray(a.vertices), np.asarray(a.faces), 1.0, np.random.default_rng(0))
+    assert len(frag.mesh.faces) == len(a.faces)
     grid = 48 + 2 * 48 * 9
-    size = float(np.ptp(mesh.vertices, axis=0).max())
     brk = set(range(grid, 2 * grid))
-    candidates = [set(c.tolist()) for c in _candidates(mesh, size)]
-    best = max(candidates, key=lambda c: len(c & brk))
-    assert best <= brk and len(best) >= 0.8 * len(brk)
-    assert not any(c & set(range(grid)) for c in candidates)
+    best = max(frag.regions, key=lambda r: len(set(r.faces.tolist()) & brk))
+    assert set(best.faces.tolist()) <= brk and len(best.faces) >= 0.8 * len(brk) and not best.planar
+    cap = max(frag.regions, key=lambda r: len(set(r.faces.tolist()) & set(range(grid))))
+    assert set(cap.faces.tolist()) == set(range(grid)) and cap.planar
 
 
-def test_more_than_two_fragments_fail_by_name(fracture_suite, tmp_path):
-    task, _ = _task(fracture_suite, "frac_cylinder_1")
-    request = build_request(task, fracture_suite, None)
-    request.part_ids = ["a", "b", "c"]
-    request.points = request.points + [request.points[0][:10]]
-    request.meshes = request.meshes + [request.meshes[0]]
-    request.mesh_paths = request.mesh_paths + [request.mesh_paths[0]]
-    request.initial_poses = np.vstack([request.initial_poses, request.initial_poses[:1]])
-    with pytest.raises(
-        RefinerError,
-        match="refiner classical: ValueError: the classical refiner handles two-fragment tasks, got 3 parts",
-    ):
-        run_refiner(resolve("classical"), request, tmp_path, 120)
+def test_a_planar_cut_meeting_the_surface_at_a_shallow_angle_is_still_its_own_region():
+    """A thin lens split through its thickness: where the cut grazes the lens's faces the rim is
+    too shallow to separate them by normals alone; the planar part is split off all the same."""
+    a, b = fragments("breaks_planar/9", 0)
+    for mesh in (a, b):
+        frag = fragment(np.asarray(mesh.vertices), np.asarray(mesh.faces), 1.0, np.random.default_rng(0))
+        planar = [r for r in frag.regions if r.planar]
+        assert planar and max(r.area for r in planar) > 0.3 * trimesh.Trimesh(mesh.vertices, mesh.faces).area
