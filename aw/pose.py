@@ -440,7 +440,7 @@ def cube_rotations() -> np.ndarray:
     for perm in itertools.permutations(range(3)):
         for signs in itertools.product((1.0, -1.0), repeat=3):
             m = np.zeros((3, 3))
-            for row, (col, s) in enumerate(zip(perm, signs)):
+            for row, (col, s) in enumerate(zip(perm, signs, strict=True)):
                 m[row, col] = s
             if np.linalg.det(m) > 0:
                 mats.append(m)

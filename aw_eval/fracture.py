@@ -80,7 +80,7 @@ class FractureMetrics:
 def wrapped_euler_error(r_pred: np.ndarray, r_target: np.ndarray) -> np.ndarray:
     """Per-part RMS of the wrapped intrinsic-XYZ Euler differences (degrees), rotations ``(P, 3, 3)``."""
     out = []
-    for rp, rt in zip(np.reshape(r_pred, (-1, 3, 3)), np.reshape(r_target, (-1, 3, 3))):
+    for rp, rt in zip(np.reshape(r_pred, (-1, 3, 3)), np.reshape(r_target, (-1, 3, 3)), strict=True):
         d = np.abs(
             Rotation.from_matrix(rp).as_euler("XYZ", degrees=True)
             - Rotation.from_matrix(rt).as_euler("XYZ", degrees=True)
@@ -119,7 +119,7 @@ def fracture_metrics_from_samples(
     if not (np.isfinite(scale) and scale > 0):
         raise ValueError("scale must be positive")
     points, predicted, target = [], [], []
-    for s, pp, r, tp in zip(samples, pred_poses, free_body_rotations(pred_poses[:, 3:]), target_poses):
+    for s, pp, r, tp in zip(samples, pred_poses, free_body_rotations(pred_poses[:, 3:]), target_poses, strict=True):
         centre = s.mean(0)
         points.append((s - centre) / scale)
         predicted.append((r, (r @ centre + pp[:3]) / scale))
@@ -131,14 +131,14 @@ def fracture_metrics_from_samples(
     turn = rg @ ra.T
     shift = tg - turn @ ta
     aligned = [(turn @ r, turn @ t + shift) for r, t in predicted]
-    pred = [q @ r.T + t for q, (r, t) in zip(points, aligned)]
-    gt = [q @ r.T + t for q, (r, t) in zip(points, target)]
+    pred = [q @ r.T + t for q, (r, t) in zip(points, aligned, strict=True)]
+    gt = [q @ r.T + t for q, (r, t) in zip(points, target, strict=True)]
     pred_tree, gt_tree = cKDTree(np.concatenate(pred)), cKDTree(np.concatenate(gt))
     part_re = wrapped_euler_error(np.stack([r for r, _ in aligned]), np.stack([r for r, _ in target]))
-    part_te = np.array([np.sqrt(np.mean((a[1] - b[1]) ** 2)) for a, b in zip(aligned, target)])
-    part_cd = np.array([_chamfer(a, b) for a, b in zip(pred, gt)])
+    part_te = np.array([np.sqrt(np.mean((a[1] - b[1]) ** 2)) for a, b in zip(aligned, target, strict=True)])
+    part_cd = np.array([_chamfer(a, b) for a, b in zip(pred, gt, strict=True)])
     shape_cd = np.array(
-        [np.mean(gt_tree.query(a)[0] ** 2) + np.mean(pred_tree.query(b)[0] ** 2) for a, b in zip(pred, gt)]
+        [np.mean(gt_tree.query(a)[0] ** 2) + np.mean(pred_tree.query(b)[0] ** 2) for a, b in zip(pred, gt, strict=True)]
     )
     return FractureMetrics(
         re=float(np.mean(part_re)),

@@ -22,7 +22,6 @@ __all__ = ["finalize", "finalize_costs", "rescore_thresholds"]
 def finalize(geom: TaskGeometry, ck: Checkpoint, reg: Registration, mode: str) -> ScoreResult:
     """Metrics of checkpoint ``ck`` under registration ``reg``: part CDs, Hungarian within groups,
     PA/SR/SCD/SR^a."""
-    st = geom.settings
     moved = ck.parts @ reg.rotation.T + reg.translation
     # registered normalized y = R_reg (R_i c + t_i) / div + t_reg  <=>  c = A_i y + b_i
     a = geom.divisor * np.einsum("pji,kj->pik", ck.rotations, reg.rotation)  # div R_i^T R_reg^T

@@ -137,7 +137,7 @@ def part_starts(poses: np.ndarray, target_poses: np.ndarray, divisor: float) -> 
     """Same-ID starts in part order: ``R0 = R*_i R_i^T``, ``t0 = (t*_i - R0 t_i) / divisor`` maps
     predicted part ``i`` exactly onto target part ``i`` (normalized units)."""
     out = []
-    for pose, tgt in zip(poses, target_poses):
+    for pose, tgt in zip(poses, target_poses, strict=True):
         r0 = quat_to_matrix(tgt[3:]) @ quat_to_matrix(pose[3:]).T
         out.append((r0, (tgt[:3] - r0 @ pose[:3]) / divisor))
     return out

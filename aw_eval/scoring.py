@@ -76,10 +76,10 @@ def _score_many_jax(
     icp_stats: dict = {}
     regs = register_exact_many(geom, padded, icp_stats)
     t2 = time.perf_counter()
-    moved = np.stack([ck.parts @ r.rotation.T + r.translation for ck, r in zip(padded, regs)])
+    moved = np.stack([ck.parts @ r.rotation.T + r.translation for ck, r in zip(padded, regs, strict=True)])
     costs = part_cd_batch(moved, geom.target_parts(), [(i, j) for g in geom.groups for i in g for j in g])
     t3 = time.perf_counter()
-    out = [finalize_costs(geom, r, c, mode) for r, c in zip(regs[: len(cks)], costs)]
+    out = [finalize_costs(geom, r, c, mode) for r, c in zip(regs[: len(cks)], costs, strict=True)]
     if stats is not None:
         t4 = time.perf_counter()
         for key, v in (
@@ -156,7 +156,11 @@ def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None, b
         for lo in range(0, len(order), JAX_CHUNK):
             keys = order[lo : lo + JAX_CHUNK]
             results.update(
-                zip(keys, _score_many_jax(geom, [geom.checkpoint(poses[k]) for k in keys], mode, stats["jax"]))
+                zip(
+                    keys,
+                    _score_many_jax(geom, [geom.checkpoint(poses[k]) for k in keys], mode, stats["jax"]),
+                    strict=True,
+                )
             )
             long_work.done(lo + len(keys))
             if progress is not None:

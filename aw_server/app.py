@@ -132,7 +132,7 @@ def _reference_resources(task: Task) -> list[FunctionResource]:
 def _prompt(task: Task) -> Prompt:
     def render() -> list[UserMessage]:
         messages = [UserMessage(task.prompt)]
-        for i, path in enumerate(task.reference_paths(), start=1):
+        for path in task.reference_paths():
             fmt = _MIME.get(path.suffix.lower(), "image/png").split("/")[1]
             messages.append(UserMessage(Image(data=path.read_bytes(), format=fmt)))
         return messages

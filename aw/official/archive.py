@@ -436,7 +436,7 @@ def _episode(
     if not finite.all():
         raise bad(path, f"frames.bin: row {int(np.argmin(finite))} holds a non-finite value")
     frames = {"initial": [], "state": [], "trace": []}
-    for k, (row, vector) in enumerate(zip(rows, vectors), start=1):
+    for k, (row, vector) in enumerate(zip(rows, vectors, strict=True), start=1):
         kind = row.get("kind")
         if not isinstance(kind, str) or kind not in frames:
             raise bad(path, f"frames.jsonl: line {k}: kind {kind!r}, expected initial, state or trace")

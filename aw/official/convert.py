@@ -109,7 +109,8 @@ def _write_suite(pkg: OfficialPackage, out: Path, chosen: list[tuple[str, str]])
         targets = Targets(
             task_id=tid,
             parts={
-                p: PartTarget(pose=[float(x) for x in pose]) for p, pose in zip(inputs.part_ids, inputs.target_poses)
+                p: PartTarget(pose=[float(x) for x in pose])
+                for p, pose in zip(inputs.part_ids, inputs.target_poses, strict=True)
             },
             equivalence_hint=hint,
             scale=1.0,
@@ -170,7 +171,7 @@ def convert_package(
 
 
 def _pose_dict(part_ids: list[str], poses: np.ndarray) -> dict[str, list[float]]:
-    return {p: [float(x) for x in pose] for p, pose in zip(part_ids, poses)}
+    return {p: [float(x) for x in pose] for p, pose in zip(part_ids, poses, strict=True)}
 
 
 def project_camera(camera: dict[str, list[float]]) -> CameraState | None:
@@ -235,7 +236,7 @@ def episode_records(ep: PartEpisode, task_id: str, system: str):
             }
             if index is not None:
                 prev, cur = poses[shown], poses[index]
-                rec["changed"] = [p for p, a, b in zip(ids, cur, prev) if not np.array_equal(a, b)]
+                rec["changed"] = [p for p, a, b in zip(ids, cur, prev, strict=True) if not np.array_equal(a, b)]
                 rec["poses"] = _pose_dict(ids, cur)
                 cam = arc.state(index).record["camera"]
                 if cam != arc.state(shown).record["camera"]:
@@ -461,7 +462,7 @@ def convert(
     staged_suite, staged_runs = staging_dir(suite, "aw-staging"), staging_dir(runs_root, "aw-staging")
     try:
         manifest = _write_suite(pkg, staged_suite, chosen)
-        for (name, block, sid, arc, extra), run_dir in zip(items, targets):
+        for (name, block, sid, arc, extra), run_dir in zip(items, targets, strict=True):
             inputs = pkg.evaluation_inputs(block, sid)
             ep = read_part_episode(arc, pkg.initial_archive(block, sid), inputs.part_ids)
             _write_run_files(ep, staged_runs / run_dir.relative_to(runs_root), system or name, run_dir.name, extra)

@@ -249,8 +249,13 @@ def write_evaluation(path: str | Path, inputs: EvaluationInputs) -> None:
         **({"provenance": inputs.provenance} if inputs.provenance is not None else {}),
         "part_ids": list(inputs.part_ids),
         "scale_divisor": float(inputs.divisor),
-        "points": {p: np.asarray(c, dtype=np.float64).tolist() for p, c in zip(inputs.part_ids, inputs.points)},
-        "gt_poses": {p: np.asarray(q, dtype=np.float64).tolist() for p, q in zip(inputs.part_ids, inputs.target_poses)},
+        "points": {
+            p: np.asarray(c, dtype=np.float64).tolist() for p, c in zip(inputs.part_ids, inputs.points, strict=True)
+        },
+        "gt_poses": {
+            p: np.asarray(q, dtype=np.float64).tolist()
+            for p, q in zip(inputs.part_ids, inputs.target_poses, strict=True)
+        },
         "equivalence": equivalence,
     }
     write_json(path, value)

@@ -272,7 +272,9 @@ def _compare_rows(key: tuple[str, str], a: Mapping[str, Any], b: Mapping[str, An
         def matches(parts):
             return [(p["part_id"], p["target_part_id"], p["correct"]) for p in parts]
 
-        if matches(pa) != matches(pb) or not all(_close(p["chamfer"], q["chamfer"], rtol) for p, q in zip(pa, pb)):
+        if matches(pa) != matches(pb) or not all(
+            _close(p["chamfer"], q["chamfer"], rtol) for p, q in zip(pa, pb, strict=True)
+        ):
             out.append(f"{where}: part matches or part Chamfers differ")
     return out
 

@@ -402,7 +402,7 @@ def fracture_samples(
         sample_surface(
             np.asarray(v, dtype=np.float64), f, int(n), stream(seed, dataset, sample_id, pid, "garf-evaluation")
         )
-        for (v, f), pid, n in zip(meshes, part_ids, counts)
+        for (v, f), pid, n in zip(meshes, part_ids, counts, strict=True)
     ]
 
 
@@ -442,12 +442,12 @@ def prepare_official(
         poses = [adapter_pose(p.pose) for p in parts]
     except ValueError as exc:
         raise ValueError(f"{sample.dataset}/{sample.sample_id}: {exc}") from None
-    assembled = [moved(p.vertices, q) for p, q in zip(parts, poses)]
+    assembled = [moved(p.vertices, q) for p, q in zip(parts, poses, strict=True)]
     scale = 2 * max(float(np.linalg.norm(p.vertices - p.vertices.mean(0), axis=1).max()) for p in parts)
     to_task = _normalization(np.concatenate(assembled), np.asarray(sample.source_to_z_up, dtype=np.float64), scale)
 
     local, candidates, firsts, targets = {}, {}, {}, {}
-    for p, q in zip(parts, poses):
+    for p, q in zip(parts, poses, strict=True):
         center, basis = pca_frame(p.vertices)
         local[p.part_id] = (p.vertices - center) @ basis / scale
         target_center = moved(center, q) @ to_task[:3, :3].T + to_task[:3, 3]

@@ -329,7 +329,7 @@ def format_summary(summary: dict[str, dict[str, Any]]) -> str:
 
     def fmt(r):
         return "  ".join(
-            c.ljust(w) if k in (0, 3, 4, 5) else c.rjust(w) for k, (c, w) in enumerate(zip(r, widths))
+            c.ljust(w) if k in (0, 3, 4, 5) else c.rjust(w) for k, (c, w) in enumerate(zip(r, widths, strict=True))
         ).rstrip()
 
     rule = "-" * len(fmt(head))

@@ -106,15 +106,16 @@ def run_study(
 
     agent_arm(arms["agent"], task_ids, None)
     refiner_arm(arms["refiner"], task_ids, None)
-    # a composed arm runs where its first stage produced a state; elsewhere it fails, by name
-    for first, arm, run in (("agent", "agent_refiner", refiner_arm), ("refiner", "refiner_agent", agent_arm)):
-        # an agent run that ended early still has a final state; a failed refiner run has none of its own
-        def has_start(t: str) -> bool:
-            if first == "refiner":
-                return t not in arms[first].failed
-            return (out / systems[first] / t / "final.json").is_file()
 
-        ok = [t for t in task_ids if has_start(t)]
+    # a composed arm runs where its first stage produced a state; elsewhere it fails, by name
+    def has_start(first: str, t: str) -> bool:
+        # an agent run that ended early still has a final state; a failed refiner run has none of its own
+        if first == "refiner":
+            return t not in arms[first].failed
+        return (out / systems[first] / t / "final.json").is_file()
+
+    for first, arm, run in (("agent", "agent_refiner", refiner_arm), ("refiner", "refiner_agent", agent_arm)):
+        ok = [t for t in task_ids if has_start(first, t)]
         for t in task_ids:
             if t not in ok:
                 arms[arm].failed[t] = f"no start state: arm {first} failed on this task"

@@ -90,7 +90,7 @@ def read_poses(obj_dir: str | Path) -> tuple[list[list[dict[str, np.ndarray]]], 
     if not views:
         raise FormatError(folder, "poses: no view_<v> folders")
     out = []
-    for v, d in views:
+    for _view, d in views:
         steps = sorted((int(m.group(1)), f) for f in d.iterdir() if f.suffix == ".json" and (m := _STEP.match(f.stem)))
         if not steps:
             raise FormatError(d, "poses: no step_<s>.json files")

@@ -185,12 +185,12 @@ def load_object(obj_dir: str | Path, default_source: str = "custom", up_axis: st
     meta_path = obj_dir / "meta.json"
     files = _part_files(obj_dir)
     meshes = [load_mesh(f) for f in files]
-    for f, mesh in zip(files, meshes):
+    for f, mesh in zip(files, meshes, strict=True):
         extent = np.ptp(np.asarray(mesh.vertices), axis=0)
         if not np.any(extent > 0):
             raise FormatError(f, "all vertices coincide; a part needs extent")
     axis, how = _up_axis(meta, up_axis, meshes)
-    parts = [SourcePart(f.stem, y_up_to_z_up(m) if axis == "y" else m) for f, m in zip(files, meshes)]
+    parts = [SourcePart(f.stem, y_up_to_z_up(m) if axis == "y" else m) for f, m in zip(files, meshes, strict=True)]
     names = {p.name for p in parts}
     for field_name, groups in (("equivalence", meta.equivalence), ("steps", meta.steps)):
         for group in groups or []:

@@ -124,7 +124,7 @@ def failure_analysis(study: Study) -> dict[str, Any]:
             "failed_tasks": n_failed,
             "wrong_parts": n_wrong,
             "unscored_runs": len(runs) - len(scored),
-            "class_counts": {c: int(n) for c, n in zip(CLASSES, counts)},
+            "class_counts": {c: int(n) for c, n in zip(CLASSES, counts, strict=True)},
             "translation_part_pooled": part,
             "translation_task_pooled": task,
             "grid": grid,

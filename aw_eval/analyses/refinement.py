@@ -177,5 +177,5 @@ def _divisor(suite_dir: Path, task_id: str, meshes, target: np.ndarray, scale: f
                 return float(npz["fracture_divisor"]), "eval_points"
     from aw.prepare.official_protocol import moved
 
-    extent = max(float(np.ptp(moved(v, p), axis=0).max()) for (v, _), p in zip(meshes, target))
+    extent = max(float(np.ptp(moved(v, p), axis=0).max()) for (v, _), p in zip(meshes, target, strict=True))
     return max(float(scale), extent), "targets scale and assembled extent"

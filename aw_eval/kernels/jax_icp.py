@@ -409,7 +409,7 @@ def icp_batch(
                 t_all[ids],
             )
         )
-    ids, active, its, prev, fwd, bwd, best, br, bt = (np.concatenate(z) for z in zip(*live))
+    ids, active, its, prev, fwd, bwd, best, br, bt = (np.concatenate(z) for z in zip(*live, strict=True))
     active &= max_iters > 0
     while active.any():
         keep = np.flatnonzero(active)
@@ -438,7 +438,7 @@ def icp_batch(
             counters["queries"] += len(pad) * iters * per_lane
             counters["lane_iterations"] += int((new_its - its[part]).sum())
             counters["brute_queries"] += int(nflag)
-            for whole, got in zip((active, its, prev, fwd, bwd, best, br, bt), out):
+            for whole, got in zip((active, its, prev, fwd, bwd, best, br, bt), out, strict=True):
                 whole[part] = np.asarray(got)[:n]
         best_obj[ids], best_r[ids], best_t[ids] = best, br, bt
     if stats is not None:

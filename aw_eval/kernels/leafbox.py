@@ -97,7 +97,7 @@ def build_part_leaves(parts: np.ndarray, leaf: int = DEFAULT_LEAF) -> LeafBoxes:
     parts = np.asarray(parts, dtype=np.float64)
     n = parts.shape[1]
     each = [build_leaf_boxes(c, leaf, q * n) for q, c in enumerate(parts)]
-    return LeafBoxes(*(np.concatenate(z) for z in zip(*each)))
+    return LeafBoxes(*(np.concatenate(z) for z in zip(*each, strict=True)))
 
 
 def brute_first_min(x: np.ndarray, ref: np.ndarray) -> np.ndarray:

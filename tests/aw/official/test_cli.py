@@ -66,7 +66,7 @@ def test_export_a_native_run(tmp_path, capsys):
     meshes = [trimesh.creation.box([0.4, 0.2, 0.1]), trimesh.creation.box([0.1, 0.1, 0.3])]
     task_dir = tmp_path / "suite" / "tasks" / "native"
     (task_dir / "parts").mkdir(parents=True)
-    for i, m in zip(ids, meshes):
+    for i, m in zip(ids, meshes, strict=True):
         m.export(task_dir / "parts" / f"{i}.obj")
     write_task(task_dir, task)
     ep = Episode(task, meshes, tmp_path / "run", system="unit", budget_minutes=5.0)

@@ -56,7 +56,7 @@ def make_fracture_suite(root: Path, objects=(("cylinder", 1), ("hex_prism", 2)))
         (task_dir / "parts").mkdir(parents=True)
         baked, targets = bake(fragments(category, seed), rng)
         ids = ["fragment_a", "fragment_b"]
-        for pid, m in zip(ids, baked):
+        for pid, m in zip(ids, baked, strict=True):
             m.export(task_dir / "parts" / f"{pid}.obj")
         write_task(
             task_dir,
@@ -73,7 +73,11 @@ def make_fracture_suite(root: Path, objects=(("cylinder", 1), ("hex_prism", 2)))
         )
         write_targets(
             root / "targets" / f"{task_id}.json",
-            Targets(task_id=task_id, parts={p: PartTarget(pose=t.tolist()) for p, t in zip(ids, targets)}, scale=1.0),
+            Targets(
+                task_id=task_id,
+                parts={p: PartTarget(pose=t.tolist()) for p, t in zip(ids, targets, strict=True)},
+                scale=1.0,
+            ),
         )
         entries.append(
             SuiteEntry(

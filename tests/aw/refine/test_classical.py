@@ -47,7 +47,7 @@ def test_local_refinement_pulls_a_near_start_onto_the_fit(fracture_suite):
     nudge = Rotation.from_rotvec(np.radians(8) * np.array([0.6, 0.8, 0.0])).as_matrix()
     start = np.array(request.initial_poses)
     start[b] = pose_of(rel_t + np.array([0.02, -0.01, 0.015]), nudge @ rel_r)
-    near = build_request(task, fracture_suite, {p: list(q) for p, q in zip(task.part_ids, start)})
+    near = build_request(task, fracture_suite, {p: list(q) for p, q in zip(task.part_ids, start, strict=True)})
     assert near.given_initial_poses
     before = fracture_metrics_from_samples(near.points, start, target, 1.0)
     after = fracture_metrics_from_samples(near.points, refine(near), target, 1.0)

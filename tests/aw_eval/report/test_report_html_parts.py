@@ -33,6 +33,9 @@ def test_markdown_tables_become_sortable_with_the_same_cells():
     names = markdown_to_html(md_table(["System", "SR"], [["oracle-noise0.5", "1"], ["heuristic", "2"]]))
     assert '<td class="l">oracle-noise0.5</td>' in names and '<td class="l">heuristic</td>' in names
     assert '<div class="tablewrap"><table class="sortable">' in names  # wide tables scroll inside their box
+    # a system named after a run directory may hold a "|": it stays one cell, the row keeps its width
+    piped = markdown_to_html(md_table(["System", "SR"], [["a|b", "1"]]))
+    assert '<td class="l">a|b</td><td class="r" data-v="1">1</td></tr>' in piped
     assert "<ul><li><strong>missing</strong> (1):<ul><li>a / t1: no run</li></ul></li><li>next</li></ul>" in out
     assert '<img src="plots/q.png" alt="quality" loading="lazy">' in out
     assert markdown_to_html("a <b> & c") == "<p>a &lt;b&gt; &amp; c</p>"
