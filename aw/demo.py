@@ -63,7 +63,7 @@ def _run(cmd: list[str]) -> None:
 
 def systems(noise_levels: tuple[float, ...]) -> list[tuple[str, str, float | None]]:
     """(label, agent, noise) of every demo system, in table order."""
-    out = [("idle", "idle", None), ("heuristic", "heuristic", None)]
+    out: list[tuple[str, str, float | None]] = [("idle", "idle", None), ("heuristic", "heuristic", None)]
     out += [(system_label("oracle", None, {"noise": n}), "oracle", n) for n in noise_levels]
     return out
 

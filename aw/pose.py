@@ -148,9 +148,9 @@ def matrix_to_quat(m) -> np.ndarray:
         else:
             s = np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
             q = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
-        q = np.asarray(q)
-        q /= np.linalg.norm(q)
-        out[k] = -q if q[0] < 0 else q
+        quat = np.asarray(q)
+        quat /= np.linalg.norm(quat)
+        out[k] = -quat if quat[0] < 0 else quat
     return out.reshape(m.shape[:-2] + (4,))
 
 

@@ -408,8 +408,8 @@ class OffscreenRenderer:
             scene.set_pose(node, m)
         lo, hi = self._bounds(mats, visible)
         # Ground at the lowest part's height, a hair below it so part bottoms never fight it.
-        extent = float(max(hi[0] - lo[0], hi[1] - lo[1], 1e-3))
-        size = float(max(np.linalg.norm(hi - lo), 1e-3))
+        extent = max(float(hi[0] - lo[0]), float(hi[1] - lo[1]), 1e-3)
+        size = max(float(np.linalg.norm(hi - lo)), 1e-3)
         step = grid_spacing(extent)
         centre = np.round(0.5 * (lo[:2] + hi[:2]) / step) * step
         z = lo[2] - 2e-3 * size

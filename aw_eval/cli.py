@@ -282,12 +282,9 @@ def _score(args: argparse.Namespace) -> int:
     cov = stats.coverage
     for s in doc["uncertainty"].get("order", study.systems):
         o = q[s]["overall"]
-        have = cov.runs.get(s, cov.n_tasks) if cov else None
-        short = (
-            f"  [WARNING: runs for only {have} of {plural(cov.n_tasks, 'task')}; the rest count 0]"
-            if cov and have < cov.n_tasks
-            else ""
-        )
+        short = ""
+        if cov is not None and (have := cov.runs.get(s, cov.n_tasks)) < cov.n_tasks:
+            short = f"  [WARNING: runs for only {have} of {plural(cov.n_tasks, 'task')}; the rest count 0]"
         print(f"{system_label(doc, s)}: Overall SR {o['sr']:.2f}%  PA {o['pa']:.2f}%{note}{short}")
     print(f"wrote {res['files']['report']}")
     if "html" in res["files"]:

@@ -240,7 +240,8 @@ def trajectory_checkpoints(obj: SyntheticObject, n: int, seed: int) -> np.ndarra
     part each, seeds ``seed, seed + 1, ...``). Prefix-stable: the first ``k`` rows do not depend
     on ``n >= k``."""
     p = len(obj.meshes)
-    out, k = [], 0
+    out: list[np.ndarray] = []
+    k = 0
     while sum(len(t) for t in out) < n:
         out.append(synthetic_trajectory(obj, 3 * p, seed=seed + k))
         k += 1

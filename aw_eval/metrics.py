@@ -11,6 +11,7 @@ errors of :mod:`aw_eval.matching` and the registration's objective:
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from aw_eval.geometry import Checkpoint, TaskGeometry
 from aw_eval.matching import match_parts, match_within_groups
@@ -57,7 +58,7 @@ def _result(geom: TaskGeometry, reg: Registration, assign: np.ndarray, errors: n
     )
 
 
-def rescore_thresholds(part_errors, thresholds) -> tuple[np.ndarray, np.ndarray]:
+def rescore_thresholds(part_errors: ArrayLike, thresholds: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """PA and SR at other thresholds with registration and matching held fixed.
 
     ``part_errors (..., P)``, ``thresholds (T,)`` -> ``(pa (..., T), sr (..., T))``; a part is
@@ -70,4 +71,4 @@ def rescore_thresholds(part_errors, thresholds) -> tuple[np.ndarray, np.ndarray]
     if thr.ndim != 1 or not np.all(np.isfinite(thr)):
         raise ValueError("thresholds must be a 1-D array of finite numbers")
     ok = e[..., None, :] <= thr[:, None]
-    return ok.mean(axis=-1), ok.all(axis=-1)
+    return ok.mean(axis=-1), np.asarray(ok.all(axis=-1))

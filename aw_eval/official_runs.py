@@ -128,7 +128,7 @@ def score_state(inputs: EvaluationInputs, poses: np.ndarray) -> dict[str, Any]:
             }
             for k, p in enumerate(ids)
         ),
-        key=lambda r: r["part_id"],
+        key=lambda r: str(r["part_id"]),
     )
     kind, index = start_label(res.start_index)
     alignment = {
@@ -288,7 +288,10 @@ def _overall_text(summary: Mapping[str, Any]) -> str:
     overall = summary.get("official_overall")
     if overall is None:
         return f"partial run ({summary['attempted']}/{summary['expected']} attempted): no Overall"
-    fmt = lambda v: "n/a" if v is None else f"{v:.4f}"  # noqa: E731
+
+    def fmt(v: float | None) -> str:
+        return "n/a" if v is None else f"{v:.4f}"
+
     return f"Overall SCD {fmt(overall['SCD'])}  PA {fmt(overall['PA'])}  SR {fmt(overall['SR'])}"
 
 

@@ -23,8 +23,12 @@ import select
 import signal
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from aw.cli.common import EXIT_USAGE, add_overwrite, new_parser
+
+if TYPE_CHECKING:  # the server's imports wait until the arguments are checked
+    from aw.formats import EndReason
 
 REFUSAL_WAIT_S = 3.0  # how long a refused stdio start waits for the client's initialize request
 
@@ -257,7 +261,8 @@ def main(argv: list[str] | None = None) -> int:
     else:
         from aw_server.app import build_server
 
-    reason, message = "disconnect", ""
+    reason: EndReason = "disconnect"
+    message = ""
     try:
         server = build_server(episode, log_level=args.log_level)
         if args.transport == "stdio":

@@ -12,12 +12,12 @@
 from __future__ import annotations
 
 import argparse
-import functools
 import os
 import sys
 import textwrap
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 __all__ = [
     "EXIT_OK",
@@ -84,14 +84,18 @@ def new_parser(prog: str, description: str, epilog: str | None = None) -> argpar
     return argparse.ArgumentParser(prog=prog, description=description, epilog=epilog, formatter_class=_Formatter)
 
 
-def add_commands(p: argparse.ArgumentParser) -> argparse._SubParsersAction:
+class _CommandParser(argparse.ArgumentParser):
+    """A subcommand's parser: the same plain help as :func:`new_parser`."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", _Formatter)
+        super().__init__(*args, **kwargs)
+
+
+def add_commands(p: argparse.ArgumentParser) -> argparse._SubParsersAction[_CommandParser]:
     """Subcommands (``args.command``, required) whose parsers speak the same plain help."""
     return p.add_subparsers(
-        dest="command",
-        metavar="COMMAND",
-        required=True,
-        help="one of:",
-        parser_class=functools.partial(argparse.ArgumentParser, formatter_class=_Formatter),
+        dest="command", metavar="COMMAND", required=True, help="one of:", parser_class=_CommandParser
     )
 
 

@@ -178,7 +178,7 @@ def _cmd_official(args: argparse.Namespace) -> int:
     try:
         if args.episodes is None:
             manifest = convert_package(args.package, args.out, force=args.overwrite)
-            runs = []
+            runs: list[Path] = []
         else:
             skipped: list[str] = []
             manifest, runs = convert(

@@ -9,7 +9,7 @@ exactly the task's parts.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Final, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
@@ -20,7 +20,7 @@ from aw.formats.trajectory import FinalState
 
 __all__ = ["POSES_FORMAT", "PosesFile", "initial_poses_file", "read_initial_poses", "write_poses"]
 
-POSES_FORMAT = "assemblyworld.poses"
+POSES_FORMAT: Final = "assemblyworld.poses"
 
 
 class PosesFile(BaseModel):

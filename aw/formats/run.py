@@ -7,6 +7,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from aw.formats.common import RunEnded
 from aw.formats.io import read_model, write_json_atomic
 
 RUN_ENDINGS = ("finished", "timeout", "error", "crashed", "hung")
@@ -30,7 +31,7 @@ class RunInfo(BaseModel):
     started_at: str = ""
     wall_seconds: float | None = Field(default=None, ge=0)
     mcp_calls: int | None = Field(default=None, ge=0)
-    ended: Literal["finished", "timeout", "error", "crashed", "hung"] = "finished"
+    ended: RunEnded = "finished"
     error: str | None = None
     tokens: TokenUsage | None = None
     cost_usd: float | None = Field(default=None, ge=0)

@@ -11,12 +11,12 @@ import os
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Final, Literal
 
 import orjson
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from aw.formats.common import PoseList
+from aw.formats.common import EndReason, PoseList
 from aw.formats.errors import FormatError
 from aw.formats.io import (
     check_format_tag,
@@ -27,7 +27,7 @@ from aw.formats.io import (
     write_json_atomic,
 )
 
-TRAJECTORY_FORMAT = "assemblyworld.trajectory"
+TRAJECTORY_FORMAT: Final = "assemblyworld.trajectory"
 END_REASONS = ("finished", "timeout", "error", "disconnect", "interrupted")
 
 
@@ -83,7 +83,7 @@ class TrajectoryCall(BaseModel):
 class TrajectoryEnd(BaseModel):
     model_config = ConfigDict(extra="forbid")
     type: Literal["end"] = "end"
-    reason: Literal["finished", "timeout", "error", "disconnect", "interrupted"]
+    reason: EndReason
     t: float | None = Field(default=None, description="as in a call line; absent if the clock never started")
     server_t: float | None = None
     message: str = ""
@@ -95,7 +95,7 @@ class FinalState(BaseModel):
     format: Literal["assemblyworld.final"] = "assemblyworld.final"
     format_version: Literal[1] = 1
     task_id: str
-    reason: Literal["finished", "timeout", "error", "disconnect", "interrupted"]
+    reason: EndReason
     poses: dict[str, PoseList]
 
 
@@ -122,6 +122,8 @@ class Trajectory:
         out = [Checkpoint(0, 0.0, dict(self.header.initial_poses))]
         for c in self.calls:
             if c.poses is not None:
+                if c.t is None:  # read_trajectory gives every call a time
+                    raise ValueError(f"call {c.seq} has no episode time")
                 out.append(Checkpoint(c.seq, c.t, dict(c.poses)))
         return out
 
@@ -132,7 +134,8 @@ class Trajectory:
         return self.checkpoints()[-1].poses
 
 
-_RECORDS: dict[str, type[BaseModel]] = {"header": TrajectoryHeader, "call": TrajectoryCall, "end": TrajectoryEnd}
+Record = TrajectoryHeader | TrajectoryCall | TrajectoryEnd
+_RECORDS: dict[str, type[Record]] = {"header": TrajectoryHeader, "call": TrajectoryCall, "end": TrajectoryEnd}
 
 
 class _BadJSON(Exception):
@@ -140,7 +143,7 @@ class _BadJSON(Exception):
         self.detail = detail
 
 
-def _parse_line(raw: bytes, lineno: int, path: Path) -> BaseModel:
+def _parse_line(raw: bytes, lineno: int, path: Path) -> Record:
     try:
         obj = parse_json_text(raw)
     except ValueError as exc:
@@ -161,7 +164,7 @@ def _parse_line(raw: bytes, lineno: int, path: Path) -> BaseModel:
         raise FormatError(path, f"line {lineno}: {describe_validation_error(exc)}") from None
 
 
-def _check_pose_ids(poses: dict | None, part_ids: list[str], what: str, path: Path) -> None:
+def _check_pose_ids(poses: dict[str, PoseList] | None, part_ids: list[str], what: str, path: Path) -> None:
     """Every recorded pose set names exactly the header's parts."""
     if poses is None:
         return
@@ -254,7 +257,7 @@ def _resolve_times(traj: Trajectory) -> None:
             stamps.append(end.server_t)
         start = max(stamps, default=0.0)
     for c in traj.calls:
-        if c.t is None:
+        if c.t is None and c.server_t is not None:  # read_trajectory refuses a call with neither
             c.t = round(c.server_t - start, 6)
     if end is not None and end.t is None:
         end.t = round(end.server_t - start, 6) if end.server_t is not None else 0.0

@@ -37,7 +37,7 @@ class KDTree(NamedTuple):
     """Arrays of a compiled KD-tree (see the module docstring); pass ``tree`` to the kernels."""
 
     points: np.ndarray  # (n, 3) tree order
-    index: np.ndarray  # (n,) tree position -> caller's row
+    index: np.ndarray  # type: ignore[assignment]  # (n,) tree position -> caller's row; shadows tuple.index, never called
     lo: np.ndarray  # (N, 3)
     hi: np.ndarray  # (N, 3)
     left: np.ndarray  # (N,)

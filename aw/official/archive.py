@@ -435,7 +435,7 @@ def _episode(
     finite = np.isfinite(vectors).all(axis=1)
     if not finite.all():
         raise bad(path, f"frames.bin: row {int(np.argmin(finite))} holds a non-finite value")
-    frames = {"initial": [], "state": [], "trace": []}
+    frames: dict[str, list[Frame]] = {"initial": [], "state": [], "trace": []}
     for k, (row, vector) in enumerate(zip(rows, vectors, strict=True), start=1):
         kind = row.get("kind")
         if not isinstance(kind, str) or kind not in frames:

@@ -108,7 +108,7 @@ def export_trajectory(
             "arguments": _object_arguments(call.args, object_ids),
             "actor": "agent",
             "producer": dict(PRODUCER),
-            "timestamp": iso_timestamp(t0 + timedelta(seconds=max(call.t, 0.0))),
+            "timestamp": iso_timestamp(t0 + timedelta(seconds=max(call.t or 0.0, 0.0))),
             "before_index": before,
             "state_index": len(ep.states),
             "trace_start": 0,

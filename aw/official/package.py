@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from aw.formats import Condition
 from aw.official.archive import EpisodeArchive, read_archive
 from aw.official.episode import read_part_episode
 from aw.official.errors import MissingPackageFileError, PackageError
@@ -60,7 +61,7 @@ BENCHMARK_EVALUATION = {
 }
 EXPECTED_SAMPLES = 100
 # A block's reference_mode as this project's task condition.
-REFERENCE_CONDITIONS = {"none": "none", "final-image": "image", "manualbook": "manual"}
+REFERENCE_CONDITIONS: dict[str, Condition] = {"none": "none", "final-image": "image", "manualbook": "manual"}
 _HF_SNAPSHOT = re.compile(r"[0-9a-f]{40}")
 
 

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from aw.pair_search import local_workers
@@ -123,7 +124,7 @@ def stream(seed: int, *identity: str) -> np.random.Generator:
 # ------------------------------------------------------------------ frames and poses
 
 
-def rotation_of(quaternion: Sequence[float]) -> np.ndarray:
+def rotation_of(quaternion: ArrayLike) -> np.ndarray:
     """``(3, 3)`` rotation of a ``(w, x, y, z)`` quaternion (normalized by SciPy)."""
     q = np.asarray(quaternion, dtype=np.float64)
     return Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix()
@@ -384,7 +385,7 @@ def allocate_fracture_samples(areas, total: int = FRACTURE_TOTAL, minimum: int =
 
 
 def fracture_samples(
-    meshes: Sequence[tuple[np.ndarray, Sequence[Sequence[int]]]],
+    meshes: Sequence[tuple[np.ndarray, ArrayLike]],
     part_ids: Sequence[str],
     dataset: str,
     sample_id: str,

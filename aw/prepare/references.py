@@ -86,7 +86,7 @@ def assembled_meshes(prep: PreparedObject) -> tuple[list[trimesh.Trimesh], np.nd
     return meshes, np.asarray(poses)
 
 
-def _font(size: int) -> ImageFont.ImageFont:
+def _font(size: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
     try:
         return ImageFont.load_default(size=size)
     except TypeError:  # Pillow < 10.1 has a single bitmap size

@@ -247,15 +247,15 @@ def standardize(obj: AssembledObject, seed: int = 0) -> PreparedObject:
         parts.append(PreparedPart(ids[k], src.name, mesh, target_pose(frame, scale, yaw, offset, centre)))
 
     name_to_id = {p.source_name: p.part_id for p in parts}
-    hint = None
+    hint: list[list[str]] | None = None
     if obj.equivalence:
-        hint = []
+        groups: list[list[str]] = []
         for group in obj.equivalence:
             unknown = [g for g in group if g not in name_to_id]
             if unknown:
                 raise ValueError(f"object {obj.object_id}: equivalence names unknown parts {unknown}")
             ids_g = sorted(name_to_id[g] for g in group)
             if len(ids_g) >= 2:
-                hint.append(ids_g)
-        hint = sorted(hint) or None
+                groups.append(ids_g)
+        hint = sorted(groups) or None
     return PreparedObject(obj, seed, scale, centre, sorted(parts, key=lambda p: p.part_id), hint)

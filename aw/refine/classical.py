@@ -106,7 +106,8 @@ def _icp(
     for _ in range(iterations):
         p = src.points @ rot.T + shift
         n = src.normals @ rot.T
-        d, j = dst.tree.query(p, distance_upper_bound=radius)
+        d, found = dst.tree.query(p, distance_upper_bound=radius)
+        j = np.asarray(found)  # (k,) rows; a miss is len(dst.points), where d is inf
         ok = np.isfinite(d)
         ok[ok] &= np.einsum("ij,ij->i", n[ok], dst.normals[j[ok]]) < OPPOSED
         if ok.sum() < 12:
@@ -182,7 +183,8 @@ def register_pair(
     # coarse: every start, few points and iterations; fine: the best few, more of both
     coarse_a = [(fa, _sample(anchor, fa, COARSE_POINTS, rng), _mean_normal(anchor, fa)) for fa in regions_a]
     coarse_b = [(fb, _sample(other, fb, COARSE_POINTS, rng), _mean_normal(other, fb)) for fb in regions_b]
-    found = []
+    # (score, order found, face regions of a and b, rotation (3, 3), shift (3,))
+    found: list[tuple[float, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
     for fa, sa, na in coarse_a:
         for fb, sb, nb in coarse_b:
             face = Rotation.align_vectors([-na], [nb])[0].as_matrix()

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from aw.formats import (
+    EndReason,
     FinalState,
     FormatError,
     RunInfo,
@@ -155,7 +156,7 @@ def refine_task(
             poses=final if changed else None,
         )
     )
-    reason = "finished" if error is None else "error"
+    reason: EndReason = "finished" if error is None else "error"
     writer.end(
         TrajectoryEnd(reason=reason, t=round(seconds, 6), server_t=round(seconds, 6), message=error or "", poses=final)
     )

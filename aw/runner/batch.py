@@ -22,7 +22,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from aw.formats import FormatError, RunInfo, read_manifest, read_run_info, read_trajectory, write_run_info
+from aw.formats import FormatError, RunEnded, RunInfo, read_manifest, read_run_info, read_trajectory, write_run_info
 from aw.formats.suite import suite_paths
 from aw.formats.task import MAX_BUDGET_MINUTES
 from aw.formats.trajectory import FinalState, write_final
@@ -354,6 +354,8 @@ def new_worker(env: dict[str, str]) -> WorkerProcess:
 def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worker: WorkerProcess) -> RunInfo:
     from aw.runner.episode import EpisodeResult, EpisodeSpec
 
+    if cfg.agent is None:
+        raise ValueError("an agent episode needs the batch's agent")
     work = ep.run_dir / ".runner"
     work.mkdir(parents=True, exist_ok=True)
     episode_marker = new_marker()
@@ -386,6 +388,8 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
     }
     if options:
         extra["options"] = options
+    ended: RunEnded
+    error: str | None
     if sup.timed_out:
         # No progress file yet: the agent was still connecting to the server.
         state = _progress_state(Path(spec.progress_path)) or {
@@ -450,6 +454,8 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
 def _run_harness_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str]) -> RunInfo:
     from aw.runner.harness import HARNESSES, HarnessOptions
 
+    if cfg.harness is None:
+        raise ValueError("a harness episode needs the batch's harness")
     adapter = HARNESSES[cfg.harness]
     opts = HarnessOptions(
         binary=cfg.harness_bin,
@@ -476,6 +482,8 @@ def _run_harness_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str]) -> 
     shutil.rmtree(prepared.cwd, ignore_errors=True)
     facts = _trajectory_facts(ep.run_dir)
     final_source = _ensure_final(ep.run_dir, facts, ep.task_id)
+    ended: RunEnded
+    error: str | None
     if sup.timed_out:
         ended, error = "timeout", f"killed at the {cfg.limit_seconds:g} s limit"
     elif sup.returncode == 0 and not usage.is_error:

@@ -151,9 +151,9 @@ def run_supervised(
         )
     finally:
         for f in (out, err):
-            if f is not subprocess.DEVNULL:
+            if not isinstance(f, int):  # a file, not DEVNULL
                 f.close()
-    if stdin_data is not None:
+    if stdin_data is not None and proc.stdin is not None:
         try:
             proc.stdin.write(stdin_data)
             proc.stdin.close()
@@ -189,26 +189,28 @@ class WorkerProcess:
         self.env = env
         self.log_path = log_path
         self.marker = new_marker()
-        self.proc: subprocess.Popen | None = None
+        self.proc: subprocess.Popen[bytes] | None = None
         self._lines: queue.Queue[str | None] = queue.Queue()
 
-    def _start(self) -> None:
+    def _start(self) -> subprocess.Popen[bytes]:
         env = dict(self.env)
         env[MARKER_VAR] = self.marker
         self._lines = queue.Queue()
         with open(self.log_path, "ab") as log:
-            self.proc = subprocess.Popen(
+            proc = subprocess.Popen(
                 self.cmd, env=env, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log, start_new_session=True
             )
+        self.proc = proc
         lines = self._lines
-        out = self.proc.stdout
+        out = proc.stdout
 
         def pump() -> None:
-            for raw in out:
+            for raw in out or ():
                 lines.put(raw.decode(errors="replace"))
             lines.put(None)
 
         threading.Thread(target=pump, daemon=True).start()
+        return proc
 
     @property
     def pid(self) -> int | None:
@@ -217,20 +219,24 @@ class WorkerProcess:
     def run(self, spec_line: str, limit_seconds: float, episode_marker: str) -> Supervised:
         """Send one spec; wait for its ``done`` line. ``returncode`` is 0 when done, the worker's
         exit code when it died mid-episode, None when it was killed at the limit."""
-        if self.proc is None or self.proc.poll() is not None:
-            self._start()
-        _register(self.proc.pid, self.marker, episode_marker)
+        proc = self.proc
+        if proc is None or proc.poll() is not None:
+            proc = self._start()
+        _register(proc.pid, self.marker, episode_marker)
         try:
-            return self._run(spec_line, limit_seconds, episode_marker)
+            return self._run(proc, spec_line, limit_seconds, episode_marker)
         finally:
             if self.proc is not None:
                 _register(self.proc.pid, self.marker)
 
-    def _run(self, spec_line: str, limit_seconds: float, episode_marker: str) -> Supervised:
+    def _run(
+        self, proc: subprocess.Popen[bytes], spec_line: str, limit_seconds: float, episode_marker: str
+    ) -> Supervised:
         t0 = time.monotonic()
         try:
-            self.proc.stdin.write(spec_line.encode() + b"\n")
-            self.proc.stdin.flush()
+            if proc.stdin is not None:
+                proc.stdin.write(spec_line.encode() + b"\n")
+                proc.stdin.flush()
         except (BrokenPipeError, OSError):
             pass
         deadline = t0 + limit_seconds
@@ -241,8 +247,8 @@ class WorkerProcess:
                 killed = self.kill(episode_marker)
                 return Supervised(None, True, time.monotonic() - t0, killed)
             if line is None:  # the worker died
-                code = self.proc.wait()
-                _unregister(self.proc.pid)
+                code = proc.wait()
+                _unregister(proc.pid)
                 wall = time.monotonic() - t0
                 killed = _reap_marked(episode_marker, grace=5.0)
                 self.proc = None
@@ -267,7 +273,8 @@ class WorkerProcess:
         if self.proc is None:
             return
         try:
-            self.proc.stdin.close()
+            if self.proc.stdin is not None:
+                self.proc.stdin.close()
             self.proc.wait(timeout=timeout)
             _unregister(self.proc.pid)
         except (subprocess.TimeoutExpired, OSError):

@@ -21,7 +21,7 @@ from __future__ import annotations
 import os
 import warnings
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
@@ -209,7 +209,11 @@ def load_object(obj_dir: str | Path, default_source: str = "custom", up_axis: st
             paths.append(p)
         if paths:
             references[cond] = paths
-    extra = {"conditions": _conditions(meta), "folder": str(obj_dir), "up_axis": {"axis": axis, "how": how}}
+    extra: dict[str, Any] = {
+        "conditions": _conditions(meta),
+        "folder": str(obj_dir),
+        "up_axis": {"axis": axis, "how": how},
+    }
     if meta.steps:
         extra["steps"] = meta.steps
     return AssembledObject(

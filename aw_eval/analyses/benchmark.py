@@ -81,7 +81,8 @@ def quality(study: Study) -> dict[str, Any]:
     return out
 
 
-def _resource_values(study: Study, system: str) -> dict[str, list[float]]:
+def _resource_values(study: Study, system: str) -> tuple[dict[str, list[float]], dict[str, list[str]]]:
+    """The system's resource values per column, and where each time and call count came from."""
     cols: dict[str, list[float]] = {"time_min": [], "mcp_calls": [], "tokens_m": [], "cost_usd": []}
     src: dict[str, list[str]] = {"time_min": [], "mcp_calls": []}
     for tid in study.original_ids:
@@ -107,8 +108,7 @@ def _resource_values(study: Study, system: str) -> dict[str, list[float]]:
                 cols["tokens_m"].append(tok / 1e6)
         if info is not None and info.cost_usd is not None:
             cols["cost_usd"].append(info.cost_usd)
-    cols["_sources"] = src  # type: ignore[assignment]
-    return cols
+    return cols, src
 
 
 def resources(study: Study) -> dict[str, Any]:
@@ -121,13 +121,12 @@ def resources(study: Study) -> dict[str, Any]:
     """
     out = {}
     for s in study.systems:
-        cols = _resource_values(study, s)
-        srcs = cols.pop("_sources")
-        row = {}
+        cols, srcs = _resource_values(study, s)
+        row: dict[str, dict[str, Any]] = {}
         for k, v in cols.items():
             row[k] = {"mean": float(np.mean(v)) if v else None, "n": len(v)}
-        for k, v in srcs.items():
-            row[k]["from_trajectory"] = int(sum(1 for x in v if x == "trajectory"))
+        for k, where in srcs.items():
+            row[k]["from_trajectory"] = int(sum(1 for x in where if x == "trajectory"))
         out[s] = row
     return out
 

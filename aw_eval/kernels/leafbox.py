@@ -55,7 +55,7 @@ class LeafBoxes(NamedTuple):
 
     lo: np.ndarray
     hi: np.ndarray
-    index: np.ndarray
+    index: np.ndarray  # type: ignore[assignment]  # shadows tuple.index, which is never called on the boxes
 
 
 def _leaves(pts: np.ndarray, leaf: int) -> list[np.ndarray]:

@@ -11,7 +11,7 @@ final.json); which one was used is reported.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -100,7 +100,7 @@ class EpisodeArrays:
     problems: list[str] = field(default_factory=list)
 
 
-def poses_array(poses: dict[str, Sequence[float]], part_ids: Sequence[str]) -> np.ndarray:
+def poses_array(poses: Mapping[str, Sequence[float]], part_ids: Sequence[str]) -> np.ndarray:
     """``(P, 7)`` poses in ``part_ids`` order with unit quaternions (w >= 0 not enforced)."""
     arr = np.array([poses[p] for p in part_ids], dtype=np.float64).reshape(len(part_ids), 7)
     arr[:, 3:] = normalize_quaternion(arr[:, 3:])
@@ -156,8 +156,8 @@ def _read_final_state(run_dir: Path, task_id: str, all_part_ids: Sequence[str], 
 
 
 def contradicting_parts(
-    final: dict[str, Sequence[float]],
-    recorded: dict[str, Sequence[float]],
+    final: Mapping[str, Sequence[float]],
+    recorded: Mapping[str, Sequence[float]],
     part_ids: Sequence[str],
     tol: float = FINAL_MATCH_TOL,
 ) -> list[str]:
@@ -229,7 +229,7 @@ def read_episode(
         call_kind_arr = np.array([call_kind(c.tool) for c in calls], dtype=np.int8)
         call_ok = np.array([c.ok for c in calls], dtype=bool)
         end_reason = traj.end.reason if traj.end is not None else None
-        end_t = float(traj.end.t) if traj.end is not None else (float(call_t[-1]) if len(calls) else 0.0)
+        end_t = float(traj.end.t or 0.0) if traj.end is not None else (float(call_t[-1]) if len(calls) else 0.0)
         # pose-changing calls, in order, aligned with checkpoints 1..N-1
         changing = [i for i, c in enumerate(calls) if c.poses is not None]
         trans, rot = edit_magnitudes(all_poses[:-1], all_poses[1:], centroids, divisor)  # (N-1, A)

@@ -133,7 +133,9 @@ def save_npz(path: str | Path, obj: RunScore | TaskFacts) -> None:
     meta, arrays = _split(obj)
     meta_bytes = orjson.dumps({"kind": type(obj).__name__, **meta}, option=orjson.OPT_SERIALIZE_NUMPY)
     buf = io.BytesIO()
-    np.savez_compressed(buf, __meta__=np.frombuffer(meta_bytes, dtype=np.uint8), **arrays)
+    # the members by name (Any: numpy's stubs would check each name against savez's own keywords)
+    members: dict[str, Any] = {"__meta__": np.frombuffer(meta_bytes, dtype=np.uint8), **arrays}
+    np.savez_compressed(buf, **members)
     write_bytes_atomic(path, buf.getvalue())  # a full disk leaves no partial entry and names this one
 
 

@@ -77,7 +77,8 @@ def schedule_jobs(jobs: list[TaskJob], n_parts: dict[str, int]) -> list[TaskJob]
     shortens the tail on a pool), and a task whose meshes repeat an earlier task's after every
     first occurrence, so its geometry is a cache hit instead of being computed twice at once."""
     seen: set[str] = set()
-    first, repeats = [], []
+    first: list[TaskJob] = []
+    repeats: list[TaskJob] = []
     for job in sorted(jobs, key=lambda j: (-n_parts.get(j.task_id, 0), j.task_id)):
         fam = shape_family(Path(job.task_dir))
         (repeats if fam in seen and fam else first).append(job)

@@ -26,7 +26,15 @@ import orjson
 from aw.formats import FormatError
 from aw.render_platform import RenderError
 from aw_eval.report.fmt import fixed
-from aw_eval.report.html.cards import Picture, TaskRuns, load_run_view, system_colors, task_card, viewer_data
+from aw_eval.report.html.cards import (
+    NO_MESHES,
+    Picture,
+    TaskRuns,
+    load_run_view,
+    system_colors,
+    task_card,
+    viewer_data,
+)
 from aw_eval.report.html.markup import markdown_to_html, scroll_box, slug
 from aw_eval.report.html.scenes import TaskScene
 from aw_eval.report.markdown import SUMMARY_SECTIONS, TABLE1, system_label
@@ -244,7 +252,8 @@ def build_card(job: CardJob) -> CardResult:
                 rel,
                 viewer_src,
                 job.colors,
-                **({"no_pictures": no_render} if no_render else {}),
+                no_pictures=no_render or NO_MESHES,
+                threshold=job.threshold,
             )
     finally:
         if scene is not None:

@@ -17,12 +17,16 @@ import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from PIL import Image
 
 from aw.camera import Camera
 from aw.pose import matrices_to_poses, poses_to_matrices
+
+if TYPE_CHECKING:  # imported where it is opened: GL set-up only when a picture is asked for
+    from aw.render import OffscreenRenderer
 
 __all__ = ["TaskScene", "aligned_poses", "RENDER_FORMAT"]
 
@@ -65,7 +69,7 @@ class TaskScene:
             h.update(np.ascontiguousarray(m.vertices, dtype=np.float64).tobytes())
             h.update(np.ascontiguousarray(m.faces, dtype=np.int64).tobytes())
         self.digest = h.hexdigest()
-        self._renderer = None  # opened on the first picture, at its size
+        self._renderer: OffscreenRenderer | None = None  # opened on the first picture, at its size
 
     @classmethod
     def load(cls, suite_dir: Path, task_id: str, part_ids: list[str], divisor: float) -> TaskScene:
@@ -134,7 +138,7 @@ class TaskScene:
                 self._renderer = OffscreenRenderer(self.meshes, colors=self.colors, width=w, height=h)
             im = self._renderer.render(poses, camera)
             if im.size != (w, h):  # smaller pictures (filmstrip frames) are scaled down
-                im = im.resize((w, h), Image.LANCZOS)
+                im = im.resize((w, h), Image.Resampling.LANCZOS)
             tmp = path.with_name(f"{path.name}.tmp{os.getpid()}.jpg")  # workers may render the same picture
             im.save(tmp, quality=_QUALITY, optimize=True)
             tmp.replace(path)
