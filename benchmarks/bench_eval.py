@@ -71,8 +71,13 @@ def bench_parts(p: int, args, rows: list, agree: list) -> None:
         "compile_s": max(0.0, first_fast - warm_fast),
     }
     same = cks[: max(args.ref, args.exact)]
-    ref_score = lambda c: ref.score(geom.clouds, geom.target_poses, geom.divisor, geom.groups, c, geom.settings)  # noqa: E731
-    exact_score = lambda c: aw_eval.score(geom, c, mode="exact")  # noqa: E731
+
+    def ref_score(c):
+        return ref.score(geom.clouds, geom.target_poses, geom.divisor, geom.groups, c, geom.settings)
+
+    def exact_score(c):
+        return aw_eval.score(geom, c, mode="exact")
+
     # reference and exact alternate checkpoint by checkpoint, so that a shared machine's load
     # changes weigh on both alike
     t_ref = t_exact = 0.0

@@ -149,7 +149,7 @@ def test_a_call_holds_memory_in_proportion_to_its_lanes_points(monkeypatch):
     target_leaves, part_leaves = index.part_leaves(geom.divisor)
     target = index.target
     init, round_ = jax_icp._compiled_round.__wrapped__(100, 1e-9, 8, True)
-    dev = lambda a: jnp.asarray(a)  # noqa: E731
+    dev = jnp.asarray
     common = (
         dev(target[None]),
         dev(target),
