@@ -82,7 +82,8 @@ def _score_many_jax(
     moved = np.stack([ck.parts @ r.rotation.T + r.translation for ck, r in zip(padded, regs, strict=True)])
     costs = part_cd_batch(moved, geom.target_parts(), [(i, j) for g in geom.groups for i in g for j in g])
     t3 = time.perf_counter()
-    out = [finalize_costs(geom, r, c, mode) for r, c in zip(regs[: len(cks)], costs, strict=True)]
+    n = len(cks)  # the padding's results are dropped
+    out = [finalize_costs(geom, r, c, mode) for r, c in zip(regs[:n], costs[:n], strict=True)]
     if stats is not None:
         t4 = time.perf_counter()
         for key, v in (
