@@ -129,9 +129,9 @@ class Scorer:
                 out["pending"] += 1
                 continue
             if "error" in res:
-                out["states"][k] = {"error": res["error"]}
+                out["states"][str(k)] = {"error": res["error"]}
                 continue
-            out["states"][k] = _numbers(res["pa"], res["sr"], res["scd"]) | {"mode": res["mode"]}
+            out["states"][str(k)] = _numbers(res["pa"], res["sr"], res["scd"]) | {"mode": res["mode"]}
             if k == req.want:
                 out["ghost"] = ghost_poses(
                     geom.target_poses, res["rotation"], res["translation"], float(geom.divisor)

@@ -318,7 +318,7 @@ class Watch:
                     if last.t is not None:
                         row["last_t"] = last.t
                 image = ep.summary.last_image
-                if image is not None:
+                if image is not None and _is_capture_name(image):  # a name elsewhere is never asked for
                     row["thumb"] = image
             status, detail = self._status(ep, traj, info, problem, flocks)
             row["status"], row["detail"] = status, detail
@@ -457,7 +457,7 @@ class Watch:
             row["changed"] = c.changed
         if c.poses is not None:
             row["poses"] = [c.poses[p] for p in part_ids]
-        if c.image:
+        if c.image and _is_capture_name(c.image):  # a name elsewhere is never offered
             row["image"] = c.image
         return row
 

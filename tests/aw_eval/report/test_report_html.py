@@ -291,3 +291,19 @@ def test_cards_say_why_parts_in_place_score_zero(report):
     assert "the parts left away, p02, p03, pull that transform" in hints[0]
     assert hints[1].startswith("gamma: 2 of 3 parts lie at their targets as placed, yet PA is 0.0%")
     assert "the part left away, p03, pulls that transform off the parts in place" in hints[1]
+
+
+def test_viewer_url_links_each_run_to_its_episode_page(report):
+    """Last in this module: it rewrites the report with the links (renders and scores reused)."""
+    url = "http://127.0.0.1:8770/?token=abc"
+    assert (
+        main([str(report["suite"]), str(report["runs"]), "--out", str(report["out"]), *OPTS, "--viewer-url", url]) == 0
+    )
+    page = (report["out"] / "report.html").read_text()
+    card = page.split(f'id="task-{TASK}"')[1].split('<section class="card"')[0]
+    links = re.findall(r'<a class="live" href="([^"]+)">([^<]+)</a>', card)
+    assert ("http://127.0.0.1:8770/episode/alpha/" + TASK + "?token=abc", "alpha") in links
+    assert len(links) == 5  # every system with a run of this task
+    assert (
+        main([str(report["suite"]), str(report["runs"]), "--out", str(report["out"]), *OPTS, "--viewer-url", "x"]) == 2
+    )
