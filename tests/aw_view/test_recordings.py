@@ -85,7 +85,7 @@ def test_recordings_as_they_are_written_damaged_hostile_stuck_and_queued(suite, 
         assert "outside the watched folder" in rows[f"link/{task_id}"]["detail"]
         assert {rows[f"later/{t}"]["status"] for t in plan.tasks} == {"queued"}
         assert fetch(f"{url}capture?id=escape/{task_id}&name=../../../../suite/targets/{task_id}.json")[0] == 404
-        assert fetch(f"{url}capture?id=mine/{task_id}&name=captures/../../bad/{task_id}/trajectory.jsonl")[0] == 404
+        assert fetch(f"{url}capture?id=mine/{task_id}&name=captures/../../../bad/{task_id}/trajectory.jsonl")[0] == 404
         assert fetch(f"{url}api/episode?id=../suite")[0] == 404
         assert fetch(f"{url}reference?id=mine/{task_id}&k=-1")[0] == 404  # no task files given: none at all
 
