@@ -107,6 +107,7 @@ class TaskFiles:
         self.folders = [Path(f) for f in folders]
         self._lock = threading.Lock()
         self._views: dict[tuple[Path, int], TaskView] = {}
+        self._tasks: dict[tuple[Path, int], Task] = {}
 
     def find(self, task_id: str, suites: list[Path]) -> Path | None:
         """The task directory of ``task_id``: in the given folders, else in the ``tasks/`` of
@@ -118,6 +119,18 @@ class TaskFiles:
             if (candidate / "task.json").is_file():
                 return candidate
         return None
+
+    def task(self, task_dir: Path) -> Task:
+        """The task's ``task.json`` (read again when it changes; ``FormatError``, :class:`NotPublic`)."""
+        real = self.public.allow(task_dir)
+        stamp = (real / "task.json").stat().st_mtime_ns
+        with self._lock:
+            cached = self._tasks.get((real, stamp))
+        if cached is None:
+            cached = read_task(real)
+            with self._lock:
+                self._tasks[(real, stamp)] = cached
+        return cached
 
     def view(self, task_dir: Path, part_ids: list[str]) -> TaskView:
         """The task's :class:`TaskView` for a recording with ``part_ids`` (``FormatError`` when the
@@ -131,7 +144,7 @@ class TaskFiles:
         from aw.meshes import display_parts, load_task_meshes
         from aw.render import part_colors
 
-        task = read_task(real)
+        task = self.task(real)
         if set(task.part_ids) != set(part_ids):
             raise FormatError(real / "task.json", f"its parts {task.part_ids} are not the recording's {part_ids}")
         for p in task.parts:

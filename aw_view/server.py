@@ -87,11 +87,11 @@ def _plotly() -> bytes:
 def _thumbnail(path: str, stamp: int) -> bytes:
     from PIL import Image
 
-    with Image.open(path) as im:
-        im = im.convert("RGB")
-        im.thumbnail(THUMB_SIZE)
-        buf = io.BytesIO()
-        im.save(buf, format="JPEG", quality=80)
+    with Image.open(path) as src:
+        im = src.convert("RGB")
+    im.thumbnail(THUMB_SIZE)
+    buf = io.BytesIO()
+    im.save(buf, format="JPEG", quality=80)
     return buf.getvalue()
 
 

@@ -376,15 +376,24 @@ class Watch:
         plan = self._plan_of(ep.run_dir)
         if plan is not None and plan.budget_minutes is not None:
             return 60.0 * plan.budget_minutes
-        view = self.task_view(ep, traj) if traj is not None else None
-        return view.budget_seconds if isinstance(view, TaskView) else None
+        task_dir = self._task_dir(ep, traj) if traj is not None else None
+        if task_dir is None:
+            return None
+        try:
+            return 60.0 * self.tasks.task(task_dir).budget_minutes  # task.json alone: no meshes for a row
+        except (FormatError, NotPublic, OSError):
+            return None
 
     # ------------------------------------------------------------------ the episode page
+    def _task_dir(self, ep: Episode, traj) -> Path | None:
+        """The public task directory of the episode's task (given folders first, then the suite
+        its aw-run batch names)."""
+        plan = self._plan_of(ep.run_dir)
+        return self.tasks.find(traj.header.task_id, [Path(plan.suite_dir)] if plan is not None else [])
+
     def task_view(self, ep: Episode, traj) -> TaskView | str:
         """The episode's public task files, or why there are none."""
-        plan = self._plan_of(ep.run_dir)
-        suites = [Path(plan.suite_dir)] if plan is not None else []
-        task_dir = self.tasks.find(traj.header.task_id, suites)
+        task_dir = self._task_dir(ep, traj)
         if task_dir is None:
             return "no task files found: start aw-view with --tasks SUITE/tasks (or --suite SUITE) to see the scene"
         try:

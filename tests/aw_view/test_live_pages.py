@@ -77,20 +77,29 @@ def test_pages_follow_a_live_episode_of_a_real_server(suite, tmp_path, browser):
         assert after[0] == pytest.approx(before[0] + 0.3, abs=1e-4) and after[1:] == before[1:]
         assert "translate_objects" in episode.locator("#calls tbody tr").nth(2).text_content()
 
+        # moving the slider stops following; the box brings the newest state back
+        episode.eval_on_selector("#slider", "s => { s.value = '0'; s.dispatchEvent(new Event('input')); }")
+        episode.wait_for_function("() => document.getElementById('plot').dataset.state === '0'", timeout=WAIT)
+        agent.call("translate_objects", {"ids": ["p02"], "delta": [0.0, 0.2, 0.0]})
+        episode.wait_for_function("() => document.getElementById('plot').dataset.states === '3'", timeout=WAIT)
+        assert episode.eval_on_selector("#plot", "p => p.dataset.state") == "0" and _first_x(episode) == before
+        episode.check("#follow")
+        episode.wait_for_function("() => document.getElementById('plot').dataset.state === '2'", timeout=WAIT)
+
         agent.call("rotate_objects", {"ids": ["p09"], "angles": [0, 0, 90]})  # refused: an unknown id
         agent.call("capture_scene")
         watcher = second.new_page()
         errors += _watch_errors(watcher)
         watcher.goto(url)
         for page in (pages, watcher):
-            page.wait_for_function(_calls_are(rid, 5), timeout=WAIT)
+            page.wait_for_function(_calls_are(rid, 6), timeout=WAIT)
             page.wait_for_function(
                 f"""() => {{ const i = document.querySelector('#runs tr[data-id="{rid}"] td.thumb img');
                     return i && i.complete && i.naturalWidth > 0; }}""",
                 timeout=WAIT,
             )
-        episode.wait_for_function("() => document.body.dataset.calls === '5'", timeout=WAIT)
-        assert "error: unknown id" in episode.locator("#calls tbody tr").nth(3).text_content()
+        episode.wait_for_function("() => document.body.dataset.calls === '6'", timeout=WAIT)
+        assert "error: unknown id" in episode.locator("#calls tbody tr").nth(4).text_content()
         episode.wait_for_function(
             "() => Array.from(document.querySelectorAll('#captures img')).some(i => i.complete && i.naturalWidth > 0)",
             timeout=WAIT,
@@ -107,7 +116,7 @@ def test_pages_follow_a_live_episode_of_a_real_server(suite, tmp_path, browser):
         pages.wait_for_function(f"""() => !document.querySelector('#runs tr[data-id="{rid}"]')""", timeout=WAIT)
         episode.wait_for_function("() => document.body.dataset.gone === '1'", timeout=WAIT)
         assert "gone" in episode.locator("#problems").text_content()
-        assert episode.locator("#calls tbody tr").count() == 5
+        assert episode.locator("#calls tbody tr").count() == 6
         assert get_json(url + "api/runs")["rows"] == []
         assert errors == []
         first.close()
