@@ -170,7 +170,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(PORT default: any free port); it stops with the batch",
     )
     add_no_progress(p)
-    from aw.refine.cli import add_refiner_arguments
+    from aw.runner.refiner_cli import add_refiner_arguments
 
     add_refiner_arguments(p)
     return p
@@ -281,7 +281,7 @@ def _start_viewer(args: argparse.Namespace) -> ViewerProcess:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from aw.refine.cli import run_refiner_command, wants_refiner
+    from aw.runner.refiner_cli import run_refiner_command, wants_refiner
 
     if not (args.agent or args.harness or wants_refiner(args)):
         raise UsageError("give --agent NAME, --harness NAME or --refiner NAME")
