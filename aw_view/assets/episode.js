@@ -209,7 +209,11 @@
         $("conn").textContent = "live"; $("conn").className = "note";
         if (!d) return;
         if (gone) { gone = false; delete document.body.dataset.gone; }
-        if (generation !== null && d.generation !== generation) { reset(); generation = d.generation; etag = null; return; }
+        if (generation !== null && d.generation !== generation) {
+          // the recording was removed or replaced: keep what was shown until a new one has begun
+          if (!d.part_ids) { $("problems").textContent = "The recording was removed; waiting for a new one."; return; }
+          reset(); generation = d.generation; etag = null; return;
+        }
         generation = d.generation;
         if (d.start !== undefined && d.start !== calls.length) { reset(); etag = null; return; }
         showStatus(d.row, d);
