@@ -14,9 +14,11 @@ os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(_ROOT / ".jax_cache"))
 CHROMIUM = "/usr/bin/chromium"
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser():
-    """Debian's Chromium (no browser download), software WebGL for the 3D views."""
+    """Debian's Chromium (no browser download), software WebGL for the 3D views. One per test
+    module: playwright's sync API keeps an event loop in the thread while it is open, which the
+    anyio tests that run after a module in the same worker must not find."""
     if not Path(CHROMIUM).is_file():
         pytest.fail(f"{CHROMIUM} not found: run scripts/install.sh as root (it installs Debian's chromium)")
     from playwright.sync_api import sync_playwright
