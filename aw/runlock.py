@@ -17,6 +17,8 @@ import socket
 import sys
 from pathlib import Path
 
+from aw.formats.strict_json import parse_json
+
 LOCK_FILE = ".aw-lock"
 
 __all__ = ["LOCK_FILE", "RunDirBusy", "RunDirLock", "holder_of"]
@@ -38,7 +40,7 @@ def _read_holder(fd: int) -> dict | None:
     try:
         os.lseek(fd, 0, os.SEEK_SET)
         data = os.read(fd, 65536)
-        holder = json.loads(data.decode("utf-8")) if data else None
+        holder = parse_json(data) if data else None
         return holder if isinstance(holder, dict) else None
     except (OSError, ValueError):
         return None

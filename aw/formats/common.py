@@ -8,6 +8,8 @@ from typing import Annotated
 from pydantic import AfterValidator
 
 PART_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+# A category is a short name (chair, StorageFurniture); it is printed in summaries and reports.
+MAX_CATEGORY_CHARS = 100
 SOURCES = ("partnet", "ikea_manual", "assemblybench", "fantastic_breaks")
 CONDITIONS = ("none", "image", "manual")
 # Sanity bounds of a recorded pose: far beyond any scene (edits stop at +-1000 units), well inside

@@ -9,9 +9,10 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import IO, Any, Literal
 
 import orjson
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -21,11 +22,11 @@ from aw.formats.errors import FormatError
 from aw.formats.io import (
     check_format_tag,
     describe_validation_error,
-    parse_json_text,
     parse_model,
     read_model,
     write_json_atomic,
 )
+from aw.formats.strict_json import LIMITS, JsonError, JsonLimits, iter_lines, open_bounded, parse_json
 
 TRAJECTORY_FORMAT = "assemblyworld.trajectory"
 END_REASONS = ("finished", "timeout", "error", "disconnect", "interrupted")
@@ -140,10 +141,17 @@ class _BadJSON(Exception):
         self.detail = detail
 
 
-def _parse_line(raw: bytes, lineno: int, path: Path) -> BaseModel:
+def _lines(fh: IO[bytes], path: Path, limits: JsonLimits) -> Iterator[tuple[int, bytes]]:
+    for number, line in iter_lines(fh, limits.max_document_bytes):
+        if line is None:
+            raise FormatError(path, f"line {number}: over the limit of {limits.max_document_bytes} bytes for one line")
+        yield number, line
+
+
+def _parse_line(raw: bytes, lineno: int, path: Path, limits: JsonLimits) -> BaseModel:
     try:
-        obj = parse_json_text(raw)
-    except ValueError as exc:
+        obj = parse_json(raw.rstrip(b"\n"), limits)
+    except JsonError as exc:
         raise _BadJSON(str(exc)) from None
     kind = obj.get("type") if isinstance(obj, dict) else None
     if not isinstance(kind, str):
@@ -173,61 +181,50 @@ def _check_pose_ids(poses: dict | None, part_ids: list[str], what: str, path: Pa
         )
 
 
-def read_trajectory(path: str | Path) -> Trajectory:
-    """Read a trajectory. A last line cut mid-write is dropped (``truncated=True``); any other
-    malformed line raises :class:`FormatError` naming the file and line."""
+def read_trajectory(path: str | Path, limits: JsonLimits = LIMITS) -> Trajectory:
+    """Read a trajectory (in bounded pieces, within ``limits``: the file, each line). A last line
+    cut mid-write is dropped (``truncated=True``); any other malformed line raises
+    :class:`FormatError` naming the file and line."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FormatError(path, "file not found") from None
-    except IsADirectoryError:
-        raise FormatError(path, "is a directory, not a file") from None
-    except OSError as exc:
-        raise FormatError(path, f"cannot be read ({exc.strerror})") from None
-    lines = data.split(b"\n")
-    complete_tail = data.endswith(b"\n")
-    if complete_tail:
-        lines = lines[:-1]
     traj: Trajectory | None = None
     truncated = False
-    for i, raw in enumerate(lines, start=1):
-        if not raw.strip():
-            continue
-        is_last = i == len(lines)
-        try:
-            rec = _parse_line(raw, i, path)
-        except _BadJSON as exc:
-            if is_last and not complete_tail:
-                truncated = True
-                break
-            raise FormatError(path, f"line {i}: not valid JSON ({exc.detail})") from None
-        if traj is None:
-            if not isinstance(rec, TrajectoryHeader):
-                raise FormatError(path, f"line {i}: the first record must be the header")
-            if len(set(rec.part_ids)) != len(rec.part_ids):
-                raise FormatError(path, f"line {i}: duplicate part ids in the header")
-            _check_pose_ids(rec.initial_poses, rec.part_ids, f"line {i}", path)
-            traj = Trajectory(path=path, header=rec)
-            continue
-        if traj.end is not None:
-            raise FormatError(path, f"line {i}: record after the end record")
-        if isinstance(rec, TrajectoryHeader):
-            raise FormatError(path, f"line {i}: a second header")
-        _check_pose_ids(rec.poses, traj.header.part_ids, f"line {i}", path)
-        if isinstance(rec, TrajectoryCall):
-            unknown = [c for c in rec.changed if c not in traj.header.part_ids]
-            if unknown:
-                raise FormatError(path, f"line {i}: changed names unknown part ids {unknown}")
-            if rec.changed and rec.poses is None:
-                raise FormatError(path, f"line {i}: parts changed but the poses after the call are missing")
-            if rec.t is None and rec.server_t is None:
-                raise FormatError(path, f"line {i}: a call needs t or server_t")
-            if traj.calls and rec.seq <= traj.calls[-1].seq:
-                raise FormatError(path, f"line {i}: sequence number {rec.seq} is not increasing")
-            traj.calls.append(rec)
-        else:
-            traj.end = rec
+    with open_bounded(path, limits.max_file_bytes, what="a trajectory") as fh:
+        for i, raw in _lines(fh, path, limits):
+            if not raw.strip():
+                continue
+            try:
+                rec = _parse_line(raw, i, path, limits)
+            except _BadJSON as exc:
+                if not raw.endswith(b"\n"):  # the last line, cut mid-write
+                    truncated = True
+                    break
+                raise FormatError(path, f"line {i}: {exc.detail}") from None
+            if traj is None:
+                if not isinstance(rec, TrajectoryHeader):
+                    raise FormatError(path, f"line {i}: the first record must be the header")
+                if len(set(rec.part_ids)) != len(rec.part_ids):
+                    raise FormatError(path, f"line {i}: duplicate part ids in the header")
+                _check_pose_ids(rec.initial_poses, rec.part_ids, f"line {i}", path)
+                traj = Trajectory(path=path, header=rec)
+                continue
+            if traj.end is not None:
+                raise FormatError(path, f"line {i}: record after the end record")
+            if isinstance(rec, TrajectoryHeader):
+                raise FormatError(path, f"line {i}: a second header")
+            _check_pose_ids(rec.poses, traj.header.part_ids, f"line {i}", path)
+            if isinstance(rec, TrajectoryCall):
+                unknown = [c for c in rec.changed if c not in traj.header.part_ids]
+                if unknown:
+                    raise FormatError(path, f"line {i}: changed names unknown part ids {unknown}")
+                if rec.changed and rec.poses is None:
+                    raise FormatError(path, f"line {i}: parts changed but the poses after the call are missing")
+                if rec.t is None and rec.server_t is None:
+                    raise FormatError(path, f"line {i}: a call needs t or server_t")
+                if traj.calls and rec.seq <= traj.calls[-1].seq:
+                    raise FormatError(path, f"line {i}: sequence number {rec.seq} is not increasing")
+                traj.calls.append(rec)
+            else:
+                traj.end = rec
     if traj is None:
         raise FormatError(path, "empty or truncated before the header line")
     _resolve_times(traj)

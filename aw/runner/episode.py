@@ -21,6 +21,8 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from aw.formats.io import read_tail
+
 
 class EpisodeSpec(BaseModel):
     """Everything the worker needs; written by the runner as JSON."""
@@ -55,10 +57,7 @@ class EpisodeResult(BaseModel):
 
 
 def _tail(path: Path, n: int = 1500) -> str:
-    try:
-        return path.read_text(errors="replace")[-n:].strip()
-    except OSError:
-        return ""
+    return read_tail(path, n).strip()
 
 
 async def run_episode(spec: EpisodeSpec) -> EpisodeResult:

@@ -67,7 +67,7 @@ def _refused(task_dir, run, start) -> subprocess.CompletedProcess:
 @pytest.mark.parametrize(
     "write, message",
     [
-        (lambda p: p.write_text("{not json"), "not JSON"),
+        (lambda p: p.write_text("{not json"), "not valid JSON"),
         (lambda p: _poses_file(p, task_id="other"), "poses are for task 'other', not 'box3_none'"),
         (lambda p: _poses_file(p, poses={k: v for k, v in START.items() if k != "p03"}), "missing ['p03']"),
         (lambda p: _poses_file(p, poses={**START, "p09": START["p01"]}), "unknown ['p09']"),

@@ -210,23 +210,26 @@ VARIANTS = [
     Variant(
         "run-json-100000-deep",
         _json_file("run.json", _set(versions="@DEEP@"), {"@DEEP@": _deep(100_000)}, False),
-        "run.json: not valid JSON",
+        "run.json: JSON nested deeper than 64 levels",
         False,
     ),
     Variant(
         "result-json-100000-deep",
         _json_file("result.json", _set(extra="@DEEP@"), {"@DEEP@": _deep(100_000)}),
-        "result.json: not valid JSON",
+        "result.json: JSON nested deeper than 64 levels",
         False,
     ),
     Variant(
         "input-json-100000-deep",
         _json_file("input.json", _set(extra="@DEEP@"), {"@DEEP@": _deep(100_000)}),
-        "input.json: not valid JSON",
+        "input.json: JSON nested deeper than 64 levels",
         False,
     ),
     Variant(
-        "conversation-100000-deep", _conversation(_deep(100_000)), "conversation.jsonl: line 1: not valid JSON", False
+        "conversation-100000-deep",
+        _conversation(_deep(100_000)),
+        "conversation.jsonl: line 1: JSON nested deeper than 64 levels",
+        False,
     ),
     Variant(
         "conversation-not-objects", _conversation("[1, 2]"), "conversation.jsonl: line 1: expected a JSON object", False
