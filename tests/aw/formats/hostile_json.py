@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 
@@ -37,3 +38,10 @@ def inject(doc: Any, path: tuple[str | int, ...], fragment: Fragment) -> str:
         holder = holder[key]
     holder[last] = _PLACEHOLDER
     return json.dumps(doc).replace(json.dumps(_PLACEHOLDER), fragment.text, 1)
+
+
+def inject_line(path: Path, number: int, fragment: Fragment) -> None:
+    """Line ``number`` of a JSON-lines file (an object) gets one more key holding the fragment."""
+    lines = path.read_text().split("\n")
+    lines[number - 1] = lines[number - 1][:-1] + f', "extra": {fragment.text}' + "}"
+    path.write_text("\n".join(lines))

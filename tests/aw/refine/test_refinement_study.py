@@ -133,6 +133,11 @@ def test_wrong_answers_fail_the_refiner_arms_and_keep_the_agent(fracture_suite, 
     assert traj.end.reason == "error" and traj.final_poses() == traj.header.initial_poses
     section = refinement_study(fracture_suite, out)
     assert section["matched"] == [] and len(section["failures"]["refiner"]) == 2
+    study = out / "refinement_study.json"
+    study.write_text(study.read_text()[:-2] + ', "notes": ' + "[" * 3000 + "]" * 3000 + "}")
+    assert refinement_study(fracture_suite, out) == {
+        "error": f"{study}: unreadable (JSON nested deeper than 64 levels)"
+    }
     assert "Failed runs (left out of the table)" in render_refinement(section)
 
 
