@@ -89,7 +89,7 @@ spec = RefinerSpec("scripted", (sys.executable, str(script), "{request}", "{resu
 for behaviour in ("big", "loud"):
     request.options = {"behaviour": behaviour}
     try:
-        run_refiner(spec, request, work / behaviour, 60)
+        run_refiner(spec, request, work / behaviour, 300)  # a loaded machine: time is not the point
     except RefinerError as exc:
         print(exc)
 print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024)
@@ -103,12 +103,12 @@ def test_a_300_mib_answer_or_log_is_never_read_whole(fracture_suite, tmp_path):
         [sys.executable, "-c", PEAK, str(fracture_suite), str(SCRIPT), str(tmp_path)],
         capture_output=True,
         text=True,
-        timeout=300,
+        timeout=900,
     )
     assert proc.returncode == 0, proc.stderr
     big, loud, peak_mb = proc.stdout.strip().splitlines()
-    assert big.endswith("314572800 bytes, over the limit of 16777216 for a JSON file")
-    assert loud == "refiner scripted: exited with code 3: scripted refiner: out of patience"
+    assert big.endswith("314572800 bytes, over the limit of 16777216 for a JSON file"), big
+    assert loud == "refiner scripted: exited with code 3: scripted refiner: out of patience", loud
     assert int(peak_mb) < 250, f"peak {peak_mb} MB"
 
 
