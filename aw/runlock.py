@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from aw.formats.io import pid_alive
+from aw.formats.strict_json import parse_json
 
 LOCK_FILE = ".aw-lock"
 
@@ -40,7 +41,7 @@ def _read_holder(fd: int) -> dict | None:
     try:
         os.lseek(fd, 0, os.SEEK_SET)
         data = os.read(fd, 65536)
-        holder = json.loads(data.decode("utf-8")) if data else None
+        holder = parse_json(data) if data else None
         return holder if isinstance(holder, dict) else None
     except (OSError, ValueError):
         return None

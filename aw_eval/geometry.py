@@ -24,6 +24,7 @@ import trimesh
 from numpy.typing import ArrayLike
 
 from aw.formats import FormatError
+from aw.formats.strict_json import parse_json
 from aw.pose import apply_pose, as_finite, pca_frame, quat_to_matrix
 from aw_eval.settings import PROTOCOL_VERSION, ProtocolSettings
 
@@ -295,7 +296,7 @@ class TaskGeometry:
     @classmethod
     def load(cls, path: Path, **extra: Any) -> TaskGeometry:
         with np.load(Path(path), allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"]))
+            meta = parse_json(str(z["meta"]))
             labels = z["group_labels"]
             groups = tuple(tuple(np.flatnonzero(labels == g).tolist()) for g in np.unique(labels))
             return cls(

@@ -144,15 +144,17 @@ def _refuse_initialize(message: str, wait_s: float = REFUSAL_WAIT_S) -> None:
     Gives up ``wait_s`` seconds after the last request (or after starting, if none comes)."""
     import json
 
+    from aw.formats.strict_json import parse_json
+
     try:
         if sys.stdin is None or sys.stdin.isatty():
             return
         while select.select([sys.stdin], [], [], wait_s)[0]:
-            line = sys.stdin.readline()
+            line = sys.stdin.readline(1 << 20)  # a request is small: a longer line is not one
             if not line:
                 return  # the client closed our stdin: it has read the replies
             try:
-                request = json.loads(line)
+                request = parse_json(line)
             except ValueError:
                 return
             if isinstance(request, dict) and "id" in request and "method" in request:

@@ -8,6 +8,8 @@ from typing import Annotated, Literal
 from pydantic import AfterValidator
 
 PART_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+# A category is a short name (chair, StorageFurniture); it is printed in summaries and reports.
+MAX_CATEGORY_CHARS = 100
 SOURCES = ("partnet", "ikea_manual", "assemblybench", "fantastic_breaks")
 # What the agent is shown beside the parts: nothing, an image of the assembly, or manual pages.
 Condition = Literal["none", "image", "manual"]

@@ -7,7 +7,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from aw.formats.common import Condition, VariantKind
+from aw.formats.common import MAX_CATEGORY_CHARS, Condition, VariantKind
 from aw.formats.errors import FormatError
 from aw.formats.io import read_model, write_json_atomic
 
@@ -18,7 +18,7 @@ class SuiteEntry(BaseModel):
     source: str
     condition: Condition
     object_id: str
-    category: str = ""
+    category: str = Field(default="", max_length=MAX_CATEGORY_CHARS)
     n_parts: int = Field(ge=1)
     weight: float = Field(default=1.0, gt=0)
     variant: VariantKind = "original"

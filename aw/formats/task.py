@@ -10,7 +10,7 @@ from typing import Final, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from aw.formats.common import PART_ID_PATTERN, Condition
+from aw.formats.common import MAX_CATEGORY_CHARS, PART_ID_PATTERN, Condition
 from aw.formats.errors import FormatError
 from aw.formats.io import read_model, write_json_atomic
 
@@ -48,7 +48,7 @@ class Task(BaseModel):
     task_id: str = Field(pattern=r"^[A-Za-z0-9_.-]{1,128}$")
     source: str = Field(min_length=1, description="partnet | ikea_manual | assemblybench | fantastic_breaks | custom")
     dataset: str = Field(min_length=1, description="where the geometry came from, e.g. synthetic, partnet, folder")
-    category: str = ""
+    category: str = Field(default="", max_length=MAX_CATEGORY_CHARS)
     object_id: str = Field(min_length=1, description="paired conditions share an object_id")
     condition: Condition = "none"
     prompt: str = Field(min_length=1)

@@ -10,9 +10,10 @@ from __future__ import annotations
 import os
 import stat
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Final, Literal
+from typing import IO, Any, Final, Literal
 
 import orjson
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
@@ -22,11 +23,11 @@ from aw.formats.errors import FormatError
 from aw.formats.io import (
     check_format_tag,
     describe_validation_error,
-    parse_json_text,
     parse_model,
     read_model,
     write_json_atomic,
 )
+from aw.formats.strict_json import LIMITS, JsonError, JsonLimits, iter_lines, open_bounded, parse_json
 
 TRAJECTORY_FORMAT: Final = "assemblyworld.trajectory"
 END_REASONS = ("finished", "timeout", "error", "disconnect", "interrupted")
@@ -144,10 +145,17 @@ class _BadJSON(Exception):
         self.detail = detail
 
 
-def _parse_line(raw: bytes, lineno: int, path: Path) -> Record:
+def _lines(fh: IO[bytes], path: Path, limits: JsonLimits) -> Iterator[tuple[int, bytes]]:
+    for number, line in iter_lines(fh, limits.max_document_bytes):
+        if line is None:
+            raise FormatError(path, f"line {number}: over the limit of {limits.max_document_bytes} bytes for one line")
+        yield number, line
+
+
+def _parse_line(raw: bytes, lineno: int, path: Path, limits: JsonLimits = LIMITS) -> Record:
     try:
-        obj = parse_json_text(raw)
-    except ValueError as exc:
+        obj = parse_json(raw.rstrip(b"\n"), limits)
+    except JsonError as exc:
         raise _BadJSON(str(exc)) from None
     kind = obj.get("type") if isinstance(obj, dict) else None
     if not isinstance(kind, str):
@@ -229,36 +237,25 @@ class _Records:
             traj.end = rec
 
 
-def read_trajectory(path: str | Path) -> Trajectory:
-    """Read a trajectory. A last line cut mid-write is dropped (``truncated=True``); any other
-    malformed line raises :class:`FormatError` naming the file and line."""
+def read_trajectory(path: str | Path, limits: JsonLimits = LIMITS) -> Trajectory:
+    """Read a trajectory (in bounded pieces, within ``limits``: the file, each line). A last line
+    cut mid-write is dropped (``truncated=True``); any other malformed line raises
+    :class:`FormatError` naming the file and line."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FormatError(path, "file not found") from None
-    except IsADirectoryError:
-        raise FormatError(path, "is a directory, not a file") from None
-    except OSError as exc:
-        raise FormatError(path, f"cannot be read ({exc.strerror})") from None
-    lines = data.split(b"\n")
-    complete_tail = data.endswith(b"\n")
-    if complete_tail:
-        lines = lines[:-1]
     records = _Records(path)
     truncated = False
-    for i, raw in enumerate(lines, start=1):
-        if not raw.strip():
-            continue
-        is_last = i == len(lines)
-        try:
-            rec = _parse_line(raw, i, path)
-        except _BadJSON as exc:
-            if is_last and not complete_tail:
-                truncated = True
-                break
-            raise FormatError(path, f"line {i}: not valid JSON ({exc.detail})") from None
-        records.add(rec, i)
+    with open_bounded(path, limits.max_file_bytes, what="a trajectory") as fh:
+        for i, raw in _lines(fh, path, limits):
+            if not raw.strip():
+                continue
+            try:
+                rec = _parse_line(raw, i, path, limits)
+            except _BadJSON as exc:
+                if not raw.endswith(b"\n"):  # the last line, cut mid-write
+                    truncated = True
+                    break
+                raise FormatError(path, f"line {i}: {exc.detail}") from None
+            records.add(rec, i)
     traj = records.traj
     if traj is None:
         raise FormatError(path, "empty or truncated before the header line")
@@ -378,7 +375,7 @@ class TrajectoryFollower:
             try:
                 rec = _parse_line(raw, self._lineno, self.path)
             except _BadJSON as exc:
-                raise FormatError(self.path, f"line {self._lineno}: not valid JSON ({exc.detail})") from None
+                raise FormatError(self.path, f"line {self._lineno}: {exc.detail}") from None
             self._records.add(rec, self._lineno)
         if len(self._pending) > self.max_line_bytes:
             raise FormatError(self.path, f"line {self._lineno + 1}: longer than {self.max_line_bytes} bytes")

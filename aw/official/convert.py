@@ -44,13 +44,13 @@ from aw.formats import (
     write_targets,
 )
 from aw.formats.io import staging_dir
+from aw.formats.strict_json import read_json_object
 from aw.formats.suite import suite_paths
 from aw.formats.trajectory import CameraState, TrajectoryCall, TrajectoryEnd, TrajectoryHeader
 from aw.official.archive import EpisodeArchive, iso_timestamp, parse_timestamp
 from aw.official.episode import PartEpisode, read_part_episode
 from aw.official.eval_points import eval_points_path, write_eval_inputs
 from aw.official.ids import sample_id_from_slug, task_id_for_sample
-from aw.official.jsonio import read_json_object
 from aw.official.package import REFERENCE_CONDITIONS, OfficialPackage
 from aw.runlock import RunDirBusy, RunDirLock
 

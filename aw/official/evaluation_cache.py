@@ -31,8 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from aw.formats.strict_json import read_json
 from aw.official.errors import EvaluationCacheError
-from aw.official.jsonio import read_json
 
 __all__ = [
     "CACHE_FILE",
@@ -121,7 +121,7 @@ def read_evaluation(
     path = Path(path)
     if not path.is_file():
         raise _fail(path, "evaluation inputs not found")
-    value = read_json(path, EvaluationCacheError)  # strict JSON (no NaN), bounded depth and size
+    value = read_json(path, error=EvaluationCacheError)
     if not isinstance(value, dict) or not {
         "version",
         "key",

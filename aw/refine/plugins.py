@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from aw.formats.io import last_line
 from aw.refine.base import RefineRequest, RefinerError, check_poses
 from aw.refine.exchange import read_result, write_request
 
@@ -123,7 +124,7 @@ def run_refiner(spec: RefinerSpec, request: RefineRequest, work_dir: Path, timeo
             _kill_group(proc)
             raise RefinerError(f"refiner {spec.name}: timed out after {timeout_s:g} s (killed)") from None
     if code != 0:
-        tail = _last_line(log)
+        tail = last_line(log)
         if tail.startswith(f"refiner {spec.name}: "):  # the worker's own verdict on the answer
             raise RefinerError(tail)
         raise RefinerError(f"refiner {spec.name}: exited with code {code}" + (f": {tail}" if tail else ""))
@@ -136,11 +137,3 @@ def _kill_group(proc: subprocess.Popen) -> None:
     except (ProcessLookupError, PermissionError):
         proc.kill()
     proc.wait()
-
-
-def _last_line(path: Path) -> str:
-    try:
-        lines = [ln.strip() for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
-    except OSError:
-        return ""
-    return lines[-1][:300] if lines else ""

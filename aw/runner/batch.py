@@ -23,8 +23,19 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from aw.formats import FormatError, RunEnded, RunInfo, read_manifest, read_run_info, read_trajectory, write_run_info
+from aw.formats import (
+    FormatError,
+    RunEnded,
+    RunInfo,
+    read_manifest,
+    read_run_info,
+    read_task,
+    read_trajectory,
+    write_run_info,
+)
+from aw.formats.io import parse_model, read_tail
 from aw.formats.run import BATCH_FILE, BatchPlan, write_batch_plan
+from aw.formats.strict_json import read_json, read_json_object
 from aw.formats.suite import suite_paths
 from aw.formats.task import MAX_BUDGET_MINUTES
 from aw.formats.trajectory import FinalState, write_final
@@ -281,7 +292,7 @@ def plan_episodes(cfg: BatchConfig) -> list[Episode]:
             raise RunnerError(f"the oracle needs the targets file, missing: {targets}")
         start = None
         if cfg.initial_poses is not None:
-            from aw.formats.poses import initial_poses_file
+            from aw.formats.poses import initial_poses_file, read_initial_poses
 
             start = initial_poses_file(cfg.initial_poses, tid)
             if start is None:
@@ -289,6 +300,10 @@ def plan_episodes(cfg: BatchConfig) -> list[Episode]:
                     f"--initial-poses {cfg.initial_poses}: no start state for {tid} ({tid}/final.json or {tid}.json)"
                 )
             start = start.resolve()
+            try:  # the server reads it again; a bad file is named here, before anything runs
+                read_initial_poses(start, tid, read_task(task_dir).part_ids)
+            except FormatError as exc:
+                raise RunnerError(str(exc)) from None
         out.append(
             Episode(tid, task_dir.resolve(), targets.resolve(), (cfg.out_dir / cfg.system / tid).resolve(), start)
         )
@@ -306,8 +321,8 @@ def _server_args(cfg: BatchConfig, ep: Episode) -> list[str]:
 
 def _progress_state(path: Path) -> dict[str, Any] | None:
     try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
+        return read_json_object(path)
+    except FormatError:
         return None
 
 
@@ -381,7 +396,10 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
     sup = worker.run(spec.model_dump_json(), cfg.limit_seconds, episode_marker)
     result: EpisodeResult | None = None
     if Path(spec.result_path).is_file():
-        result = EpisodeResult.model_validate_json(Path(spec.result_path).read_bytes())
+        try:
+            result = parse_model(EpisodeResult, read_json(spec.result_path), spec.result_path)
+        except FormatError as exc:  # the agent process wrote something else: a crash of its own
+            result = EpisodeResult(ended="crashed", error=f"the agent process left an unreadable result ({exc})")
     extra: dict[str, Any] = {
         "seed": cfg.seed,
         "think_seconds": cfg.think_seconds,
@@ -411,11 +429,7 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
         extra["killed_pids"] = sup.killed
     elif result is None:
         ended = "crashed"
-        tail = ""
-        try:
-            tail = (ep.run_dir / "agent.log").read_text(errors="replace")[-1500:].strip()
-        except OSError:
-            pass
+        tail = read_tail(ep.run_dir / "agent.log", 1500).strip()
         error = f"the agent process died (exit code {sup.returncode}) without a result" + (f":\n{tail}" if tail else "")
     else:
         ended, error = result.ended, result.error
@@ -496,11 +510,8 @@ def _run_harness_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str]) -> 
         ended = "error"
         error = usage.error or f"the harness exited with code {sup.returncode}"
         if not usage.error:
-            try:
-                tail = (ep.run_dir / "harness.log").read_text(errors="replace")[-1500:].strip()
-                error += f":\n{tail}" if tail else ""
-            except OSError:
-                pass
+            tail = read_tail(ep.run_dir / "harness.log", 1500).strip()
+            error += f":\n{tail}" if tail else ""
     extra: dict[str, Any] = {
         "harness_command": prepared.display_command,
         "call_counts": facts.get("call_counts", {}),

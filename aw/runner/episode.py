@@ -22,6 +22,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 from aw.formats import RunEnded
+from aw.formats.io import read_tail
 
 
 class EpisodeSpec(BaseModel):
@@ -57,10 +58,7 @@ class EpisodeResult(BaseModel):
 
 
 def _tail(path: Path, n: int = 1500) -> str:
-    try:
-        return path.read_text(errors="replace")[-n:].strip()
-    except OSError:
-        return ""
+    return read_tail(path, n).strip()
 
 
 async def run_episode(spec: EpisodeSpec) -> EpisodeResult:

@@ -28,7 +28,9 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from aw.assembly import AssembledObject, SourcePart, y_up_to_z_up
 from aw.formats import FormatError
-from aw.formats.io import load_json, read_model
+from aw.formats.common import MAX_CATEGORY_CHARS
+from aw.formats.io import read_model
+from aw.formats.strict_json import read_json
 from aw.meshes import load_mesh
 from aw.sources.up_axis import guess_up_axis
 
@@ -67,8 +69,8 @@ class ObjectMeta(BaseModel):
 
     object_id: str | None = Field(default=None, min_length=1, max_length=100)
     source: str | None = Field(default=None, min_length=1, max_length=64)
-    dataset: str = Field(default="folder", min_length=1)
-    category: str = ""
+    dataset: str = Field(default="folder", min_length=1, max_length=64)
+    category: str = Field(default="", max_length=MAX_CATEGORY_CHARS)
     condition: Condition | None = None
     conditions: list[Condition] | None = Field(default=None, min_length=1)
     references: dict[Literal["image", "manual"], list[str]] = Field(default_factory=dict)
@@ -104,7 +106,7 @@ def unknown_keys(obj_dir: str | Path) -> list[str]:
     path = Path(obj_dir) / "meta.json"
     if not path.exists():
         return []
-    raw = load_json(path)
+    raw = read_json(path)
     return sorted(set(raw) - set(ObjectMeta.model_fields)) if isinstance(raw, dict) else []
 
 

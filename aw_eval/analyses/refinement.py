@@ -12,13 +12,13 @@ difference within ``TOLERANCE`` counting as unchanged.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from aw.formats import FormatError, read_final, read_manifest, read_run_info, read_targets, read_task, read_trajectory
+from aw.formats.strict_json import read_json_object
 from aw.formats.suite import suite_paths
 from aw.meshes import load_task_meshes
 from aw.prepare.official_protocol import fracture_samples
@@ -77,10 +77,12 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
     if not path.is_file():
         return None
     try:
-        study = json.loads(path.read_text())
+        study = read_json_object(path)
         systems = {a["arm"]: a["system"] for a in study["arms"]}
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        return {"error": f"{path}: unreadable ({exc})"}
+    except FormatError as exc:
+        return {"error": f"{path}: unreadable ({exc.problem})"}
+    except (KeyError, TypeError) as exc:
+        return {"error": f"{path}: unreadable ({type(exc).__name__}: {exc})"}
     missing = [a for a in ARMS if a not in systems]
     if missing:
         return {"error": f"{path}: arms missing: {', '.join(missing)}"}

@@ -16,6 +16,7 @@ import numpy as np
 import orjson
 
 from aw.formats.io import write_bytes_atomic
+from aw.formats.strict_json import parse_json
 
 __all__ = ["RunScore", "TaskFacts", "save_npz", "load_npz", "STATUS_SCORED", "STATUS_MISSING", "STATUS_UNREADABLE"]
 
@@ -143,9 +144,9 @@ def load_npz(path: str | Path) -> RunScore | TaskFacts:
     """Read what :func:`save_npz` wrote; raises ``ValueError`` on a damaged file."""
     try:
         with np.load(path, allow_pickle=False) as z:
-            meta = orjson.loads(z["__meta__"].tobytes())
+            meta = parse_json(z["__meta__"].tobytes())
             arrays = {k: z[k] for k in z.files if k != "__meta__"}
-    except (OSError, KeyError, ValueError, orjson.JSONDecodeError) as exc:
+    except (OSError, KeyError, ValueError) as exc:  # JsonError is a ValueError
         raise ValueError(f"{path}: damaged cache entry ({exc})") from None
     kind = meta.pop("kind", None)
     cls = {"RunScore": RunScore, "TaskFacts": TaskFacts}.get(kind)

@@ -89,6 +89,20 @@ def test_lock_is_exclusive_within_a_process_too(tmp_path):
         pass
 
 
+def test_a_hostile_lock_file_is_described_as_another_process(tmp_path):
+    import fcntl
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / LOCK_FILE).write_text("[" * 3000 + "]" * 3000)
+    fd = os.open(run / LOCK_FILE, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        assert holder_of(run) == "another process"
+    finally:
+        os.close(fd)
+
+
 def test_the_lock_file_names_its_holder_during_and_after(tmp_path):
     """docs/harnesses.md: ``.aw-lock`` names pid, host and command (it used to be emptied on release)."""
     import json

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import trimesh
@@ -13,6 +14,7 @@ from aw.cli.prepare import main
 from aw.formats import read_manifest, read_targets, read_task
 from aw.formats.suite import suite_paths
 from aw.meshes import load_task_meshes
+from tests.aw.formats.hostile_json import DEEP, inject
 
 
 def _tree(root) -> dict[str, bytes]:
@@ -235,6 +237,36 @@ def test_folder_summary_names_an_empty_category_and_counts_in_the_right_number(t
     assert main(["folder", str(src), "--out", str(tmp_path / "o"), "--jobs", "1", "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "categories (no category) 1;" in out and "wrote 1 task of 1 object to" in out
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        (inject({"source": "partnet"}, ("source",), DEEP), DEEP.message),
+        ('{"source": "partnet", "source": "ikea_manual"}', "duplicate key 'source'"),
+        (json.dumps({"category": "x" * 101}), "category: String should have at most 100 characters"),
+        (
+            json.dumps({"category": "x" * (20 << 20)}),
+            "'category': a string of 20971520 characters, over the limit of 16777216",
+        ),
+    ],
+    ids=["deep", "duplicate-key", "category-101-chars", "category-20-MiB"],
+)
+def test_a_hostile_meta_json_is_one_line_and_nothing_is_echoed_whole(tmp_path, text, message):
+    """The real command: a hostile meta.json is refused by name before anything is built; a long
+    category never reaches the summary or any message."""
+    src = _folder(tmp_path / "src")
+    (src / "lamp" / "meta.json").write_text(text)
+    proc = subprocess.run(
+        [str(Path(sys.executable).with_name("aw-prepare")), "folder", str(src), "--out", str(tmp_path / "o")]
+        + ["--jobs", "1", "--no-progress"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 2 and proc.stdout == "", proc.stdout[:300]
+    assert proc.stderr.splitlines() == [f"aw-prepare: error: {src / 'lamp' / 'meta.json'}: {message}"]
+    assert not (tmp_path / "o").exists()
 
 
 def test_folder_warns_of_unknown_meta_keys_in_one_line(tmp_path, capsys):

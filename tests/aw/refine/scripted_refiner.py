@@ -2,10 +2,13 @@
 
 It reads the request file and answers as its ``options.behaviour`` says: ``shift`` (the
 non-anchor parts moved by ``options.dx`` along x), ``short`` (one pose fewer), ``nan``,
-``move_anchor``, ``sleep`` (never answers), ``fail`` (exits 3 with a message) or ``silent``
-(exits 0 without writing a result)."""
+``move_anchor``, ``sleep`` (never answers), ``fail`` (exits 3 with a message), ``silent``
+(exits 0 without writing a result), or a hostile answer: ``far`` (a position of 1e300), ``huge``
+(a number of 401 digits), ``deep`` (arrays 3,000 deep), ``big`` (a 300 MiB result file) or
+``loud`` (300 MiB of output, then a last line, exit 3); the two large files are sparse."""
 
 import json
+import os
 import sys
 import time
 
@@ -31,5 +34,21 @@ elif behaviour == "fail":
     sys.exit(3)
 elif behaviour == "silent":
     sys.exit(0)
+elif behaviour == "far":
+    poses[next(p for p in poses if p != anchor)][0] = 1e300
+elif behaviour == "big":
+    with open(result_path, "wb") as fh:
+        fh.truncate(300 << 20)
+    sys.exit(0)
+elif behaviour == "loud":
+    os.lseek(1, 300 << 20, os.SEEK_SET)  # stdout is the refiner.log file
+    os.write(1, b"\nscripted refiner: out of patience\n")
+    sys.exit(3)
+doc = {"format": "assemblyworld.refine-result", "format_version": 1, "poses": poses}
+text = json.dumps(doc)
+if behaviour == "huge":
+    text = text.replace(json.dumps(poses[anchor]), "[1" + "0" * 400 + ", 0, 0, 1, 0, 0, 0]", 1)
+elif behaviour == "deep":
+    text = text[:-1] + ', "notes": ' + "[" * 3000 + "]" * 3000 + "}"
 with open(result_path, "w") as fh:
-    json.dump({"format": "assemblyworld.refine-result", "format_version": 1, "poses": poses}, fh)
+    fh.write(text)

@@ -119,18 +119,25 @@ def test_wrong_answers_fail_the_refiner_arms_and_keep_the_agent(fracture_suite, 
     arms = {a["arm"]: a for a in json.loads((out / "refinement_study.json").read_text())["arms"]}
     assert arms["agent"]["status"] == "ok"
     assert arms["refiner"]["status"] == arms["agent_refiner"]["status"] == "failed"
-    assert arms["refiner"]["failed_tasks"][TASKS[0]].startswith("refiner scripted: non-finite pose for fragment_")
+    assert arms["refiner"]["failed_tasks"][TASKS[0]].startswith(
+        "refiner scripted: result file refine-result.json: not valid JSON: NaN at char "
+    )
     assert arms["refiner_agent"]["failed_tasks"] == {
         t: "no start state: arm refiner failed on this task" for t in TASKS
     }
     assert not (out / "scripted-then-idle").exists()  # the agent never ran from a failed refinement
     info = read_run_info(out / "scripted" / TASKS[0] / "run.json")
-    assert info.ended == "error" and "non-finite pose" in info.error
+    assert info.ended == "error" and "(NaN and Infinity are not JSON numbers)" in info.error
     # the failed refinement leaves its start state, recorded as an error
     traj = read_trajectory(out / "scripted" / TASKS[0] / "trajectory.jsonl")
     assert traj.end.reason == "error" and traj.final_poses() == traj.header.initial_poses
     section = refinement_study(fracture_suite, out)
     assert section["matched"] == [] and len(section["failures"]["refiner"]) == 2
+    study = out / "refinement_study.json"
+    study.write_text(study.read_text()[:-2] + ', "notes": ' + "[" * 3000 + "]" * 3000 + "}")
+    assert refinement_study(fracture_suite, out) == {
+        "error": f"{study}: unreadable (JSON nested deeper than 64 levels)"
+    }
     assert "Failed runs (left out of the table)" in render_refinement(section)
 
 

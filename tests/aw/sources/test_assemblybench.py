@@ -53,7 +53,10 @@ def _pose_file(root, view=0, step=-1):
             lambda d: d.update(part1=[0, 0, 0, 1, 0, 0]),
             r"poses.part1: expected \[tx, ty, tz, qw, qx, qy, qz\], got shape \(6,\)",
         ),
-        (lambda d: d.update(part1=[0, 0, float("nan"), 1, 0, 0, 0]), r"poses.part1: non-finite values"),
+        (
+            lambda d: d.update(part1=[0, 0, float("nan"), 1, 0, 0, 0]),
+            r"step_1.json: not valid JSON: NaN at char \d+ \(NaN and Infinity are not JSON numbers\)",
+        ),
         (lambda d: d.update(part1=[0, 0, 0, 0, 0, 0, 0]), r"poses.part1: zero quaternion"),
         (lambda d: d.update(ghost=[0, 0, 0, 1, 0, 0, 0]), r"poses for unknown parts \['ghost'\]"),
     ],

@@ -79,6 +79,8 @@ def _edit(root, fn):
         ),
         (lambda d: d[0]["steps"].append({"parts": ["12"]}), r"\[0\].steps\[2\].parts: unknown part ids \['12'\]"),
         (lambda d: d[0].pop("name"), r"\[0\].name: missing"),
+        (lambda d: d[0].update(name=float("nan")), r"main_data.json: not valid JSON: NaN at char \d+"),
+        (lambda d: d[0].update(notes=json.loads("[" * 70 + "]" * 70)), r"main_data.json: JSON nested deeper than 64"),
     ],
 )
 def test_malformed_main_data(root, edit, message):
