@@ -19,7 +19,7 @@ from pathlib import Path
 
 LOCK_FILE = ".aw-lock"
 
-__all__ = ["LOCK_FILE", "RunDirBusy", "RunDirLock", "holder_of"]
+__all__ = ["LOCK_FILE", "RunDirBusy", "RunDirLock", "holder_of", "run_in_progress"]
 
 
 class RunDirBusy(Exception):
@@ -109,3 +109,11 @@ def holder_of(run_dir: str | Path) -> str | None:
         return None
     finally:
         os.close(fd)
+
+
+def run_in_progress(run_dir: str | Path) -> str | None:
+    """Whether the run in ``run_dir`` is live: who is still recording it (``aw-serve``, an
+    ``aw-run`` refiner), described, or None when no live process holds its lock (finished, or
+    abandoned by a process that died). The one check every reader of runs makes (``aw-score``,
+    ``aw-view``) before it treats a run as finished."""
+    return holder_of(run_dir)
