@@ -2,10 +2,13 @@
 
 It reads the request file and answers as its ``options.behaviour`` says: ``shift`` (the
 non-anchor parts moved by ``options.dx`` along x), ``short`` (one pose fewer), ``nan``,
-``move_anchor``, ``sleep`` (never answers), ``fail`` (exits 3 with a message) or ``silent``
-(exits 0 without writing a result)."""
+``move_anchor``, ``sleep`` (never answers), ``fail`` (exits 3 with a message), ``silent``
+(exits 0 without writing a result), ``setsid`` (starts a process that calls ``os.setsid()``,
+leaves its parent's tree, writes its pid to ``options.pid_file`` and sleeps, then never answers)
+or ``setsid_answer`` (the same process, then answers at once)."""
 
 import json
+import os
 import sys
 import time
 
@@ -26,6 +29,19 @@ elif behaviour == "move_anchor":
     poses[anchor][2] += 0.5
 elif behaviour == "sleep":
     time.sleep(600)
+elif behaviour in ("setsid", "setsid_answer"):
+    if os.fork() == 0:  # a child that leaves the refiner's session and, orphaned, its process tree
+        os.setsid()
+        if os.fork() == 0:
+            with open(req["options"]["pid_file"] + ".tmp", "w") as fh:
+                fh.write(str(os.getpid()))
+            os.replace(req["options"]["pid_file"] + ".tmp", req["options"]["pid_file"])
+            time.sleep(600)
+        os._exit(0)
+    while not os.path.exists(req["options"]["pid_file"]):
+        time.sleep(0.01)
+    if behaviour == "setsid":
+        time.sleep(600)
 elif behaviour == "fail":
     print("scripted refiner: model weights not found", file=sys.stderr)
     sys.exit(3)
