@@ -22,6 +22,7 @@ from typing import Any
 
 from aw import interrupts
 from aw.cli.common import plural
+from aw.cores import available_cores
 from aw.formats import FormatError, read_manifest, read_run_info
 from aw.formats.run import system_label_problem
 from aw.formats.suite import suite_paths
@@ -42,7 +43,6 @@ __all__ = [
     "running_line",
     "score_study",
     "ScoreStats",
-    "default_jobs",
 ]
 
 
@@ -72,12 +72,6 @@ class ScoreStats:
     seconds_checkpoints: float = 0.0
     seconds_final: float = 0.0
     coverage: Coverage | None = None  # how the runs found match the suite
-
-
-def default_jobs() -> int:
-    from aw.cli.common import default_jobs as cores
-
-    return cores()
 
 
 def shape_family(task_dir: Path) -> str:
@@ -428,7 +422,7 @@ def score_study(
         log(f"WARNING: {running_line(stats.running, allow_running)}")
     jobs = schedule_jobs(jobs, {e.task_id: e.n_parts for e in entries})
     stats.tasks_dispatched = len(jobs)
-    outputs, stats.executor, close = _run_jobs(jobs, scheduler=scheduler, n_jobs=n_jobs or default_jobs())
+    outputs, stats.executor, close = _run_jobs(jobs, scheduler=scheduler, n_jobs=n_jobs or available_cores())
     if log and jobs:
         log(
             f"scoring {plural(sum(len(j.runs) for j in jobs), 'run')} of {plural(len(jobs), 'task')} ({stats.executor}); "
