@@ -161,7 +161,7 @@ def run_supervised(
         for f in (out, err):
             if not isinstance(f, int):  # DEVNULL, STDOUT
                 f.close()
-    if stdin_data is not None:
+    if stdin_data is not None and proc.stdin is not None:
         try:
             proc.stdin.write(stdin_data)
             proc.stdin.close()

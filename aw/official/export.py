@@ -101,7 +101,7 @@ def export_trajectory(
     )
     current = start.copy()
     view = _StateView(model, ep)
-    object_ids = dict(zip(part_ids, names))
+    object_ids = dict(zip(part_ids, names, strict=True))
 
     def record_state(poses: dict[str, list[float]] | None, camera: CameraState | None) -> int:
         target = current if poses is None else np.array([poses[p] for p in part_ids], dtype=float)
@@ -240,7 +240,9 @@ def _result(call, index: int | None, view: _StateView, run_dir: Path) -> dict | 
             "objects": copy.deepcopy(m["objects"]),
         }
     if name == "get_object":
-        object_ids = dict(zip([o["name"][len("Part ") :] for o in m["objects"]], [o["id"] for o in m["objects"]]))
+        object_ids = dict(
+            zip([o["name"][len("Part ") :] for o in m["objects"]], [o["id"] for o in m["objects"]], strict=True)
+        )
         return view.object(object_ids.get(call.args.get("id"), call.args.get("id")))
     if name == "get_state":
         return {
@@ -303,7 +305,7 @@ def task_setup_archive(
     from aw.meshes import load_task_meshes
 
     task = read_task(task_dir)
-    meshes = dict(zip(task.part_ids, load_task_meshes(task)))
+    meshes = dict(zip(task.part_ids, load_task_meshes(task), strict=True))
     ids = sorted(initial_poses)
     if set(ids) - set(meshes):
         raise FormatError(Path(task_dir), f"the run names parts {sorted(set(ids) - set(meshes))} the task lacks")

@@ -125,11 +125,11 @@ def refine_task(
     error = None
     initial = read_initial_poses(start_file, task.task_id, task.part_ids) if start_file is not None else None
     request = build_request(task, suite_dir, initial, seed=seed, steps=steps, options=options)
-    start = {p: [float(v) for v in q] for p, q in zip(task.part_ids, request.initial_poses)}
+    start = {p: [float(v) for v in q] for p, q in zip(task.part_ids, request.initial_poses, strict=True)}
     final = start
     try:
         poses = run_refiner(spec, request, run_dir / "refine", timeout_s)
-        final = {p: [float(v) for v in q] for p, q in zip(task.part_ids, poses)}
+        final = {p: [float(v) for v in q] for p, q in zip(task.part_ids, poses, strict=True)}
     except RefinerError as exc:
         error = str(exc)
     seconds = time.monotonic() - t0

@@ -109,7 +109,7 @@ def run_study(
     # a composed arm runs where its first stage produced a state; elsewhere it fails, by name
     for first, arm, run in (("agent", "agent_refiner", refiner_arm), ("refiner", "refiner_agent", agent_arm)):
         # an agent run that ended early still has a final state; a failed refiner run has none of its own
-        def has_start(t: str) -> bool:
+        def has_start(t: str, first: str = first) -> bool:
             if first == "refiner":
                 return t not in arms[first].failed
             return (out / systems[first] / t / "final.json").is_file()

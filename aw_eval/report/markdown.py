@@ -193,7 +193,7 @@ def _table1(doc: dict[str, Any]) -> str:
     # Only real systems compete; lowest resource use is only "best" for a system that achieved
     # something (an idle system's few calls are not an achievement).
     real = [_role(doc, s) == "system" for s in systems]
-    achieved = [r and float(q["systems"][s]["overall"]["pa"] or 0) > 0 for r, s in zip(real, systems)]
+    achieved = [r and float(q["systems"][s]["overall"]["pa"] or 0) > 0 for r, s in zip(real, systems, strict=True)]
     text_cols = []
     for j, col in enumerate(cols):
         if j <= len(cells):
@@ -221,7 +221,7 @@ def _quality_full(doc: dict[str, Any]) -> str:
     for s in _order(doc):
         row = q["systems"][s]
         rows = []
-        for c, v in zip(q["cells"], row["cells"]):
+        for c, v in zip(q["cells"], row["cells"], strict=True):
             rows.append(
                 [
                     c["label"],
@@ -534,7 +534,7 @@ def _curves(doc: dict[str, Any]) -> str:
             continue
         rows.append(
             [system_label(doc, s)]
-            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["normalized"], v["sr"]["normalized"])]
+            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["normalized"], v["sr"]["normalized"], strict=True)]
         )
     t1 = md_table(["System"] + [f"PA/SR (%) at {p:g}" for p in pts], rows)
     rows = []
@@ -544,7 +544,7 @@ def _curves(doc: dict[str, Any]) -> str:
             continue
         rows.append(
             [system_label(doc, s)]
-            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["budget"], v["sr"]["budget"])]
+            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["budget"], v["sr"]["budget"], strict=True)]
             + [f"{paper(v['pa']['final'])}/{paper(v['sr']['final'])}", str(v["edits_after_last_budget"])]
         )
     t2 = md_table(

@@ -29,7 +29,7 @@ def write_refinement_plot(section: dict[str, Any], out_dir: Path) -> str | None:
     out_dir.mkdir(parents=True, exist_ok=True)
     fig, axes = plt.subplots(1, len(section["scatter"]), figsize=(5.2 * len(section["scatter"]), 4.6), squeeze=False)
     labels = {a: v["label"] for a, v in section["arms"].items()}
-    for ax, panel in zip(axes[0], section["scatter"]):
+    for ax, panel in zip(axes[0], section["scatter"], strict=True):
         x = np.maximum(np.asarray(panel["x"], float), CD_FLOOR)
         y = np.maximum(np.asarray(panel["y"], float), CD_FLOOR)
         lo, hi = float(min(x.min(), y.min())) / 2, float(max(x.max(), y.max())) * 2

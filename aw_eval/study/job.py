@@ -210,7 +210,7 @@ def _load_native(job: TaskJob, t0: float):
     meshes = load_task_meshes(task)
     all_ids = task.part_ids
     scored = set(geom.part_ids)
-    ratio = part_size_ratio([m for pid, m in zip(all_ids, meshes) if pid in scored])
+    ratio = part_size_ratio([m for pid, m in zip(all_ids, meshes, strict=True) if pid in scored])
     facts = TaskFacts(
         job.task_id, int(geom.n_parts), float(ratio), float(geom.divisor), list(geom.part_ids), time.perf_counter() - t0
     )

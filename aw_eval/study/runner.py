@@ -256,7 +256,7 @@ def _run_jobs(
         except (OSError, TimeoutError, ValueError) as exc:
             raise StudyError(f"cannot connect to the Dask scheduler at {scheduler}: {exc}") from None
         futures = client.map(score_task, jobs, pure=False)
-        job_of = {f.key: j for f, j in zip(futures, jobs)}
+        job_of = {f.key: j for f, j in zip(futures, jobs, strict=True)}
 
         def gen_dask() -> Iterator[TaskOutput]:
             for fut in dask_completed(futures):

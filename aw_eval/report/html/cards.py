@@ -254,7 +254,7 @@ def _part_table(scene_ids: list[str], colors: np.ndarray | None, study: TaskRuns
     for i, pid in enumerate(scene_ids):
         sw = ""
         if colors is not None:
-            c = "#%02x%02x%02x" % tuple(int(round(255 * x)) for x in colors[i])
+            c = "#{:02x}{:02x}{:02x}".format(*(int(round(255 * x)) for x in colors[i]))
             sw = f'<span class="sw" style="background:{c}"></span>'
         tds = f'<td class="l">{sw}{html.escape(pid)}</td>'
         for s in systems:
@@ -304,7 +304,7 @@ def _curves(study: TaskRuns, task_id: str, views: dict[str, RunView], colors: di
 def _filmstrip(view: RunView, scene: TaskScene, camera, folder: Path, rel: str) -> str:
     r = view.score
     frames = []
-    for u, k in zip(NORMALIZED_POINTS, normalized_states(r)):
+    for u, k in zip(NORMALIZED_POINTS, normalized_states(r), strict=True):
         if k is None or len(view.states) == 0:
             poses, pa, scd = view.final, r.pa, r.scd
         else:
@@ -451,12 +451,12 @@ def viewer_data(scene: TaskScene, views: dict[str, RunView]) -> dict[str, Any]:
     poses, and per system its recorded states (aligned poses, PA, SCD), at most
     :data:`MAX_VIEWER_STATES` of them plus the final state; per system its tool calls."""
     parts = []
-    for pid, m, c in zip(scene.part_ids, scene.meshes, scene.colors):
+    for pid, m, c in zip(scene.part_ids, scene.meshes, scene.colors, strict=True):
         v, f = _cluster(np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64), MAX_VIEWER_FACES)
         parts.append(
             {
                 "id": pid,
-                "color": "#%02x%02x%02x" % tuple(int(round(255 * x)) for x in c),
+                "color": "#{:02x}{:02x}{:02x}".format(*(int(round(255 * x)) for x in c)),
                 "v": np.round(v, 5).reshape(-1).tolist(),
                 "f": f.reshape(-1).tolist(),
             }

@@ -318,7 +318,7 @@ def write_html(
     used_viewer: set[str] = set()
     cards, pictures, no_render = [], {}, None
     # spawned workers take seconds to start: not worth it for a handful of cards
-    for job, res in zip(card_jobs, _cards(card_jobs, jobs if len(card_jobs) >= MIN_POOL_TASKS else 1)):
+    for job, res in zip(card_jobs, _cards(card_jobs, jobs if len(card_jobs) >= MIN_POOL_TASKS else 1), strict=True):
         cards.append(res.html)
         pictures[job.task["task_id"]] = res.pictures
         used_renders.update(res.render_files)

@@ -78,7 +78,7 @@ class TaskScene:
         task_dir, targets_path = suite_paths(suite_dir, task_id)
         task = read_task(task_dir)
         targets = read_targets(targets_path)
-        by_id = dict(zip(task.part_ids, load_task_meshes(task)))
+        by_id = dict(zip(task.part_ids, load_task_meshes(task), strict=True))
         meshes = [by_id[p] for p in part_ids]
         target = np.array([targets.parts[p].pose for p in part_ids], dtype=np.float64).reshape(-1, 7)
         return cls(task_id, list(part_ids), meshes, target, part_colors(len(part_ids)), float(divisor))
@@ -86,7 +86,7 @@ class TaskScene:
     def bounds(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World bounds ``(lo (3,), hi (3,))`` of the parts at ``poses (P, 7)``."""
         mats = poses_to_matrices(poses)
-        pts = np.concatenate([m.vertices @ t[:3, :3].T + t[:3, 3] for m, t in zip(self.meshes, mats)])
+        pts = np.concatenate([m.vertices @ t[:3, :3].T + t[:3, 3] for m, t in zip(self.meshes, mats, strict=True)])
         return pts.min(axis=0), pts.max(axis=0)
 
     def placed(self, poses: np.ndarray, threshold: float) -> np.ndarray:
