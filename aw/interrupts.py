@@ -14,7 +14,9 @@ the interrupt as that input's failure and go on. So:
   :func:`deferred` around a commit that must not stop halfway: a signal inside it is recorded and
   raised when the commit is done;
 - :func:`ignore_in_worker` in worker processes: a terminal's Ctrl-C reaches the whole process
-  group, and the parent, not each worker, decides (it ends its workers).
+  group, and the parent, not each worker, decides (it ends its workers); workers are started
+  inside :func:`blocked_for_children`, so that one signalled while it still imports does not
+  die with a traceback.
 
 The exit status of an interrupted command is ``128 + signal`` (:attr:`Interrupted.exit_status`):
 130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP.
@@ -30,6 +32,7 @@ from contextlib import contextmanager
 __all__ = [
     "SIGNALS",
     "Interrupted",
+    "blocked_for_children",
     "check",
     "deferred",
     "handled",
@@ -75,7 +78,7 @@ def _on_signal(signum: int, frame: object) -> None:
 def handled(signals: tuple[int, ...] = SIGNALS) -> Iterator[None]:
     """Within the block, ``signals`` raise :class:`Interrupted` after recording themselves. Only
     the main thread can install handlers: elsewhere the block runs as it is."""
-    global _requested
+    global _requested, _defer_depth
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -84,8 +87,12 @@ def handled(signals: tuple[int, ...] = SIGNALS) -> Iterator[None]:
     try:
         yield
     finally:
-        for s, h in before.items():
-            signal.signal(s, h)
+        _defer_depth += 1  # a signal while the handlers are put back is recorded, not raised here
+        try:
+            for s, h in before.items():
+                signal.signal(s, h)
+        finally:
+            _defer_depth -= 1
         _requested = None
 
 
@@ -141,8 +148,22 @@ def deferred() -> Iterator[None]:
         check()
 
 
+@contextmanager
+def blocked_for_children() -> Iterator[None]:
+    """Processes started inside the block start with SIGINT and SIGHUP blocked (a blocked mask
+    survives fork and exec), until :func:`ignore_in_worker`; this process receives a signal that
+    came meanwhile when the block ends."""
+    held = {signal.SIGINT, signal.SIGHUP}
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
+
+
 def ignore_in_worker() -> None:
     """In a worker process: SIGINT and SIGHUP are the parent's to act on (it ends its workers with
     SIGTERM, whose default action stops this process at once)."""
     for s in (signal.SIGINT, signal.SIGHUP):
         signal.signal(s, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT, signal.SIGHUP})  # ignored now: pending ones are dropped

@@ -200,7 +200,9 @@ def evaluate_system(
             initargs=(os.getpid(),),
         )  # a killed aw-score takes its workers with it
         try:
-            rows = list(pool.map(_score_job, [(a, sources) for a in items]))
+            with interrupts.blocked_for_children():  # the workers are started by the submissions
+                scored = pool.map(_score_job, [(a, sources) for a in items])
+            rows = list(scored)
         except BrokenProcessPool as exc:  # a worker died: the tool failed, not the runs
             stop_pool(pool)
             raise ScoringFailed(

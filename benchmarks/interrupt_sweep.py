@@ -253,7 +253,8 @@ class Point:
 
 
 def plan(n: int, seed: int, variants: list[list[str]]) -> list[Point]:
-    """``n`` interrupt points: signals and option sets in turn; in every four calls, three score
+    """``n`` interrupt points: signals and option sets in turn (each pair in every nine, with three
+    option sets); in every four calls, three score
     again (their cache removed) and two of them are signalled during the scoring of runs (in the
     compiled ICP, most likely); the others at any moment of a whole call."""
     rng = random.Random(seed)
@@ -262,7 +263,8 @@ def plan(n: int, seed: int, variants: list[list[str]]) -> list[Point]:
         fresh = i % 4 != 2
         anchor = SCORING_LINE if i % 4 in (0, 3) else None
         delay = rng.uniform(0.0, 1.0)
-        out.append(Point(SIGNALS[i % len(SIGNALS)], delay, tuple(variants[i % len(variants)]), fresh, anchor))
+        variant = variants[(i + i // len(SIGNALS)) % len(variants)]  # every signal meets every option set
+        out.append(Point(SIGNALS[i % len(SIGNALS)], delay, tuple(variant), fresh, anchor))
     return out
 
 

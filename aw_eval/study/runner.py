@@ -286,7 +286,8 @@ def _run_jobs(
         initializer=_worker_init,
         initargs=(os.getpid(),),
     )
-    futs = {pool.submit(score_task, j): j for j in jobs}
+    with interrupts.blocked_for_children():  # workers are started by the submissions
+        futs = {pool.submit(score_task, j): j for j in jobs}
 
     def gen_pool() -> Iterator[TaskOutput]:
         for f in as_completed(futs):

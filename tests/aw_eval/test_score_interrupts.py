@@ -30,8 +30,11 @@ def sweep(tmp_path_factory) -> interrupt_sweep.Sweep:
 
 
 # Seeded points (interrupt_sweep.plan with seed 0 draws the delays): two in the scoring of
-# runs, the other two anywhere in a call (starting up, the analyses, writing the outputs).
-POINTS = interrupt_sweep.plan(4, seed=0, variants=[["--jobs", "1"], ["--jobs", "2"]])
+# runs, the other two anywhere in a call (starting up, the analyses, writing the outputs); and
+# Ctrl-C to the process group just as the scoring workers start (they are still importing).
+POINTS = interrupt_sweep.plan(4, seed=0, variants=[["--jobs", "1"], ["--jobs", "2"]]) + [
+    interrupt_sweep.Point(signal.SIGINT, 0.01, ("--jobs", "2"), True, interrupt_sweep.SCORING_LINE)
+]
 
 
 @pytest.mark.parametrize("index", range(len(POINTS)))

@@ -22,6 +22,7 @@ from typing import Any
 
 import orjson
 
+from aw import interrupts
 from aw.formats import FormatError
 from aw.formats.io import write_bytes_atomic, write_text_atomic
 from aw.render_platform import RenderError
@@ -272,7 +273,9 @@ def _cards(jobs: list[CardJob], n_jobs: int):
         initargs=(os.getpid(),),
     )
     try:
-        yield from pool.map(build_card, jobs)
+        with interrupts.blocked_for_children():  # the workers are started by the submissions
+            cards = pool.map(build_card, jobs)
+        yield from cards
     except BaseException:  # an interrupt or a failure: end the workers now, not after their cards
         stop_pool(pool)
         raise
