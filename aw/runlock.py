@@ -22,7 +22,7 @@ from aw.formats.strict_json import parse_json
 
 LOCK_FILE = ".aw-lock"
 
-__all__ = ["LOCK_FILE", "RunDirBusy", "RunDirLock", "holder_of", "kernel_flocks", "live_holder"]
+__all__ = ["LOCK_FILE", "RunDirBusy", "RunDirLock", "holder_of", "kernel_flocks", "run_in_progress"]
 
 
 class RunDirBusy(Exception):
@@ -116,7 +116,7 @@ def holder_of(run_dir: str | Path) -> str | None:
 
 def kernel_flocks() -> frozenset[str] | None:
     """The files the kernel lists as flocked, as ``"<major>:<minor>:<inode>"`` (``/proc/locks``,
-    Linux); None where that list cannot be read. Read once for many :func:`live_holder` calls."""
+    Linux); None where that list cannot be read. Read once for many :func:`run_in_progress` calls."""
     try:
         with open("/proc/locks", encoding="ascii", errors="replace") as fh:
             rows = fh.read().splitlines()
@@ -129,12 +129,15 @@ def kernel_flocks() -> frozenset[str] | None:
 _READ = object()
 
 
-def live_holder(run_dir: str | Path, flocks: frozenset[str] | None | object = _READ) -> str | None:
-    """Who holds ``run_dir``'s lock now, or None, found without touching the lock: unlike
+def run_in_progress(run_dir: str | Path, flocks: frozenset[str] | None | object = _READ) -> str | None:
+    """Whether the run in ``run_dir`` is live: who is still recording it (``aw-serve``, an
+    ``aw-run`` refiner), described, or None (finished, or abandoned by a process that died). The
+    one check every reader of runs makes (``aw-score``, ``aw-view``) before it treats a run as
+    finished. It never touches the lock: unlike
     :func:`holder_of`, whose brief shared lock makes a recorder that starts at that moment refuse
     the directory, this looks the lock file up in the kernel's list of locks (``flocks``, default
     :func:`kernel_flocks` read now); where there is no such list, a holder on this host whose pid
-    is alive counts as live. For watchers (``aw-view``)."""
+    is alive counts as live."""
     path = Path(run_dir) / LOCK_FILE
     try:
         fd = os.open(path, os.O_RDONLY)

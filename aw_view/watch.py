@@ -31,7 +31,7 @@ import orjson
 from aw.formats import FormatError, TrajectoryFollower, read_run_info
 from aw.formats.io import pid_alive
 from aw.formats.run import BATCH_FILE, BatchPlan, read_batch_plan
-from aw.runlock import LOCK_FILE, kernel_flocks, live_holder
+from aw.runlock import LOCK_FILE, kernel_flocks, run_in_progress
 from aw_view.public import NotPublic, PublicFiles, TaskFiles, TaskView
 
 __all__ = ["Watch", "Episode", "MAX_DEPTH", "STATUSES", "MAX_ARGS_CHARS"]
@@ -360,7 +360,7 @@ class Watch:
             reason = traj.end.reason
             detail = "the client disconnected" if reason == "disconnect" else _first_line(traj.end.message)
             return _END_STATUS.get(reason, "error"), detail
-        holder = live_holder(ep.run_dir, flocks)
+        holder = run_in_progress(ep.run_dir, flocks)
         plan = self._plan_of(ep.run_dir)
         if holder is not None or ((ep.run_dir / ".runner").is_dir() and plan is not None and self._batch_alive(plan)):
             return "running", ("starting" if traj is None else "")

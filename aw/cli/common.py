@@ -6,13 +6,15 @@
 - ``--jobs J`` defaults to the number of CPU cores this process may use (:func:`aw.cores.available_cores`).
 - Exit status 2: a usage error (bad flag or value, a path that cannot be used), said before any
   work starts; 1: a failure while working (including a run in which every episode failed);
-  130: interrupted. Errors are one line, ``PROG: error: ...``, never a traceback.
+  130: interrupted (128 + the signal: 143 for SIGTERM, 129 for SIGHUP, where the command
+  handles those). Errors are one line, ``PROG: error: ...``, never a traceback.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 import textwrap
 from collections.abc import Callable
@@ -213,9 +215,11 @@ def run_main(prog: str, body: Callable[[], int]) -> int:
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         print(f"{prog}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return EXIT_FAILURE
-    except KeyboardInterrupt:
-        print(f"\n{prog}: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as exc:  # Ctrl-C, or a signal turned into aw.interrupts.Interrupted
+        status = getattr(exc, "exit_status", EXIT_INTERRUPTED)
+        how = "" if status == EXIT_INTERRUPTED else f" ({signal.Signals(status - 128).name})"
+        print(f"\n{prog}: interrupted{how}", file=sys.stderr)
+        return status
     except OSError as exc:  # e.g. a full disk (ENOSPC) or a file too large: one line, never a traceback
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         print(f"{prog}: error: {where}{exc.strerror or exc}", file=sys.stderr)

@@ -6,6 +6,9 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TypeVar, get_args
 
@@ -141,3 +144,65 @@ def last_line(path: str | Path, max_chars: int = 300) -> str:
     lines = ["".join(c for c in line if c.isprintable()).strip() for line in read_tail(path).splitlines()]
     lines = [line for line in lines if line]
     return lines[-1][:max_chars] if lines else ""
+
+
+def _named(exc: OSError, path: Path) -> OSError:
+    """``exc`` naming ``path`` (a write error of a temporary file, or one without a file name)."""
+    return OSError(exc.errno, exc.strerror or str(exc), str(path))
+
+
+@contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """A temporary path beside ``path`` (same extension, so writers that read the format from it
+    still do) for the block to write; renamed onto ``path`` when the block succeeds. The rename
+    gives ``path`` a new file: a hard link to an older file (a staged copy) keeps the old bytes.
+    On failure the temporary file is removed, and an ``OSError`` names ``path``."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}-{threading.get_ident()}{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise _named(exc, path) from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_text_atomic(path: str | Path, text: str) -> None:
+    """:func:`write_bytes_atomic` of ``text`` in UTF-8."""
+    write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def link_tree(src: Path, dst: Path, skip: Callable[[str], bool] = lambda _name: False) -> None:
+    """``dst`` a copy of the folder ``src`` made of hard links (a real copy where the file system
+    refuses them), without the files whose name ``skip`` accepts: a staged folder that starts
+    as the published one at no cost. Write into it only through :func:`atomic_path`."""
+
+    def link(s: str, d: str) -> None:
+        try:
+            os.link(s, d)
+        except OSError:
+            shutil.copy2(s, d)
+
+    shutil.copytree(src, dst, copy_function=link, ignore=lambda _d, names: [n for n in names if skip(n)])
+
+
+def publish_staged(stage: Path, dest: Path) -> list[Path]:
+    """Move every entry of the folder ``stage`` onto the same name in ``dest``: a file by one
+    rename (atomic), a folder by renaming the published one aside, the new one in, and removing
+    the old. Returns the published paths. Call it with signals deferred (``aw.interrupts``)."""
+    published = []
+    for entry in sorted(p for p in stage.iterdir() if not p.name.startswith(".published-")):
+        target = dest / entry.name
+        if entry.is_dir() and not entry.is_symlink():
+            old = stage / f".published-{entry.name}"  # removed with the stage, or by the next staging_dir
+            if target.exists():
+                os.replace(target, old)
+            os.replace(entry, target)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(entry, target)
+        published.append(target)
+    return published

@@ -37,6 +37,7 @@ from aw.formats import (
     write_run_info,
 )
 from aw.formats.poses import initial_poses_file, read_initial_poses
+from aw.formats.run import ExistingRuns, existing_runs
 from aw.formats.suite import suite_paths
 from aw.refine.base import RefineRequest, RefinerError, identity_poses
 from aw.refine.plugins import RefinerSpec, run_refiner
@@ -192,24 +193,31 @@ class RefineConfig:
     steps: int = 20
     options: dict[str, Any] = field(default_factory=dict)
     overwrite: bool = False
+    keep_failed: bool = False  # keep runs that failed (default: a rerun retries them)
     jobs: int = 1
     progress: bool = False
 
 
 def refine_suite(
-    cfg: RefineConfig, on_done: Callable[[RunInfo], None] | None = None
-) -> tuple[list[RunInfo], list[str]]:
-    """Refine every task (or ``cfg.tasks``) of the suite; ``(run infos, skipped task ids)``.
-    Tasks with a ``run.json`` already are skipped unless ``overwrite``; a task whose start state
-    is missing under ``start_from`` is recorded as an error run."""
+    cfg: RefineConfig, on_done: Callable[[RunInfo], None] | None = None, log: Callable[[str], None] | None = None
+) -> tuple[list[RunInfo], ExistingRuns]:
+    """Refine every task (or ``cfg.tasks``) of the suite; ``(run infos, what was done with the
+    runs already there)``. Without ``overwrite``, tasks with a finished run are skipped and runs
+    that failed are retried (said through ``log``), or kept with ``keep_failed``; a task whose
+    start state is missing under ``start_from`` is recorded as an error run."""
     from concurrent.futures import ThreadPoolExecutor
 
     try:
         ids = read_manifest(cfg.suite_dir).select(cfg.tasks)
     except ValueError as exc:
         raise RefinerError(str(exc)) from None
-    skipped = [t for t in ids if not cfg.overwrite and (cfg.out_dir / cfg.system / t / "run.json").is_file()]
-    todo = [t for t in ids if t not in skipped]
+    if cfg.overwrite:
+        existing = ExistingRuns(todo=list(ids))
+    else:
+        existing = existing_runs({t: cfg.out_dir / cfg.system / t for t in ids}, cfg.keep_failed)
+        if log is not None and existing.retry:
+            log(existing.retry_line())
+    todo = [t for t in ids if t not in set(existing.kept)]
     bar = None
     if cfg.progress:
         from aw.progress import progress
@@ -255,7 +263,7 @@ def refine_suite(
                 on_done(info)
     if bar is not None:
         bar.close()
-    return out, skipped
+    return out, existing
 
 
 def _failed(cfg: RefineConfig, run_dir: Path, task_id: str, error: str) -> RunInfo:

@@ -34,7 +34,7 @@ from aw.formats import (
     write_run_info,
 )
 from aw.formats.io import parse_model, read_tail
-from aw.formats.run import BATCH_FILE, BatchPlan, write_batch_plan
+from aw.formats.run import BATCH_FILE, BatchPlan, ExistingRuns, existing_runs, system_label_problem, write_batch_plan
 from aw.formats.strict_json import read_json, read_json_object
 from aw.formats.suite import suite_paths
 from aw.formats.task import MAX_BUDGET_MINUTES
@@ -94,6 +94,7 @@ class BatchConfig:
     think_seconds: float = 0.0
     call_timeout: float = 120.0
     overwrite: bool = False
+    keep_failed: bool = False  # keep runs that failed (default: a rerun retries them)
     agent_options: dict[str, Any] = field(default_factory=dict)
     harness_bin: str | None = None
     harness_model: str | None = None
@@ -147,8 +148,9 @@ def check_config(cfg: BatchConfig) -> None:
         raise RunnerError(f"--budget-minutes must be positive and at most {MAX_BUDGET_MINUTES:g}")
     if cfg.think_seconds < 0 or cfg.call_timeout <= 0:
         raise RunnerError("--think-seconds must be >= 0 and --call-timeout positive")
-    if not cfg.system or "/" in cfg.system or cfg.system in (".", ".."):
-        raise RunnerError(f"--system must be a plain name (it becomes a directory), got {cfg.system!r}")
+    problem = system_label_problem(cfg.system)
+    if problem:
+        raise RunnerError(f"--system {problem} (it becomes a folder and a row of the reports)")
 
 
 def system_label(agent: str | None, harness: str | None, options: dict[str, Any] | None = None) -> str:
@@ -247,7 +249,11 @@ def check_reuse(cfg: BatchConfig, planned: list[Episode]) -> None:
     system_dir = cfg.out_dir / cfg.system
     if not system_dir.is_dir():
         return
-    replaced = {ep.task_id for ep in planned} if cfg.overwrite else set()
+    replaced = (
+        {ep.task_id for ep in planned}
+        if cfg.overwrite
+        else set(existing_runs({ep.task_id: ep.run_dir for ep in planned}, cfg.keep_failed).retry)
+    )
     now = run_settings(cfg)
     clashes: dict[str, list[str]] = {}
     for path in sorted(system_dir.glob("*/run.json")):
@@ -605,6 +611,7 @@ class BatchResult:
     runs: list[RunInfo]
     skipped: list[str]
     wall_seconds: float
+    existing: ExistingRuns = field(default_factory=ExistingRuns)  # what was done with the runs already there
 
     def endings(self) -> Counter[str]:
         return Counter(r.ended for r in self.runs)
@@ -634,20 +641,23 @@ def _close_plan(cfg: BatchConfig, plan: BatchPlan) -> None:
         pass
 
 
-def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None) -> BatchResult:
-    """Run every planned episode, ``cfg.jobs`` at a time, with a progress bar."""
+def run_batch(
+    cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None, log: Callable[[str], None] | None = None
+) -> BatchResult:
+    """Run every planned episode, ``cfg.jobs`` at a time, with a progress bar. Without
+    ``overwrite``, tasks with a finished run are skipped and runs that failed are retried (said
+    through ``log``), or kept with ``keep_failed``."""
     check_config(cfg)
     episodes = plan_episodes(cfg)
     check_reuse(cfg, episodes)
-    skipped = []
+    skipped: list[str] = []
+    existing = None
     if not cfg.overwrite:
-        todo = []
-        for ep in episodes:
-            if (ep.run_dir / "run.json").is_file():
-                skipped.append(ep.task_id)
-            else:
-                todo.append(ep)
-        episodes = todo
+        existing = existing_runs({ep.task_id: ep.run_dir for ep in episodes}, cfg.keep_failed)
+        skipped = existing.kept
+        episodes = [ep for ep in episodes if ep.task_id not in set(skipped)]
+        if log is not None and existing.retry:
+            log(existing.retry_line())
     (cfg.out_dir / cfg.system).mkdir(parents=True, exist_ok=True)
     plan = _write_plan(cfg, episodes)
     env = episode_env()
@@ -704,4 +714,9 @@ def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None
         _close_plan(cfg, plan)
     order = {ep.task_id: i for i, ep in enumerate(episodes)}
     runs.sort(key=lambda r: order.get(r.task_id, 0))
-    return BatchResult(runs=runs, skipped=skipped, wall_seconds=time.monotonic() - t0)
+    return BatchResult(
+        runs=runs,
+        skipped=skipped,
+        wall_seconds=time.monotonic() - t0,
+        existing=existing or ExistingRuns(todo=[ep.task_id for ep in episodes]),
+    )

@@ -136,7 +136,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="start each episode from given poses instead of the task's layout: DIR/<task_id>/final.json "
         "(another system's runs, e.g. a refiner's) or DIR/<task_id>.json (assemblyworld.poses files)",
     )
-    add_overwrite(p, "runs that already have a run.json (default: skip them)")
+    add_overwrite(p, "runs that already have a run.json (default: keep finished runs, retry failed ones)")
+    p.add_argument(
+        "--keep-failed",
+        action="store_true",
+        help="keep runs that ended in an error, a crash, a hang or the time limit (default: a rerun retries them)",
+    )
     p.add_argument("--harness-bin", metavar="PATH", help="harness executable (default: claude / codex on PATH)")
     p.add_argument("--harness-model", metavar="MODEL", help="model passed to the harness (--model / -m)")
     p.add_argument(
@@ -253,6 +258,7 @@ def _batch_config(args: argparse.Namespace) -> BatchConfig:
         think_seconds=args.think_seconds,
         call_timeout=args.call_timeout,
         overwrite=args.overwrite,
+        keep_failed=args.keep_failed,
         agent_options=dict(args.agent_option),
         harness_bin=harness_bin,
         harness_model=args.harness_model,
@@ -300,7 +306,7 @@ def _run(args: argparse.Namespace) -> int:
         return 1
     viewer = _start_viewer(args) if args.view is not None else None
     try:
-        result = run_batch(cfg)
+        result = run_batch(cfg, log=lambda m: print(f"aw-run: {m}", file=sys.stderr, flush=True))
     except RunnerError as exc:
         raise UsageError(str(exc)) from None
     except KeyboardInterrupt:
@@ -315,12 +321,14 @@ def _run(args: argparse.Namespace) -> int:
     ends = result.endings()
     summary = ", ".join(f"{k} {v}" for k, v in sorted(ends.items())) or "nothing to run"
     print(f"{system}: {plural(len(result.runs), 'episode')} in {result.wall_seconds:.1f} s ({summary})", end="")
-    print(f"; skipped {len(result.skipped)} with an existing run.json (same options)" if result.skipped else "")
+    print(f"; {result.existing.kept_line()}" if result.skipped else "")
     print(f"runs: {os.path.join(str(args.out), system)}")
     for r in result.runs:
         if r.ended != "finished":
             first = (r.error or "").splitlines()[0] if r.error else ""
             print(f"  {r.task_id}: {r.ended}{': ' + first if first else ''}")
+    for tid, why in result.existing.kept_failed.items():
+        print(f"  {tid}: kept (--keep-failed); it failed: {why}")
     if result.runs and not ends.get("finished"):
         raise CliError(f"no episode finished ({summary}); see run.json and the logs under {args.out / system}")
     return 0

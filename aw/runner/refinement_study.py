@@ -87,7 +87,7 @@ def run_study(
             return
         cfg = dataclasses.replace(agent_cfg, system=arm.system, tasks=tasks, initial_poses=start_from)
         log(f"arm {arm.arm}: {cfg.agent or cfg.harness} on {len(tasks)} tasks -> {out / arm.system}")
-        result = run_batch(cfg)
+        result = run_batch(cfg, log=lambda m: log(f"arm {arm.arm}: {m}"))
         for info in result.runs:
             if info.ended != "finished":
                 arm.failed[info.task_id] = f"{info.ended}: {_first_line(info.error)}"
@@ -98,11 +98,11 @@ def run_study(
             return
         cfg = dataclasses.replace(refine_cfg, system=arm.system, tasks=tasks, start_from=start_from)
         log(f"arm {arm.arm}: refiner {cfg.spec.name} on {len(tasks)} tasks -> {out / arm.system}")
-        infos, skipped = refine_suite(cfg)
+        infos, existing = refine_suite(cfg, log=lambda m: log(f"arm {arm.arm}: {m}"))
         for info in infos:
             if info.ended != "finished":
                 arm.failed[info.task_id] = _first_line(info.error)
-        _note_skipped(arm, out, skipped)
+        _note_skipped(arm, out, existing.kept)
 
     agent_arm(arms["agent"], task_ids, None)
     refiner_arm(arms["refiner"], task_ids, None)

@@ -126,6 +126,18 @@ def _how_to_read(doc: dict[str, Any]) -> str:
     if n_unscored:
         kinds = ", ".join(f"{len(v)} {k}" for k, v in sorted(doc["unscored_runs"].items()))
         warn.append(f"{plural(n_unscored, 'run')} not scored ({kinds}) count PA = SR = 0: see Runs.")
+    running = doc.get("running_runs") or []
+    if running:
+        scored = [r for r in running if r["scored"]]
+        warn.append(
+            f"{plural(len(running), 'run')} {'was' if len(running) == 1 else 'were'} still being recorded when "
+            "scored (a live lock): "
+            + (
+                "scored at their last state (--allow-running), not their end; marked running under Runs."
+                if scored
+                else "left out (status running, counted 0); score again when they end."
+            )
+        )
     if doc.get("unknown_runs"):
         n = len(doc["unknown_runs"])
         warn.append(f"{plural(n, 'run')} for tasks not in the suite {'was' if n == 1 else 'were'} ignored: see Runs.")
@@ -688,13 +700,20 @@ def _runs(doc: dict[str, Any]) -> str:
     if doc["unknown_runs"]:
         lines.append(f"- **runs for tasks not in the suite** ({len(doc['unknown_runs'])}), ignored:")
         lines += [f"  - {u['system']} / {u['task_id']}" for u in doc["unknown_runs"]]
-    notes = [r for r in doc["runs"] if r["status"] == "scored" and (r["problems"] or r["final_from"] != "final.json")]
+    notes = [
+        r
+        for r in doc["runs"]
+        if r["status"] == "scored" and (r["problems"] or r["final_from"] != "final.json" or r.get("running"))
+    ]
     if notes:
         lines.append(f"- **scored with notes** ({len(notes)}):")
         for r in notes:
             msg = "; ".join(r["problems"]) if r["problems"] else ""
             lines.append(
-                f"  - {r['system']} / {r['task_id']}: final state from {r['final_from']}" + (f"; {msg}" if msg else "")
+                f"  - {r['system']} / {r['task_id']}: "
+                + ("**running**, " if r.get("running") else "")
+                + f"final state from {r['final_from']}"
+                + (f"; {msg}" if msg else "")
             )
     return "\n".join(lines) if lines else "Every run was found and scored from its final.json."
 

@@ -14,6 +14,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from aw.formats.io import atomic_path  # noqa: E402
+
 __all__ = ["write_plots"]
 
 _DPI = 110
@@ -30,8 +32,11 @@ def _colors(n: int):
 
 
 def _save(fig, path: Path) -> str:
-    fig.savefig(path, dpi=_DPI, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=_DPI, bbox_inches="tight")
+    finally:
+        plt.close(fig)
     return path.name
 
 

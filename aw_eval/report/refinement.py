@@ -8,6 +8,8 @@ from typing import Any
 
 import numpy as np
 
+from aw.formats.io import atomic_path
+
 __all__ = ["render_refinement", "write_refinement_plot"]
 
 PLOT_NAME = "refinement_paired_cd.png"
@@ -44,8 +46,11 @@ def write_refinement_plot(section: dict[str, Any], out_dir: Path) -> str | None:
         ax.set_title(f"{labels[panel['after']]} against {labels[panel['before']]}")
         ax.legend(loc="upper left", fontsize=8)
     path = out_dir / PLOT_NAME
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=110, bbox_inches="tight")
+    finally:
+        plt.close(fig)
     return path.name
 
 

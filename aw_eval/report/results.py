@@ -43,6 +43,9 @@ def _run_entry(study: Study, system: str, task_id: str) -> dict[str, Any]:
         "system": system,
         "task_id": task_id,
         "status": r.status,
+        # still being recorded when scored (a live lock): left out (status "running"), or, with
+        # --allow-running, scored at its last state
+        "running": rec.running is not None,
         "problems": list(r.problems),
         "final_from": r.final_from,
         "end_reason": r.end_reason,
@@ -152,6 +155,11 @@ def build_results(
         # aggregates count them 0, so the study is incomplete, not a measurement of those runs.
         "partial": any(st in by_status for st in PARTIAL_STATUSES),
         "unknown_runs": study.unknown_runs,
+        "running_runs": [
+            {"system": s, "task_id": t, "recorded_by": rec.running, "scored": rec.score.scored}
+            for (s, t), rec in sorted(study.runs.items())
+            if rec.running is not None
+        ],
         "quality": analyses.quality(study),
         "resources": analyses.resources(study),
         "outcomes": analyses.outcomes(study),

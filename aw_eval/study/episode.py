@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from aw.formats import FormatError, read_final, read_trajectory
+from aw.formats.agreement import contradicting_parts
 from aw.pose import normalize_quaternion, quat_to_matrix
 
 __all__ = [
@@ -41,9 +42,6 @@ MANIPULATE_TOOLS = frozenset({"translate_objects", "rotate_objects", "set_object
 KIND_NAMES = ("inspect", "observe", "manipulate", "other")
 # Edits rotating every affected part by less than this count as translations (Appendix C.1).
 ROTATION_CUTOFF_DEG = 0.5
-# final.json and the trajectory's last state are written from one scene state: any difference
-# beyond float noise is a contradiction.
-FINAL_MATCH_TOL = 1e-6
 
 
 def call_kind(tool: str) -> int:
@@ -153,23 +151,6 @@ def _read_final_state(run_dir: Path, task_id: str, all_part_ids: Sequence[str], 
         problems.append(f"final.json names parts {unknown} that task {task_id!r} does not have; ignored")
         return None
     return final
-
-
-def contradicting_parts(
-    final: Mapping[str, Sequence[float]],
-    recorded: Mapping[str, Sequence[float]],
-    part_ids: Sequence[str],
-    tol: float = FINAL_MATCH_TOL,
-) -> list[str]:
-    """Parts whose ``final.json`` pose differs from the trajectory's last recorded pose (beyond
-    ``tol`` per component; ``q`` and ``-q`` are the same rotation)."""
-    out = []
-    for pid in part_ids:
-        a, b = np.asarray(final[pid], dtype=np.float64), np.asarray(recorded[pid], dtype=np.float64)
-        qa, qb = normalize_quaternion(a[3:]), normalize_quaternion(b[3:])
-        if np.abs(a[:3] - b[:3]).max() > tol or min(np.abs(qa - qb).max(), np.abs(qa + qb).max()) > tol:
-            out.append(pid)
-    return out
 
 
 def read_episode(

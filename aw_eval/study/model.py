@@ -18,11 +18,21 @@ import orjson
 from aw.formats.io import write_bytes_atomic
 from aw.formats.strict_json import parse_json
 
-__all__ = ["RunScore", "TaskFacts", "save_npz", "load_npz", "STATUS_SCORED", "STATUS_MISSING", "STATUS_UNREADABLE"]
+__all__ = [
+    "RunScore",
+    "TaskFacts",
+    "save_npz",
+    "load_npz",
+    "STATUS_SCORED",
+    "STATUS_MISSING",
+    "STATUS_RUNNING",
+    "STATUS_UNREADABLE",
+]
 
 STATUS_SCORED = "scored"
 STATUS_MISSING = "missing"
 STATUS_UNREADABLE = "unreadable"
+STATUS_RUNNING = "running"  # still being recorded (a live lock), left out: aw-score --allow-running scores it
 
 
 @dataclass

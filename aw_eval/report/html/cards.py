@@ -206,6 +206,8 @@ def _final_pictures(
         src = rel + scene.render(v.final, camera, CARD_SIZE, folder) if v is not None and scene is not None else None
         if r.scored:
             nums = _run_numbers(r) if src is not None else f"{_run_numbers(r)} · no picture"
+            if study.record(s, task_id).running is not None:
+                nums = f"running: scored at its last state · {nums}"
         else:
             nums = f"{r.status}: {'; '.join(r.problems) or r.status} (PA = SR = 0)"
         out.append(Picture(s, src, nums))

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import html
-import os
 import re
 import time
 from collections.abc import Callable
@@ -23,7 +22,9 @@ from typing import Any
 
 import orjson
 
+from aw import interrupts
 from aw.formats import FormatError
+from aw.formats.io import write_bytes_atomic, write_text_atomic
 from aw.render_platform import RenderError
 from aw_eval.report.fmt import fixed
 from aw_eval.report.html.cards import (
@@ -68,9 +69,7 @@ def _plotly_bundle(folder: Path) -> str:
     name = f"plotly-{plotly.__version__}.min.js"
     path = folder / name
     if not path.is_file():
-        tmp = path.with_name(name + f".tmp{os.getpid()}")
-        tmp.write_text(get_plotlyjs(), encoding="utf-8")
-        tmp.replace(path)
+        write_text_atomic(path, get_plotlyjs())
     for old in folder.glob("plotly-*.min.js"):
         if old.name != name:
             old.unlink()
@@ -83,7 +82,7 @@ def _copy_static(folder: Path) -> None:
         data = (pkg / name).read_bytes()
         path = folder / name
         if not path.is_file() or path.read_bytes() != data:
-            path.write_bytes(data)
+            write_bytes_atomic(path, data)
 
 
 def _overview(doc: dict[str, Any], study: Study) -> str:
@@ -103,7 +102,8 @@ def _overview(doc: dict[str, Any], study: Study) -> str:
         for s in study.systems:
             r = runs[(s, tid)]
             if r["status"] == "scored":
-                tds += f'<td class="r" data-v="{r["pa"]:.6g}">{fixed(r["pa"])}</td><td class="r" data-v="{r["sr"]:g}">{int(r["sr"])}</td>'
+                mark = " (running)" if r.get("running") else ""
+                tds += f'<td class="r" data-v="{r["pa"]:.6g}">{fixed(r["pa"])}{mark}</td><td class="r" data-v="{r["sr"]:g}">{int(r["sr"])}</td>'
             else:
                 tds += f'<td class="r" data-v="">{html.escape(r["status"])}</td><td class="r" data-v=""></td>'
         rows.append(f"<tr>{tds}</tr>")
@@ -223,7 +223,7 @@ def build_card(job: CardJob) -> CardResult:
                 viewer_file = f"{slug(tid)[:60]}-{hashlib.sha1(vd).hexdigest()[:12]}.js"
                 path = files / "viewer" / viewer_file
                 if not path.is_file():
-                    path.write_bytes(b"AWViewer.register(" + orjson.dumps(tid) + b"," + vd + b");\n")
+                    write_bytes_atomic(path, b"AWViewer.register(" + orjson.dumps(tid) + b"," + vd + b");\n")
                 viewer_src = f"{ASSETS_DIR}/viewer/{viewer_file}"
         card = None
         if scene is not None:
@@ -273,10 +273,25 @@ def _cards(jobs: list[CardJob], n_jobs: int):
         yield from map(build_card, jobs)
         return
     import multiprocessing
+    import os
     from concurrent.futures import ProcessPoolExecutor
 
-    with ProcessPoolExecutor(max_workers=min(n_jobs, len(jobs)), mp_context=multiprocessing.get_context("spawn")) as ex:
-        yield from ex.map(build_card, jobs)
+    from aw_eval.workers import stop_pool, worker_init
+
+    pool = ProcessPoolExecutor(
+        max_workers=min(n_jobs, len(jobs)),
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=worker_init,
+        initargs=(os.getpid(),),
+    )
+    try:
+        with interrupts.blocked_for_children():  # the workers are started by the submissions
+            cards = pool.map(build_card, jobs)
+        yield from cards
+    except BaseException:  # an interrupt or a failure: end the workers now, not after their cards
+        stop_pool(pool)
+        raise
+    pool.shutdown()
 
 
 def write_html(
@@ -351,9 +366,7 @@ def write_html(
         f'<script src="{ASSETS_DIR}/viewer.js" data-plotly="{ASSETS_DIR}/{plotly_name}"></script></body></html>\n'
     )
     path = out / "report.html"
-    tmp = path.with_name(f"report.html.tmp{os.getpid()}")
-    tmp.write_text(page, encoding="utf-8")
-    tmp.replace(path)
+    write_text_atomic(path, page)
     files_bytes = sum(p.stat().st_size for p in files.rglob("*") if p.is_file())
     new = len(used_renders - before)
     stats = HtmlStats(path, path.stat().st_size, files_bytes, len(used_renders), new, time.perf_counter() - t0)

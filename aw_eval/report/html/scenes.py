@@ -14,7 +14,6 @@ and identical states (consecutive filmstrip frames, systems that ended alike) re
 from __future__ import annotations
 
 import hashlib
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -23,6 +22,7 @@ import numpy as np
 from PIL import Image
 
 from aw.camera import Camera
+from aw.formats.io import atomic_path
 from aw.pose import matrices_to_poses, poses_to_matrices
 
 if TYPE_CHECKING:  # imported where it is opened: GL set-up only when a picture is asked for
@@ -139,9 +139,8 @@ class TaskScene:
             im = self._renderer.render(poses, camera)
             if im.size != (w, h):  # smaller pictures (filmstrip frames) are scaled down
                 im = im.resize((w, h), Image.Resampling.LANCZOS)
-            tmp = path.with_name(f"{path.name}.tmp{os.getpid()}.jpg")  # workers may render the same picture
-            im.save(tmp, quality=_QUALITY, optimize=True)
-            tmp.replace(path)
+            with atomic_path(path) as tmp:  # workers may render the same picture
+                im.save(tmp, quality=_QUALITY, optimize=True)
         return name
 
     def close(self) -> None:

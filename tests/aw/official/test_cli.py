@@ -267,3 +267,44 @@ def test_what_the_runs_need_and_the_package_lacks_is_named(tmp_path, capsys):
     for path in (sample.evaluation_path, gone.initial_path, gone.evaluation_path):
         assert str(path.relative_to(pkg_root)) in err
     assert "ikea-manualbook/ikea-manual/prep-v1-s0-i0-fixture/config.json" in err
+
+
+def test_a_run_whose_end_contradicts_its_calls_is_refused_or_exported_as_said(tmp_path, capsys):
+    """final.json moved after the calls (as aw-score flags it): refused in one line; with
+    --trust-final exported with its closing state as one more state, and said."""
+    import json
+
+    ids = ["p01", "p02"]
+    task = Task(
+        task_id="native",
+        source="custom",
+        dataset="test",
+        object_id="native",
+        prompt=task_prompt("none"),
+        parts=[TaskPart(id=i, mesh=f"parts/{i}.obj") for i in ids],
+    )
+    task_dir = tmp_path / "suite" / "tasks" / "native"
+    (task_dir / "parts").mkdir(parents=True)
+    meshes = [trimesh.creation.box([0.4, 0.2, 0.1]), trimesh.creation.box([0.1, 0.1, 0.3])]
+    for i, m in zip(ids, meshes, strict=True):
+        m.export(task_dir / "parts" / f"{i}.obj")
+    write_task(task_dir, task)
+    ep = Episode(task, meshes, tmp_path / "run", system="unit", budget_minutes=5.0)
+    ep.call("start_episode", {})
+    ep.call("translate_objects", {"ids": ["p01"], "delta": [0, 0, 0.25]})
+    ep.close("finished")
+    final = json.loads((tmp_path / "run" / "final.json").read_text())
+    final["poses"]["p02"][0] += 0.5  # an edit that no call records
+    (tmp_path / "run" / "final.json").write_text(json.dumps(final))
+    argv = ["official-export", str(tmp_path / "run"), "--suite", str(tmp_path / "suite")]
+    capsys.readouterr()
+    assert main([*argv, "--out", str(tmp_path / "a.episode.zip")]) == 1
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "contradicts the state its calls leave (parts ['p02'])" in err
+    assert "--trust-final" in err and not (tmp_path / "a.episode.zip").exists()
+    assert main([*argv, "--out", str(tmp_path / "b.episode.zip"), "--trust-final"]) == 0
+    said = capsys.readouterr()
+    assert "the closing state contradicts the calls (parts ['p02']); exported as recorded" in said.err
+    arc = read_archive(tmp_path / "b.episode.zip")
+    assert arc.calls[-1]["state_index"] == 1 and arc.final_state().index == 2  # one more state than the calls'
+    assert "final state 2" in said.out

@@ -4,8 +4,10 @@ It reads the request file and answers as its ``options.behaviour`` says: ``shift
 non-anchor parts moved by ``options.dx`` along x), ``short`` (one pose fewer), ``nan``,
 ``move_anchor``, ``sleep`` (never answers), ``fail`` (exits 3 with a message), ``silent``
 (exits 0 without writing a result), or a hostile answer: ``far`` (a position of 1e300), ``huge``
-(a number of 401 digits), ``deep`` (arrays 3,000 deep), ``big`` (a 300 MiB result file) or
-``loud`` (300 MiB of output, then a last line, exit 3); the two large files are sparse."""
+(a number of 401 digits), ``deep`` (arrays 3,000 deep), ``big`` (a 300 MiB result file),
+``loud`` (300 MiB of output, then a last line, exit 3; the two large files are sparse), ``setsid`` (starts a process that calls ``os.setsid()``,
+leaves its parent's tree, writes its pid to ``options.pid_file`` and sleeps, then never answers)
+or ``setsid_answer`` (the same process, then answers at once)."""
 
 import json
 import os
@@ -29,6 +31,19 @@ elif behaviour == "move_anchor":
     poses[anchor][2] += 0.5
 elif behaviour == "sleep":
     time.sleep(600)
+elif behaviour in ("setsid", "setsid_answer"):
+    if os.fork() == 0:  # a child that leaves the refiner's session and, orphaned, its process tree
+        os.setsid()
+        if os.fork() == 0:
+            with open(req["options"]["pid_file"] + ".tmp", "w") as fh:
+                fh.write(str(os.getpid()))
+            os.replace(req["options"]["pid_file"] + ".tmp", req["options"]["pid_file"])
+            time.sleep(600)
+        os._exit(0)
+    while not os.path.exists(req["options"]["pid_file"]):
+        time.sleep(0.01)
+    if behaviour == "setsid":
+        time.sleep(600)
 elif behaviour == "fail":
     print("scripted refiner: model weights not found", file=sys.stderr)
     sys.exit(3)

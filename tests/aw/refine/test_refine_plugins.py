@@ -7,6 +7,7 @@ import os
 import shlex
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -116,6 +117,39 @@ def test_a_refiner_past_its_time_limit_is_killed_and_named(request_, tmp_path):
     spec = RefinerSpec("slow", (sys.executable, str(SCRIPT), "{request}", "{result}"))
     with pytest.raises(RefinerError, match=r"refiner slow: timed out after 1.5 s \(killed\)"):
         run_refiner(spec, _with(request_, behaviour="sleep"), tmp_path, 1.5)
+
+
+def _running(pid: int) -> bool:
+    import psutil
+
+    try:
+        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
+
+
+@pytest.mark.parametrize("behaviour", ["setsid", "setsid_answer"], ids=["timed-out", "answered"])
+def test_nothing_a_refiner_started_outlives_it(request_, tmp_path, behaviour):
+    """A process the refiner started in a session of its own (``os.setsid()``), orphaned out of its
+    tree, ends at the refiner's time-out, or right after the refiner answered."""
+    pid_file = tmp_path / "grandchild.pid"
+    spec = RefinerSpec("slow", (sys.executable, str(SCRIPT), "{request}", "{result}"))
+    request = _with(request_, behaviour=behaviour, pid_file=str(pid_file))
+    try:
+        if behaviour == "setsid":
+            with pytest.raises(RefinerError, match=r"refiner slow: timed out after 10 s \(killed\)"):
+                run_refiner(spec, request, tmp_path, 10)
+        else:
+            assert run_refiner(spec, request, tmp_path, 60).shape == (2, 7)
+        pid = int(pid_file.read_text())
+        for _ in range(100):  # killed by then; give the kernel a moment to tear it down
+            if not _running(pid):
+                break
+            time.sleep(0.1)
+        assert not _running(pid)
+    finally:
+        if pid_file.exists() and _running(int(pid_file.read_text())):
+            os.kill(int(pid_file.read_text()), 9)
 
 
 def test_unknown_refiner_and_bad_command_are_refused():

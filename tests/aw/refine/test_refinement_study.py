@@ -141,28 +141,36 @@ def test_wrong_answers_fail_the_refiner_arms_and_keep_the_agent(fracture_suite, 
     assert "Failed runs (left out of the table)" in render_refinement(section)
 
 
-def test_refiner_alone_past_its_time_limit(fracture_suite, tmp_path, capsys):
+def test_refiner_alone_past_its_time_limit_then_retried(fracture_suite, tmp_path, capsys):
     command = f"{shlex.quote(sys.executable)} {shlex.quote(str(SCRIPT))}"
-    code = aw_run(
-        [
-            str(fracture_suite),
-            "--refiner-command",
-            command,
-            "--refiner-option",
-            "behaviour=sleep",
-            "--refiner-timeout",
-            "1",
-            "--tasks",
-            TASKS[0],
-            "--out",
-            str(tmp_path / "runs"),
-            "--no-progress",
-        ]
-    )
+
+    def refine(behaviour: str) -> int:
+        return aw_run(
+            [
+                str(fracture_suite),
+                "--refiner-command",
+                command,
+                "--refiner-option",
+                f"behaviour={behaviour}",
+                "--refiner-timeout",
+                "1",
+                "--tasks",
+                TASKS[0],
+                "--out",
+                str(tmp_path / "runs"),
+                "--no-progress",
+            ]
+        )
+
+    code = refine("sleep")
     captured = capsys.readouterr()
     assert code == 1
     assert f"{TASKS[0]}: refiner scripted_refiner.py: timed out after 1 s (killed)" in captured.out
     assert captured.err.strip().startswith("aw-run: error: the refiner failed on every task")
+    assert refine("shift") == 0  # the failed run is retried by the same command, which says so
+    captured = capsys.readouterr()
+    assert f"aw-run: retrying 1 run that failed: {TASKS[0]} (error: refiner " in captured.err
+    assert "timed out after 1 s (killed))" in captured.err
 
 
 @pytest.mark.parametrize(
