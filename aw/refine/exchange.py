@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from aw.cli.common import plural
 from aw.formats.io import write_json_atomic
 from aw.refine.base import RefineRequest, RefinerError
 
@@ -27,9 +28,13 @@ def write_request(path: str | Path, request: RefineRequest) -> None:
         "task_id": request.task_id,
         "part_ids": list(request.part_ids),
         "anchor": request.part_ids[request.anchor],
-        "points": {pid: np.asarray(p, dtype=float).tolist() for pid, p in zip(request.part_ids, request.points)},
-        "meshes": dict(zip(request.part_ids, request.mesh_paths)),
-        "initial_poses": {pid: [float(v) for v in p] for pid, p in zip(request.part_ids, request.initial_poses)},
+        "points": {
+            pid: np.asarray(p, dtype=float).tolist() for pid, p in zip(request.part_ids, request.points, strict=True)
+        },
+        "meshes": dict(zip(request.part_ids, request.mesh_paths, strict=True)),
+        "initial_poses": {
+            pid: [float(v) for v in p] for pid, p in zip(request.part_ids, request.initial_poses, strict=True)
+        },
         "given_initial_poses": bool(request.given_initial_poses),
         "seed": int(request.seed),
         "steps": int(request.steps),
@@ -70,7 +75,7 @@ def write_result(path: str | Path, part_ids: list[str], poses: np.ndarray) -> No
         {
             "format": RESULT_FORMAT,
             "format_version": 1,
-            "poses": {pid: [float(v) for v in p] for pid, p in zip(part_ids, np.asarray(poses))},
+            "poses": {pid: [float(v) for v in p] for pid, p in zip(part_ids, np.asarray(poses), strict=True)},
         },
     )
 
@@ -100,7 +105,9 @@ def read_result(name: str, path: str | Path, part_ids: list[str]) -> list[Any]:
             )
             if x
         )
-        raise RefinerError(f"refiner {name}: returned {len(poses)} poses for {len(part_ids)} parts ({detail})")
+        raise RefinerError(
+            f"refiner {name}: returned {plural(len(poses), 'pose')} for {plural(len(part_ids), 'part')} ({detail})"
+        )
     out = []
     for pid in part_ids:
         p = poses[pid]

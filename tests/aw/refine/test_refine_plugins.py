@@ -13,7 +13,7 @@ import pytest
 
 from aw.formats import read_task
 from aw.refine.base import RefinerError
-from aw.refine.plugins import RefinerSpec, available, resolve, run_refiner
+from aw.refine.plugins import RefinerSpec, available, command_label, resolve, run_refiner
 from aw.refine.runs import build_request
 
 SCRIPT = Path(__file__).with_name("scripted_refiner.py")
@@ -52,7 +52,7 @@ def test_command_without_placeholders_gets_both_files_appended(request_, tmp_pat
 @pytest.mark.parametrize(
     "behaviour, message",
     [
-        ("short", "refiner scripted_refiner.py: returned 1 poses for 2 parts (missing fragment_"),
+        ("short", "refiner scripted_refiner.py: returned 1 pose for 2 parts (missing fragment_"),
         ("nan", "refiner scripted_refiner.py: non-finite pose for fragment_"),
         ("move_anchor", "refiner scripted_refiner.py: moved the anchor fragment_"),
         ("fail", "refiner scripted_refiner.py: exited with code 3: scripted refiner: model weights not found"),
@@ -70,6 +70,14 @@ def test_a_refiner_past_its_time_limit_is_killed_and_named(request_, tmp_path):
     spec = RefinerSpec("slow", (sys.executable, str(SCRIPT), "{request}", "{result}"))
     with pytest.raises(RefinerError, match=r"refiner slow: timed out after 1.5 s \(killed\)"):
         run_refiner(spec, _with(request_, behaviour="sleep"), tmp_path, 1.5)
+
+
+def test_a_command_is_labelled_by_its_program_without_a_script_extension():
+    assert resolve(None, _command()).name == "scripted_refiner"  # python SCRIPT: the script
+    assert resolve(None, "./refine.sh {request} {result}").name == "refine"
+    assert resolve(None, "/opt/garf/bin/garf-infer").name == "garf-infer"
+    assert resolve("mine", "./refine.py").name == "mine"  # --refiner NAME wins
+    assert command_label("model.v2") == "model.v2" and command_label("R.EXE") == "R"
 
 
 def test_unknown_refiner_and_bad_command_are_refused():
@@ -105,5 +113,5 @@ def test_entry_point_plug_in_is_found_and_run_in_a_child_process(request_, tmp_p
     spec = resolve("shifty")
     poses = run_refiner(spec, _with(request_), tmp_path / "ok", 120)
     assert np.isclose(poses[1 - request_.anchor, 2], 0.125)
-    with pytest.raises(RefinerError, match="refiner shifty: returned 1 poses for 2 parts"):
+    with pytest.raises(RefinerError, match="refiner shifty: returned 1 pose for 2 parts"):
         run_refiner(spec, _with(request_, count=1), tmp_path / "short", 120)
