@@ -4,8 +4,10 @@ anchor-aligned), and paired per-object changes.
 
 Reads ``RUNS/refinement_study.json`` (written by ``aw-run --refinement-study``) for the arms'
 systems. Each run's final state is its trajectory's last recorded state (``final.json`` when the
-trajectory cannot be read); a run whose ``run.json`` says it did not finish counts as failed. The table averages over the tasks where every arm finished (the
-matched comparison); failed runs are listed per arm. Paired changes compare one arm with another
+trajectory cannot be read); a run whose ``run.json`` says it did not finish counts as failed.
+The table averages over the tasks where every arm finished (the matched comparison); failed
+runs are listed per arm. For the arms that end with the refiner it counts the tasks where the
+refiner returned its start unchanged (``run.json`` ``extra.returned_start``). Paired changes compare one arm with another
 task by task: PA improved / degraded / unchanged, and shape CD likewise (lower is better), a
 difference within ``TOLERANCE`` counting as unchanged.
 """
@@ -22,8 +24,9 @@ from aw.formats import FormatError, read_final, read_manifest, read_run_info, re
 from aw.formats.suite import suite_paths
 from aw.meshes import load_task_meshes
 from aw.prepare.official_protocol import fracture_samples
+from aw.refine.base import SAME_AS_START
 from aw.refine.runs import fracture_identity
-from aw.refine.study import ARMS, STUDY_FILE
+from aw.refine.study import ARMS, REFINER_ARMS, STUDY_FILE
 from aw_eval.fracture import SEED, fracture_metrics_from_samples
 
 __all__ = ["ARM_LABELS", "PAIRS", "TOLERANCE", "paired_changes", "refinement_study"]
@@ -110,6 +113,7 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
         row: dict[str, Any] = {"divisor": divisor, "divisor_from": divisor_from, "arms": {}}
         for arm in ARMS:
             run_dir = runs_dir / systems[arm] / tid
+            info = None
             if (run_dir / "run.json").is_file():  # optional, as for aw-score; when present, it says how the run ended
                 try:
                     info = read_run_info(run_dir / "run.json")
@@ -127,6 +131,8 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
                 continue
             m = fracture_metrics_from_samples(samples, np.array([poses[p] for p in ids]), target, divisor)
             row["arms"][arm] = {"re": m.re, "te": m.te, "pa": m.pa, "cd": m.cd, "anchor": ids[m.anchor]}
+            if arm in REFINER_ARMS:  # recorded by the refiner's run (None: not recorded)
+                row["arms"][arm]["returned_start"] = None if info is None else info.extra.get("returned_start")
         rows[tid] = row
     matched = [t for t, r in rows.items() if all(a in r["arms"] for a in ARMS)]
 
@@ -141,6 +147,10 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
             "failed": len(failures[arm]),
             **({k: float(values(arm, k).mean()) for k in ("re", "te", "pa", "cd")} if matched else {}),
         }
+        if arm in REFINER_ARMS:
+            said = [rows[t]["arms"][arm]["returned_start"] for t in matched]
+            table[arm]["returned_start"] = sum(1 for x in said if x)
+            table[arm]["returned_start_unknown"] = sum(1 for x in said if x is None)
     pairs = []
     for arm, base, metric in PAIRS:
         counts = paired_changes(values(arm, metric), values(base, metric), metric == "pa") if matched else {}
@@ -160,6 +170,7 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
         "pairs": pairs,
         "scatter": scatter,
         "tolerance": TOLERANCE,
+        "same_as_start": SAME_AS_START,
         "failures": failures,
         "per_task": rows,
     }
@@ -177,5 +188,5 @@ def _divisor(suite_dir: Path, task_id: str, meshes, target: np.ndarray, scale: f
                 return float(npz["fracture_divisor"]), "eval_points"
     from aw.prepare.official_protocol import moved
 
-    extent = max(float(np.ptp(moved(v, p), axis=0).max()) for (v, _), p in zip(meshes, target))
+    extent = max(float(np.ptp(moved(v, p), axis=0).max()) for (v, _), p in zip(meshes, target, strict=True))
     return max(float(scale), extent), "targets scale and assembled extent"

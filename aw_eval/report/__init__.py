@@ -80,11 +80,7 @@ def write_outputs(
             made["refinement_paired_cd"] = name
     doc["plots"] = {k: f"plots/{v}" for k, v in made.items()}
     write_json(files["scores"], doc)
-    markdown = render_markdown(doc, doc["plots"])
-    if refinement is not None:
-        from aw_eval.report.refinement import render_refinement
-
-        markdown += "\n" + render_refinement(refinement, doc["plots"].get("refinement_paired_cd"))
+    markdown = render_markdown(doc, doc["plots"])  # a refinement study's table comes first
     files["report"].write_text(markdown)
     if html:
         from aw_eval.report.html import write_html  # imports plotly only when asked

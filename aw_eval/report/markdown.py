@@ -12,6 +12,7 @@ from typing import Any
 from aw.cli.common import plural
 from aw_eval.analyses.failures import CLASSES
 from aw_eval.report.fmt import DASH, bold_best, ci, fixed, md_table, paper, pval, signed, threshold_label
+from aw_eval.report.refinement import REFINEMENT_TITLE, refinement_headline, render_refinement
 from aw_eval.report.results import protocol_of
 
 __all__ = ["render_markdown", "system_label", "SUMMARY_SECTIONS"]
@@ -21,7 +22,7 @@ TABLE1 = "Table 1: benchmark results"
 OVERVIEW = "Table A-3: benchmark quality with bootstrap intervals"
 PAIRS = "Table A-4: paired system differences"
 # The sections a reader needs first; report.html shows them open and folds the rest.
-SUMMARY_SECTIONS = (HOW_TO_READ, TABLE1, OVERVIEW, PAIRS)
+SUMMARY_SECTIONS = (REFINEMENT_TITLE, HOW_TO_READ, TABLE1, OVERVIEW, PAIRS)
 
 SOURCE_NAMES = {
     "partnet": "PartNet",
@@ -76,19 +77,24 @@ def _how_to_read(doc: dict[str, Any]) -> str:
     p = protocol_of(doc)
     over, q = doc["uncertainty"].get("overview") or {}, doc["quality"]["systems"]
     real = [s for s in _real(doc) if s in over]
+    # RUNS is a refinement study: its four-arm table is the headline, Table 1 a second protocol
+    study_headline = refinement_headline(doc["refinement"]) if doc.get("refinement") else ""
     if real:
         head = "; ".join(
             f"{s} {paper(over[s]['sr']['value'])}% (95% CI {ci(over[s]['sr']['ci'])}; PA "
             f"{paper(over[s]['pa']['value'])}%)"
             for s in real
         )
-        headline = f"- **Headline: Overall SR** (Table 1; sources weighted equally): {head}."
+        title = "Overall SR by the benchmark's protocol" if study_headline else "Headline: Overall SR"
+        headline = f"- **{title}** (Table 1; sources weighted equally): {head}."
     elif over:
         headline = (
             "- **Headline: none.** Every system is calibration or floor: the study measures the scorer, not an agent."
         )
     else:
         headline = f"- **Headline: none.** {NO_ORIGINALS}"
+    if study_headline:
+        headline = study_headline + ("\n" + headline if real else "")
     lines = [
         headline,
         f"- **PA** (part accuracy, %): parts whose Chamfer distance to their matched target part is at most "
@@ -157,6 +163,17 @@ def _resource_note(doc: dict[str, Any], systems: list[str]) -> str:
     out = ([f"Not recorded: {', '.join(none)}."] if none else []) + (
         [f"Means over fewer runs: {'; '.join(fewer)}."] if fewer else []
     )
+    composed = [s for s in systems if any(res[s][k].get("composed") for k in names)]
+    if composed:
+        out.append(
+            f"{', '.join(composed)} started from another system's final states: their resources add up both stages."
+        )
+    short = [s for s in systems if any(res[s][k].get("stages_left_out") for k in names)]
+    if short:
+        out.append(
+            f"{', '.join(short)}: resources leave out the stage that made their start states (a run outside this "
+            "study, or a poses file); never bolded."
+        )
     return " ".join(out)
 
 
@@ -181,7 +198,7 @@ def _table1(doc: dict[str, Any]) -> str:
     # Only real systems compete; lowest resource use is only "best" for a system that achieved
     # something (an idle system's few calls are not an achievement).
     real = [_role(doc, s) == "system" for s in systems]
-    achieved = [r and float(q["systems"][s]["overall"]["pa"] or 0) > 0 for r, s in zip(real, systems)]
+    achieved = [r and float(q["systems"][s]["overall"]["pa"] or 0) > 0 for r, s in zip(real, systems, strict=True)]
     text_cols = []
     for j, col in enumerate(cols):
         if j <= len(cells):
@@ -191,7 +208,9 @@ def _table1(doc: dict[str, Any]) -> str:
             k = res_keys[j - len(cells) - 1]
             digits = {"time_min": 2, "mcp_calls": 0, "tokens_m": 2, "cost_usd": 2}[k]
             txt = [fixed(v, digits) for v in col]
-            text_cols.append(bold_best(txt, col, higher=False, eligible=achieved))
+            # a cost that leaves out a stage is not a system's whole cost: never the best
+            whole = [a and not res[s][k].get("stages_left_out") for a, s in zip(achieved, systems, strict=True)]
+            text_cols.append(bold_best(txt, col, higher=False, eligible=whole))
     rows = [[system_label(doc, s)] + [tc[i] for tc in text_cols] for i, s in enumerate(systems)]
     note = (
         "SR (%) per source and condition (NR: no reference, IR: image, M: manual); Overall by eq. 3 (sources "
@@ -209,7 +228,7 @@ def _quality_full(doc: dict[str, Any]) -> str:
     for s in _order(doc):
         row = q["systems"][s]
         rows = []
-        for c, v in zip(q["cells"], row["cells"]):
+        for c, v in zip(q["cells"], row["cells"], strict=True):
             rows.append(
                 [
                     c["label"],
@@ -522,7 +541,7 @@ def _curves(doc: dict[str, Any]) -> str:
             continue
         rows.append(
             [system_label(doc, s)]
-            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["normalized"], v["sr"]["normalized"])]
+            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["normalized"], v["sr"]["normalized"], strict=True)]
         )
     t1 = md_table(["System"] + [f"PA/SR (%) at {p:g}" for p in pts], rows)
     rows = []
@@ -532,7 +551,7 @@ def _curves(doc: dict[str, Any]) -> str:
             continue
         rows.append(
             [system_label(doc, s)]
-            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["budget"], v["sr"]["budget"])]
+            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["budget"], v["sr"]["budget"], strict=True)]
             + [f"{paper(v['pa']['final'])}/{paper(v['sr']['final'])}", str(v["edits_after_last_budget"])]
         )
     t2 = md_table(
@@ -720,6 +739,11 @@ def render_markdown(doc: dict[str, Any], plots: dict[str, str] | None = None) ->
                 "could not be scored (listed under Runs); the tables count them 0.**"
             ]
             if doc.get("partial")
+            else []
+        ),
+        *(
+            [render_refinement(doc["refinement"], plots.get("refinement_paired_cd")).rstrip("\n")]
+            if doc.get("refinement")
             else []
         ),
         f"## {HOW_TO_READ}",
