@@ -149,14 +149,15 @@ def protocol_note(final_mode: str, overrides: Sequence[tuple[str, float]] = ()) 
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    typed = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(typed)
     if threading.current_thread() is not threading.main_thread():
-        return run_main("aw-score", lambda: _locked(args))
+        return run_main("aw-score", lambda: _locked(args, typed))
     before = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops as Ctrl-C does: workers ended, exit 130
     try:
         with warnings.catch_warnings():
             warnings.showwarning = warnings_in_one_line("aw-score")
-            return run_main("aw-score", lambda: _locked(args))
+            return run_main("aw-score", lambda: _locked(args, typed))
     finally:
         signal.signal(signal.SIGTERM, before)
 
@@ -165,10 +166,15 @@ def _interrupt(signum, frame) -> None:
     raise KeyboardInterrupt
 
 
-def _locked(args: argparse.Namespace) -> int:
-    """``_score`` holding ``--out``'s lock (aw.runlock): a second aw-score on the same --out is refused."""
+def _locked(args: argparse.Namespace, typed: Sequence[str]) -> int:
+    """``_score`` holding ``--out``'s lock (aw.runlock): a second aw-score on the same --out is
+    refused. SUITE and RUNS given as other kinds of folder are refused first, with what to type."""
+    from aw.cli.paths import check_paths
     from aw.runlock import RunDirBusy, RunDirLock, holder_of
+    from aw_eval.official_runs import is_official_package
 
+    if not is_official_package(args.suite_dir):  # a package's RUNS are the official runner's logs
+        check_paths("aw-score", typed, [(args.suite_dir, "suite"), (args.runs_dir, "runs")])
     out = check_out_dir(args.out)
     try:
         lock = RunDirLock(out).acquire()

@@ -119,7 +119,7 @@ def _cmd_folder(args: argparse.Namespace) -> int:
         donor_j = next((j for j in same if j > i), same[0] if same else None)
         donor = ObjectSpec(loader, (found[donor_j].path, args.source, args.up_axis)) if donor_j is not None else None
         specs.append(ObjectSpec(loader, (f.path, args.source, args.up_axis), tuple(f.conditions), donor))
-    check_unique_task_ids([(s, f.object_id, f.conditions) for s, f in zip(sources, found)])
+    check_unique_task_ids([(s, f.object_id, f.conditions) for s, f in zip(sources, found, strict=True)])
     # load every object once here: bad meshes and objects that cannot be assessed are reported
     # before any work is done, and the up axis chosen for each is said
     for f in found:
@@ -163,7 +163,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     import warnings
 
-    args = build_parser().parse_args(argv)
+    typed = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(typed)
+    args.typed = typed  # as the user typed them: path errors say what to type instead
 
     def body() -> int:
         try:
