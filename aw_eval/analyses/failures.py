@@ -23,9 +23,18 @@ from typing import Any
 
 import numpy as np
 
+from aw_eval.study.model import RunScore
 from aw_eval.study.table import Study
 
-__all__ = ["CLASSES", "classify_parts", "translation_fractions", "failure_analysis", "OFFSET_GRID", "CENTRED_GRID"]
+__all__ = [
+    "CLASSES",
+    "classify_parts",
+    "translation_fractions",
+    "failure_analysis",
+    "far_from_assembled",
+    "OFFSET_GRID",
+    "CENTRED_GRID",
+]
 
 CLASSES = (
     "correct",
@@ -124,10 +133,53 @@ def failure_analysis(study: Study) -> dict[str, Any]:
             "failed_tasks": n_failed,
             "wrong_parts": n_wrong,
             "unscored_runs": len(runs) - len(scored),
-            "class_counts": {c: int(n) for c, n in zip(CLASSES, counts)},
+            "class_counts": {c: int(n) for c, n in zip(CLASSES, counts, strict=True)},
             "translation_part_pooled": part,
             "translation_task_pooled": task,
             "grid": grid,
             "grid_range": [min(finite), max(finite)] if finite else None,
         }
     return out
+
+
+HIGH_PA = 0.25  # a PA from which a state far from assembled gets a note on why it scores
+DISPLACED_SHARE = 0.5  # a state is far from assembled when at least this share of parts is displaced
+
+
+def far_from_assembled(
+    r: RunScore,
+    part_ids: Sequence[str],
+    *,
+    threshold: float = CORRECT_CD,
+    sra_threshold: float = 0.02,
+    offset_cutoff: float = OFFSET_CUTOFF,
+) -> dict[str, Any] | None:
+    """Why a final state far from assembled scores well, as data for the report's note; None
+    unless the run's PA is at least ``HIGH_PA`` or its SR^a holds while at least
+    ``DISPLACED_SHARE`` of its parts are displaced: their centroids more than ``offset_cutoff`` (Table
+    A-11's translation cutoff, in largest-part diagonals) from their matched targets
+    after the registration. A heap of parts around the object's middle is such a state: the one
+    registration fits it as well as it can, and parts whose targets lie near the middle pass.
+
+    Returns ``n_parts``, ``displaced`` (part ids), ``passed`` (per passing part: ``part``,
+    ``cd`` its matched Chamfer distance, ``offset``), ``pa``, ``sr``, ``sra``, ``scd`` and the
+    ``threshold``, ``sra_threshold`` and ``offset_cutoff`` used. ``part_ids``: the scored parts, in the run's order."""
+    if not r.scored or not r.n_parts or r.sr or len(r.offset) != r.n_parts or len(part_ids) != r.n_parts:
+        return None
+    errors, offset = np.asarray(r.part_errors, dtype=np.float64), np.asarray(r.offset, dtype=np.float64)
+    displaced = offset > offset_cutoff
+    if displaced.mean() < DISPLACED_SHARE or not (r.pa >= HIGH_PA or r.sra):
+        return None
+    passing = np.flatnonzero(errors <= threshold)
+    return {
+        "n_parts": int(r.n_parts),
+        "displaced": [part_ids[i] for i in np.flatnonzero(displaced)],
+        "passed": [{"part": part_ids[i], "cd": float(errors[i]), "offset": float(offset[i])} for i in passing],
+        "pa": float(r.pa),
+        "sr": float(r.sr),
+        "sra": float(r.sra),
+        "scd": float(r.scd),
+        "threshold": threshold,
+        "sra_threshold": sra_threshold,
+        "offset_cutoff": offset_cutoff,
+    }

@@ -110,7 +110,12 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
         samples = fracture_samples(meshes, ids, dataset, sample_id, SEED)
         target = np.array([targets.parts[p].pose for p in ids])
         divisor, divisor_from = _divisor(suite_dir, tid, meshes, target, targets.scale)
-        row: dict[str, Any] = {"divisor": divisor, "divisor_from": divisor_from, "arms": {}}
+        row: dict[str, Any] = {
+            "divisor": divisor,
+            "divisor_from": divisor_from,
+            "benchmark_divisor": _benchmark_divisor(suite_dir, tid, meshes, targets.eval_divisor),
+            "arms": {},
+        }
         for arm in ARMS:
             run_dir = runs_dir / systems[arm] / tid
             info = None
@@ -174,6 +179,22 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
         "failures": failures,
         "per_task": rows,
     }
+
+
+def _benchmark_divisor(suite_dir: Path, task_id: str, meshes, eval_divisor: float | None) -> float:
+    """The benchmark protocol's unit for the same task (Table 1's): ``scale_divisor`` from
+    ``eval_points/<task>.npz``, else the targets' ``eval_divisor``, else the largest part's PCA box
+    diagonal (:func:`aw_eval.geometry.part_divisor`), as the evaluator takes it."""
+    path = suite_dir / "eval_points" / f"{task_id}.npz"
+    if path.is_file():
+        with np.load(path, allow_pickle=False) as npz:
+            if "scale_divisor" in npz.files:
+                return float(npz["scale_divisor"])
+    if eval_divisor is not None:
+        return float(eval_divisor)
+    from aw_eval.geometry import part_divisor
+
+    return max(part_divisor(v) for v, _ in meshes)
 
 
 def _divisor(suite_dir: Path, task_id: str, meshes, target: np.ndarray, scale: float) -> tuple[float, str]:

@@ -10,8 +10,9 @@ from __future__ import annotations
 from typing import Any
 
 from aw.cli.common import plural
-from aw_eval.analyses.failures import CLASSES
+from aw_eval.analyses.failures import CLASSES, HIGH_PA
 from aw_eval.report.fmt import DASH, bold_best, ci, fixed, md_table, paper, pval, signed, threshold_label
+from aw_eval.report.heaps import far_from_assembled_note
 from aw_eval.report.refinement import REFINEMENT_TITLE, refinement_headline, render_refinement
 from aw_eval.report.results import protocol_of
 
@@ -142,6 +143,12 @@ def _how_to_read(doc: dict[str, Any]) -> str:
                 f"{system_label(doc, s)}: SR^a {paper(o['sra'])}% but SR {paper(o['sr'])}% and PA {paper(o['pa'])}%: "
                 "its assemblies are close in shape, not part by part."
             )
+    far = [r for r in doc["runs"] if r.get("far_from_assembled")]
+    if far:
+        warn.append(
+            f"{plural(len(far), 'run')} {'scores' if len(far) == 1 else 'score'} PA of {100 * HIGH_PA:g}% or "
+            "more, or SR^a, on a state far from assembled (most parts displaced): see Runs for why."
+        )
     if doc["settings"].get("protocol_overrides"):
         warn.append("Scored with protocol overrides: not comparable with the paper's numbers.")
     lines += [f"- **Warning:** {w}" for w in warn]
@@ -707,6 +714,12 @@ def _runs(doc: dict[str, Any]) -> str:
     if doc["unknown_runs"]:
         lines.append(f"- **runs for tasks not in the suite** ({len(doc['unknown_runs'])}), ignored:")
         lines += [f"  - {u['system']} / {u['task_id']}" for u in doc["unknown_runs"]]
+    far = [r for r in doc["runs"] if r.get("far_from_assembled")]
+    if far:
+        lines.append(f"- **high scores on states far from assembled** ({len(far)}):")
+        for r in far:
+            label = f"{r['system']} / {r['task_id']}"
+            lines.append(f"  - {far_from_assembled_note(label, r['far_from_assembled'])}")
     notes = [r for r in doc["runs"] if r["status"] == "scored" and (r["problems"] or r["final_from"] != "final.json")]
     if notes:
         lines.append(f"- **scored with notes** ({len(notes)}):")

@@ -15,6 +15,7 @@ import orjson
 from aw.formats import FormatError, read_final, read_trajectory
 from aw_eval.analyses.curves import NORMALIZED_POINTS, normalized_states
 from aw_eval.report.fmt import DASH, fixed
+from aw_eval.report.heaps import far_from_assembled_note
 from aw_eval.report.html.markup import scroll_box, slug
 from aw_eval.report.html.scenes import TaskScene, aligned_poses
 from aw_eval.report.html.svg import Series, step_chart
@@ -252,7 +253,7 @@ def _part_table(scene_ids: list[str], colors: np.ndarray | None, study: TaskRuns
     for i, pid in enumerate(scene_ids):
         sw = ""
         if colors is not None:
-            c = "#%02x%02x%02x" % tuple(int(round(255 * x)) for x in colors[i])
+            c = "#" + "".join(f"{int(round(255 * x)):02x}" for x in colors[i])
             sw = f'<span class="sw" style="background:{c}"></span>'
         tds = f'<td class="l">{sw}{html.escape(pid)}</td>'
         for s in systems:
@@ -302,7 +303,7 @@ def _curves(study: TaskRuns, task_id: str, views: dict[str, RunView], colors: di
 def _filmstrip(view: RunView, scene: TaskScene, camera, folder: Path, rel: str) -> str:
     r = view.score
     frames = []
-    for u, k in zip(NORMALIZED_POINTS, normalized_states(r)):
+    for u, k in zip(NORMALIZED_POINTS, normalized_states(r), strict=True):
         if k is None or len(view.states) == 0:
             poses, pa, scd = view.final, r.pa, r.scd
         else:
@@ -393,6 +394,10 @@ def task_card(
             hint = registration_hint(scene, views[s], threshold) if s in views else ""
             if hint:
                 parts.append(f'<p class="hint">{html.escape(hint)}</p>')
+    for s in study.systems:  # a high score on a heap: why (report.md's Runs section says the same)
+        far = doc_runs.get((s, tid), {}).get("far_from_assembled")
+        if far:
+            parts.append(f'<p class="hint">{html.escape(far_from_assembled_note(s, far))}</p>')
     parts.append(_curves(study, tid, views, colors))
     parts.append(
         _part_table(
@@ -449,12 +454,12 @@ def viewer_data(scene: TaskScene, views: dict[str, RunView]) -> dict[str, Any]:
     poses, and per system its recorded states (aligned poses, PA, SCD), at most
     :data:`MAX_VIEWER_STATES` of them plus the final state; per system its tool calls."""
     parts = []
-    for pid, m, c in zip(scene.part_ids, scene.meshes, scene.colors):
+    for pid, m, c in zip(scene.part_ids, scene.meshes, scene.colors, strict=True):
         v, f = _cluster(np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64), MAX_VIEWER_FACES)
         parts.append(
             {
                 "id": pid,
-                "color": "#%02x%02x%02x" % tuple(int(round(255 * x)) for x in c),
+                "color": "#" + "".join(f"{int(round(255 * x)):02x}" for x in c),
                 "v": np.round(v, 5).reshape(-1).tolist(),
                 "f": f.reshape(-1).tolist(),
             }
