@@ -14,6 +14,7 @@ import orjson
 
 from aw.formats import FormatError, read_final, read_trajectory
 from aw_eval.analyses.curves import NORMALIZED_POINTS, normalized_states
+from aw_eval.analyses.failures import PULLED_GAP
 from aw_eval.report.fmt import DASH, fixed
 from aw_eval.report.heaps import far_from_assembled_note
 from aw_eval.report.html.markup import scroll_box, slug
@@ -220,7 +221,7 @@ def _finals(pictures: list[Picture], views: dict[str, RunView]) -> str:
     return f'<div class="finals">{"".join(figs)}</div>'
 
 
-HINT_GAP = 0.25  # share of parts placed minus PA from which a card explains the difference
+HINT_GAP = PULLED_GAP  # share of parts placed minus PA from which a card explains the difference
 
 
 def registration_hint(scene: TaskScene, view: RunView, threshold: float) -> str:

@@ -78,7 +78,7 @@ class TaskScene:
         task_dir, targets_path = suite_paths(suite_dir, task_id)
         task = read_task(task_dir)
         targets = read_targets(targets_path)
-        by_id = dict(zip(task.part_ids, load_task_meshes(task)))
+        by_id = dict(zip(task.part_ids, load_task_meshes(task), strict=True))
         meshes = [by_id[p] for p in part_ids]
         target = np.array([targets.parts[p].pose for p in part_ids], dtype=np.float64).reshape(-1, 7)
         return cls(task_id, list(part_ids), meshes, target, part_colors(len(part_ids)), float(divisor))
@@ -86,24 +86,15 @@ class TaskScene:
     def bounds(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World bounds ``(lo (3,), hi (3,))`` of the parts at ``poses (P, 7)``."""
         mats = poses_to_matrices(poses)
-        pts = np.concatenate([m.vertices @ t[:3, :3].T + t[:3, 3] for m, t in zip(self.meshes, mats)])
+        pts = np.concatenate([m.vertices @ t[:3, :3].T + t[:3, 3] for m, t in zip(self.meshes, mats, strict=True)])
         return pts.min(axis=0), pts.max(axis=0)
 
     def placed(self, poses: np.ndarray, threshold: float) -> np.ndarray:
         """``(P,)`` bool: the parts that lie at their targets as placed in ``poses (P, 7)``, before
-        any registration: each part's Chamfer distance to its own target part (normalized units)
-        is at most ``threshold``. Decided by a bound that needs no samples: a surface point moves
-        by at most its triangle's largest vertex displacement ``m`` between the two poses (the
-        displacement is affine in the point), so both Chamfer terms are at most ``(m / d) ** 2``."""
-        now, target = poses_to_matrices(poses), poses_to_matrices(self.target_poses)
-        out = np.zeros(len(self.meshes), dtype=bool)
-        for i, m in enumerate(self.meshes):
-            v = np.asarray(m.vertices, dtype=np.float64)
-            a = v @ now[i, :3, :3].T + now[i, :3, 3]
-            b = v @ target[i, :3, :3].T + target[i, :3, 3]
-            worst = float(np.sqrt(((a - b) ** 2).sum(axis=1)).max()) / self.divisor
-            out[i] = 2.0 * worst**2 <= threshold
-        return out
+        any registration (:func:`aw_eval.analyses.failures.placed_parts`)."""
+        from aw_eval.analyses.failures import placed_parts
+
+        return placed_parts(self.meshes, poses, self.target_poses, self.divisor, threshold)
 
     def camera(self, states: list[np.ndarray]) -> Camera:
         """One camera for the target and every ``states`` entry ``(P, 7)``: frames their union,
