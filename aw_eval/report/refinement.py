@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from aw.refine.study import REFINER_ARMS
+from aw.runner.refinement_study import REFINER_ARMS
 
 __all__ = ["REFINEMENT_TITLE", "refinement_headline", "render_refinement", "write_refinement_plot"]
 

@@ -99,7 +99,7 @@ def test_parallel_build_is_byte_identical(small_suite, tmp_path):
     tasks = read_manifest(out).tasks
     assert [t for t in read_manifest(small_suite).tasks if t.source in ("partnet", "fantastic_breaks")] == tasks
     for t in tasks:
-        for a, b in zip(suite_paths(out, t.task_id), suite_paths(small_suite, t.task_id)):
+        for a, b in zip(suite_paths(out, t.task_id), suite_paths(small_suite, t.task_id), strict=True):
             assert (_tree(a) if a.is_dir() else a.read_bytes()) == (_tree(b) if b.is_dir() else b.read_bytes())
 
 
