@@ -15,8 +15,9 @@ from aw.runner.cli import main as aw_run
 from aw_eval.cli import main as aw_score
 from aw_eval.study.fixtures import box_suite, write_scripted_run
 from aw_server.cli import main as aw_serve
+from aw_view.cli import main as aw_view
 
-COMMANDS = {"aw-score": aw_score, "aw-run": aw_run, "aw-serve": aw_serve, "aw-prepare": aw_prepare}
+COMMANDS = {"aw-score": aw_score, "aw-run": aw_run, "aw-serve": aw_serve, "aw-prepare": aw_prepare, "aw-view": aw_view}
 
 
 @pytest.fixture(scope="module")
@@ -148,6 +149,22 @@ def test_kinds(here):
             ["suite/tasks/{first}/task.json", "--print-prompt"],
             "suite/tasks/{first}/task.json is a file; TASK_DIR is the folder that holds it: "
             "aw-serve suite/tasks/{first} --print-prompt",
+        ),
+        (
+            "aw-view",
+            ["suite", "--suite", "runs", "--port", "0"],
+            "suite is a suite (2 tasks) and runs is a runs folder (systems idle): PATH and SUITE are swapped: "
+            "aw-view runs --suite suite --port 0",
+        ),
+        (
+            "aw-view",
+            ["runs", "--suite", "suite/tasks", "--port", "0"],
+            "suite/tasks is a suite's tasks folder; SUITE is the suite itself: aw-view runs --suite suite --port 0",
+        ),
+        (
+            "aw-view",
+            ["suite/tasks", "--port", "0"],
+            "suite/tasks is a suite's tasks folder, not runs; PATH is a runs folder or one run: aw-view PATH --port 0",
         ),
         (
             "aw-prepare",

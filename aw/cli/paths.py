@@ -31,8 +31,16 @@ RUN_FILES = ("trajectory.jsonl", "final.json", "run.json")
 MAX_LISTED = 200  # entries looked at per folder: enough to tell a layout, cheap on a huge folder
 _ATTEMPT = re.compile(r"attempt-[0-9]+")
 OUT_RUNS = "out runs"  # a runs folder to write into: may be new, or a folder that holds other things
+WATCHED = "watched"  # what aw-view watches: a runs folder, one system's runs or one run
 # what each wanted kind is called in messages (the metavar of the argument)
-METAVARS = {SUITE: "SUITE", RUNS: "RUNS", OUT_RUNS: "RUNS", TASK: "TASK_DIR", RUN: "RUN_DIR"}
+METAVARS = {SUITE: "SUITE", RUNS: "RUNS", OUT_RUNS: "RUNS", WATCHED: "PATH", TASK: "TASK_DIR", RUN: "RUN_DIR"}
+
+
+def _fits(kind: str, want: str) -> bool:
+    """Whether a path of ``kind`` is what an argument wanting ``want`` takes."""
+    if want == WATCHED:
+        return kind in (RUNS, SYSTEM, RUN)
+    return kind == (RUNS if want == OUT_RUNS else want)
 
 
 @dataclass(frozen=True)
@@ -126,16 +134,18 @@ def _parent(p: Path, levels: int = 1) -> Path:
 
 
 def wrong_kind(found: Found, want: str) -> tuple[str, Path | str | None] | None:
-    """Why ``found`` is not the ``want`` kind (``suite``, ``runs``, ``out runs``, ``task`` or
-    ``run``) and what to type instead: ``(reason, right path, a pattern, or None)``; None when it
+    """Why ``found`` is not the ``want`` kind (``suite``, ``runs``, ``out runs``, ``watched``,
+    ``task`` or ``run``) and what to type instead: ``(reason, right path, a pattern, or None)``; None when it
     is that kind, or when it cannot be placed (the command's own checks then speak)."""
     p, kind, meta = found.path, found.kind, METAVARS[want]
-    if want == OUT_RUNS:
-        if kind == OTHER:  # an output folder may hold anything besides runs
-            return None
-        want = RUNS
-    if kind in (want, MISSING):
+    if _fits(kind, want) or kind == MISSING:
         return None
+    if want in (OUT_RUNS, WATCHED):
+        if kind == OTHER:  # an output folder may hold anything; aw-view watches any folder
+            return None
+        if want == WATCHED:
+            return f"{found.path} is {found.describe()}, not runs; {meta} is a runs folder or one run", None
+        want = RUNS
     what = f"{p} is {found.describe()}"
     if kind == FILE:
         wanted_file = {SUITE: "manifest.json", TASK: "task.json", RUN: None, RUNS: None}[want]
@@ -211,7 +221,7 @@ def check_paths(prog: str, argv: Sequence[str], wanted: Sequence[tuple[str | Pat
             given.append((key, want, classify(path)))
     for i, (key, want, found) in enumerate(given):  # two paths given in each other's place
         for key_q, want_q, found_q in given[i + 1 :]:
-            if found.kind == want_q and found_q.kind == want:
+            if _fits(found.kind, want_q) and _fits(found_q.kind, want):
                 swapped = _retyped(prog, argv, {key: str(key_q[0]), key_q: str(key[0])})
                 raise UsageError(
                     f"{key[0]} is {found.describe()} and {key_q[0]} is {found_q.describe()}: {METAVARS[want]} and "
