@@ -161,19 +161,25 @@ def protocol_note(final_mode: str, overrides: Sequence[tuple[str, float]] = ()) 
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    typed = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(typed)
     # SIGINT, SIGTERM and SIGHUP stop the study at once (workers ended, nothing written, exit
     # 128 + signal), however deep in a compiled kernel they land (aw.interrupts)
     with interrupts.handled(), warnings.catch_warnings():
         if threading.current_thread() is threading.main_thread():
             warnings.showwarning = warnings_in_one_line("aw-score")
-        return run_main("aw-score", lambda: _locked(args))
+        return run_main("aw-score", lambda: _locked(args, typed))
 
 
-def _locked(args: argparse.Namespace) -> int:
-    """``_score`` holding ``--out``'s lock (aw.runlock): a second aw-score on the same --out is refused."""
+def _locked(args: argparse.Namespace, typed: Sequence[str]) -> int:
+    """``_score`` holding ``--out``'s lock (aw.runlock): a second aw-score on the same --out is
+    refused. SUITE and RUNS given as other kinds of folder are refused first, with what to type."""
+    from aw.cli.paths import check_paths
     from aw.runlock import RunDirBusy, RunDirLock, holder_of
+    from aw_eval.official_runs import is_official_package
 
+    if not is_official_package(args.suite_dir):  # a package's RUNS are the official runner's logs
+        check_paths("aw-score", typed, [(args.suite_dir, "suite"), (args.runs_dir, "runs")])
     out = check_out_dir(args.out)
     try:
         lock = RunDirLock(out).acquire()

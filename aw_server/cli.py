@@ -187,14 +187,18 @@ def next_attempt_dir(parent: Path, task_id: str) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    typed = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(typed)
+    from aw.cli.common import UsageError
+    from aw.cli.paths import check_paths
     from aw.formats import FormatError, read_task
 
     serving = not (args.print_prompt or args.print_references)
     stdio = serving and args.transport == "stdio"
     try:
+        check_paths("aw-serve", typed, [(args.task_dir, "task")])
         task = read_task(args.task_dir)
-    except FormatError as exc:
+    except (FormatError, UsageError) as exc:
         return _fail(str(exc), tell_client=stdio)
     if args.print_prompt or args.print_references:
         try:

@@ -77,8 +77,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    return run_main("aw-view", lambda: _serve(args))
+    typed = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(typed)
+
+    def body() -> int:
+        from aw.cli.paths import check_paths
+
+        # PATH a suite, --suite a runs folder (or the two swapped): say what to type
+        check_paths("aw-view", typed, [(args.path, "watched"), (args.suite, "suite")])
+        return _serve(args)
+
+    return run_main("aw-view", body)
 
 
 def _inside(path: Path, root: Path) -> bool:

@@ -226,11 +226,13 @@ def register_official_export(sub) -> None:
 
 def _cmd_official_export(args: argparse.Namespace) -> int:
     from aw.cli.common import CliError, UsageError
+    from aw.cli.paths import check_paths
     from aw.formats import read_trajectory
     from aw.formats.suite import suite_paths
     from aw.official.convert import initial_archive_path
     from aw.official.export import export_run, export_task_run
 
+    check_paths("aw-prepare", args.typed, [(args.run, "run"), (args.suite, "suite")])
     if Path(args.out).exists() and not args.overwrite:
         raise UsageError(f"--out {args.out}: already exists; pass --overwrite to replace it")
     gap = _closing_contradiction(Path(args.run))

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from aw.cli.common import plural
 from aw.formats.common import pose_problem
 from aw.formats.errors import FormatError
 from aw.formats.io import write_json_atomic
@@ -108,7 +109,9 @@ def read_result(name: str, path: str | Path, part_ids: list[str]) -> list[list[f
             )
             if x
         )
-        raise RefinerError(f"refiner {name}: returned {len(poses)} poses for {len(part_ids)} parts ({detail})")
+        raise RefinerError(
+            f"refiner {name}: returned {plural(len(poses), 'pose')} for {plural(len(part_ids), 'part')} ({detail})"
+        )
     out = []
     for pid in part_ids:
         p = poses[pid]

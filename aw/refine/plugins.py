@@ -25,7 +25,16 @@ from aw.processes import new_marker, run_supervised
 from aw.refine.base import RefineRequest, RefinerError, check_poses
 from aw.refine.exchange import read_result, write_request
 
-__all__ = ["BUILTIN", "ENTRY_POINT_GROUP", "RefinerSpec", "available", "load_refiner", "resolve", "run_refiner"]
+__all__ = [
+    "BUILTIN",
+    "ENTRY_POINT_GROUP",
+    "RefinerSpec",
+    "available",
+    "command_label",
+    "load_refiner",
+    "resolve",
+    "run_refiner",
+]
 
 ENTRY_POINT_GROUP = "assemblyworld.refiners"
 LEFTOVER_GRACE_S = 1.0  # processes a refiner left running after it exited: ended after this long
@@ -78,6 +87,17 @@ class RefinerSpec:
         return words
 
 
+# extensions of scripts and programs that a label leaves out (refine.py is labelled refine)
+SCRIPT_SUFFIXES = (".py", ".sh", ".bash", ".js", ".mjs", ".rb", ".pl", ".r", ".jl", ".exe", ".bat", ".cmd")
+
+
+def command_label(program: str) -> str:
+    """The label of an external refiner's program: its file name without a script extension
+    (``python refine.py`` and ``./refine.py`` are both ``refine``)."""
+    path = Path(program)
+    return path.stem if path.suffix.lower() in SCRIPT_SUFFIXES and path.stem else path.name
+
+
 def resolve(name: str | None, command: str | None = None) -> RefinerSpec:
     """Check a refiner choice before anything runs: a known Python refiner, or a command line
     (named ``name``, else its program's file name, the script's for ``python SCRIPT``)."""
@@ -89,7 +109,7 @@ def resolve(name: str | None, command: str | None = None) -> RefinerSpec:
         if not words:
             raise RefinerError("--refiner-command is empty")
         program = words[1] if Path(words[0]).name.startswith("python") and len(words) > 1 else words[0]
-        return RefinerSpec(name or Path(program).name, tuple(words))
+        return RefinerSpec(name or command_label(program), tuple(words))
     if not name:
         raise RefinerError("name a refiner (--refiner) or give --refiner-command")
     load_refiner(name)

@@ -4,7 +4,9 @@ For each task: the request is built from the task's public files (part meshes, t
 samples), the start state is the task's layout or a given poses file (a run's ``final.json``),
 the refiner runs in a child process, and ``RUNS/<system>/<task_id>/`` gets ``trajectory.jsonl``
 (the start state in the header, one ``refine`` call carrying the refined poses, the end line),
-``final.json`` and ``run.json`` (``extra.refiner``, ``extra.initial_poses``). A refiner that
+``final.json`` and ``run.json`` (``extra.refiner``, ``extra.initial_poses``, and
+``extra.returned_start``: whether the answer equals the start within
+:data:`aw.refine.base.SAME_AS_START`). A refiner that
 fails or answers wrongly leaves the start state as the run's final state and ``ended:
 "error"`` with the one-line reason; the other tasks go on.
 """
@@ -39,7 +41,7 @@ from aw.formats import (
 from aw.formats.poses import initial_poses_file, read_initial_poses
 from aw.formats.run import ExistingRuns, existing_runs
 from aw.formats.suite import suite_paths
-from aw.refine.base import RefineRequest, RefinerError, identity_poses
+from aw.refine.base import RefineRequest, RefinerError, identity_poses, returned_start
 from aw.refine.plugins import RefinerSpec, run_refiner
 
 __all__ = ["RefineConfig", "build_request", "fracture_identity", "refine_suite", "refine_task"]
@@ -131,6 +133,7 @@ def refine_task(
     try:
         poses = run_refiner(spec, request, run_dir / "refine", timeout_s)
         final = {p: [float(v) for v in q] for p, q in zip(task.part_ids, poses, strict=True)}
+        extra["returned_start"] = returned_start(request.initial_poses, poses)
     except RefinerError as exc:
         error = str(exc)
     seconds = time.monotonic() - t0

@@ -182,8 +182,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    return run_main("aw-run", lambda: _run(args))
+    typed = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(typed)
+
+    def body() -> int:
+        from aw.cli.paths import check_paths
+
+        # SUITE or RUNS given as another kind of folder: say what it is and what to type
+        check_paths("aw-run", typed, [(args.suite, "suite"), (args.out, "out runs")])
+        return _run(args)
+
+    return run_main("aw-run", body)
 
 
 def _first_task_dir(args: argparse.Namespace) -> Path:

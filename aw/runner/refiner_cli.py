@@ -136,11 +136,12 @@ def run_refiner_command(args: argparse.Namespace, agent_config) -> int:
         arms = run_study(agent_cfg, cfg, ids, log=lambda m: print(f"aw-run: {m}", file=sys.stderr, flush=True))
         for a in arms:
             note = (
-                f" ({len(a.failed)} of {a.tasks} tasks failed, first: {next(iter(a.failed.values()))})"
+                f" ({len(a.failed)} of {plural(a.tasks, 'task')} failed, first: {next(iter(a.failed.values()))})"
                 if a.failed
                 else ""
             )
-            print(f"{a.arm}: {a.system} {a.status}{note}")
+            unchanged = a.unchanged_note()
+            print(f"{a.arm}: {a.system} {a.status}{note}" + (f"; {unchanged}" if unchanged else ""))
         print(f"runs: {args.out}; study: {os.path.join(str(args.out), 'refinement_study.json')}")
         bad = [a.arm for a in arms if a.status != "ok"]
         if bad:
@@ -161,8 +162,11 @@ def run_refiner_command(args: argparse.Namespace, agent_config) -> int:
     except RefinerError as exc:
         raise UsageError(str(exc)) from None
     failed = [i for i in infos if i.ended != "finished"]
+    n_unchanged = sum(1 for i in infos if i.extra.get("returned_start"))
     print(
-        f"{cfg.system}: {plural(len(infos), 'task')} refined, {len(failed)} failed"
+        f"{cfg.system}: {len(infos) - len(failed)} of {plural(len(infos), 'task')} refined"
+        + (f" ({n_unchanged} returned {'its' if n_unchanged == 1 else 'their'} start unchanged)" if n_unchanged else "")
+        + f", {len(failed)} failed"
         + (f"; {existing.kept_line()}" if existing.kept else "")
     )
     print(f"runs: {os.path.join(str(args.out), cfg.system)}")

@@ -133,11 +133,7 @@ def _write_all(
             made["refinement_paired_cd"] = name
     doc["plots"] = {k: f"plots/{v}" for k, v in made.items()}
     write_json(files["scores"], doc)
-    markdown = render_markdown(doc, doc["plots"])
-    if refinement is not None:
-        from aw_eval.report.refinement import render_refinement
-
-        markdown += "\n" + render_refinement(refinement, doc["plots"].get("refinement_paired_cd"))
+    markdown = render_markdown(doc, doc["plots"])  # a refinement study's table comes first
     write_text_atomic(files["report"], markdown)
     if html:
         from aw_eval.report.html import ASSETS_DIR, write_html  # imports plotly only when asked

@@ -48,7 +48,9 @@ def test_one_systems_folder_is_refused_with_a_hint(small, tmp_path, capsys):
         score_study(suite, runs / "alpha", tmp_path / "o", ScoreSettings())
     assert main([str(suite), str(runs / "alpha"), "--out", str(tmp_path / "o"), *FAST]) == 2
     err = capsys.readouterr().err
-    assert "looks like one system's folder" in err and str(runs) in err and tasks[0] in err
+    # aw-score says it first, with the command to type (aw.cli.paths)
+    assert f"{runs / 'alpha'} is one system's runs folder; RUNS is the folder above it" in err
+    assert f": aw-score {suite} {runs} --out" in err
     assert not (tmp_path / "o" / "scores.json").exists()
 
 

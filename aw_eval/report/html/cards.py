@@ -16,7 +16,9 @@ import orjson
 from aw.formats import FormatError, read_final, read_trajectory
 from aw.meshes import display_parts, hex_color
 from aw_eval.analyses.curves import NORMALIZED_POINTS, normalized_states
+from aw_eval.analyses.failures import PULLED_GAP
 from aw_eval.report.fmt import DASH, fixed
+from aw_eval.report.heaps import far_from_assembled_note
 from aw_eval.report.html.markup import scroll_box, slug
 from aw_eval.report.html.scenes import TaskScene, aligned_poses
 from aw_eval.report.html.svg import Series, step_chart
@@ -231,7 +233,7 @@ def _finals(pictures: list[Picture], views: dict[str, RunView]) -> str:
     return f'<div class="finals">{"".join(figs)}</div>'
 
 
-HINT_GAP = 0.25  # share of parts placed minus PA from which a card explains the difference
+HINT_GAP = PULLED_GAP  # share of parts placed minus PA from which a card explains the difference
 
 
 def registration_hint(scene: TaskScene, view: RunView, threshold: float) -> str:
@@ -414,6 +416,10 @@ def task_card(
             hint = registration_hint(scene, views[s], threshold) if s in views else ""
             if hint:
                 parts.append(f'<p class="hint">{html.escape(hint)}</p>')
+    for s in study.systems:  # a high score on a heap: why (report.md's Runs section says the same)
+        far = doc_runs.get((s, tid), {}).get("far_from_assembled")
+        if far:
+            parts.append(f'<p class="hint">{html.escape(far_from_assembled_note(s, far))}</p>')
     parts.append(_curves(study, tid, views, colors))
     parts.append(
         _part_table(

@@ -95,19 +95,10 @@ class TaskScene:
 
     def placed(self, poses: np.ndarray, threshold: float) -> np.ndarray:
         """``(P,)`` bool: the parts that lie at their targets as placed in ``poses (P, 7)``, before
-        any registration: each part's Chamfer distance to its own target part (normalized units)
-        is at most ``threshold``. Decided by a bound that needs no samples: a surface point moves
-        by at most its triangle's largest vertex displacement ``m`` between the two poses (the
-        displacement is affine in the point), so both Chamfer terms are at most ``(m / d) ** 2``."""
-        now, target = poses_to_matrices(poses), poses_to_matrices(self.target_poses)
-        out = np.zeros(len(self.meshes), dtype=bool)
-        for i, m in enumerate(self.meshes):
-            v = np.asarray(m.vertices, dtype=np.float64)
-            a = v @ now[i, :3, :3].T + now[i, :3, 3]
-            b = v @ target[i, :3, :3].T + target[i, :3, 3]
-            worst = float(np.sqrt(((a - b) ** 2).sum(axis=1)).max()) / self.divisor
-            out[i] = 2.0 * worst**2 <= threshold
-        return out
+        any registration (:func:`aw_eval.analyses.failures.placed_parts`)."""
+        from aw_eval.analyses.failures import placed_parts
+
+        return placed_parts(self.meshes, poses, self.target_poses, self.divisor, threshold)
 
     def camera(self, states: list[np.ndarray]) -> Camera:
         """One camera for the target and every ``states`` entry ``(P, 7)``: frames their union,

@@ -227,6 +227,30 @@ def test_folder_refuses_an_unusable_source_and_objects_that_cannot_be_assessed(t
     assert not (tmp_path / "o").exists()  # refused before any work
 
 
+def test_folder_refuses_parts_saved_at_their_own_origins_unless_allowed(tmp_path, capsys):
+    """A stool whose seat and legs were each exported centred at the origin: refused by name,
+    before any work; --allow-overlap keeps it with a warning."""
+    src = _folder(tmp_path / "src")
+    (src / "stool").mkdir()
+    for name, size in (("seat", (0.4, 0.3, 0.04)), ("leg_a", (0.04, 0.04, 0.4)), ("leg_b", (0.04, 0.04, 0.4))):
+        trimesh.creation.box(extents=size).export(src / "stool" / f"{name}.obj")
+    argv = ["folder", str(src), "--out", str(tmp_path / "o"), "--jobs", "1", "--no-progress"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == (
+        f"aw-prepare: error: {src / 'stool'}: the bounding boxes of its parts mostly overlap (3 of 3 part pairs "
+        "share most of the smaller part's box): each part was likely exported centred at its own origin, not where "
+        "it sits in the assembled object, so the target would be a pile on one point; export the parts in the "
+        "assembled frame, or pass --allow-overlap if they truly nest"
+    )
+    assert not (tmp_path / "o").exists()
+    assert main(argv + ["--allow-overlap"]) == 0
+    err = capsys.readouterr().err
+    assert f"aw-prepare: warning: {src / 'stool'}: the bounding boxes of its parts mostly overlap" in err
+    assert "; kept (--allow-overlap)" in err
+    assert (tmp_path / "o" / "tasks" / "custom-stool-none").is_dir()
+
+
 def test_folder_summary_names_an_empty_category_and_counts_in_the_right_number(tmp_path, capsys):
     src = _folder(tmp_path / "src")
     for extra in ("desk", "lamp"):

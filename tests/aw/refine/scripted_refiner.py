@@ -1,7 +1,8 @@
 """A small external refiner for tests: ``python scripted_refiner.py REQUEST RESULT``.
 
 It reads the request file and answers as its ``options.behaviour`` says: ``shift`` (the
-non-anchor parts moved by ``options.dx`` along x), ``short`` (one pose fewer), ``nan``,
+non-anchor parts moved by ``options.dx`` along x; on the task ``options.same_task``, the start
+returned unchanged), ``short`` (one pose fewer), ``nan``,
 ``move_anchor``, ``sleep`` (never answers), ``fail`` (exits 3 with a message), ``silent``
 (exits 0 without writing a result), or a hostile answer: ``far`` (a position of 1e300), ``huge``
 (a number of 401 digits), ``deep`` (arrays 3,000 deep), ``big`` (a 300 MiB result file),
@@ -21,7 +22,7 @@ behaviour = req["options"].get("behaviour", "shift")
 poses = {pid: list(p) for pid, p in req["initial_poses"].items()}
 anchor = req["anchor"]
 for pid in poses:
-    if pid != anchor:
+    if pid != anchor and req["task_id"] != req["options"].get("same_task"):
         poses[pid][0] += float(req["options"].get("dx", 0.25))
 if behaviour == "short":
     poses.pop(next(p for p in poses if p != anchor))

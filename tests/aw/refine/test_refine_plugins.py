@@ -15,7 +15,7 @@ import pytest
 
 from aw.formats import read_task
 from aw.refine.base import RefinerError
-from aw.refine.plugins import RefinerSpec, available, resolve, run_refiner
+from aw.refine.plugins import RefinerSpec, available, command_label, resolve, run_refiner
 from aw.refine.runs import build_request
 
 SCRIPT = Path(__file__).with_name("scripted_refiner.py")
@@ -51,14 +51,14 @@ def test_command_without_placeholders_gets_both_files_appended(request_, tmp_pat
     assert run_refiner(spec, _with(request_, behaviour="shift"), tmp_path, 60).shape == (2, 7)
 
 
-R = "refiner scripted_refiner.py: "
+R = "refiner scripted_refiner: "
 RESULT = R + "result file refine-result.json: "
 
 
 @pytest.mark.parametrize(
     "behaviour, start, end",
     [
-        ("short", R + "returned 1 poses for 2 parts (missing fragment_", ")"),
+        ("short", R + "returned 1 pose for 2 parts (missing fragment_", ")"),
         ("nan", RESULT + "not valid JSON: NaN at char ", " (NaN and Infinity are not JSON numbers)"),
         ("far", R + "pose of fragment_", ": pose position beyond +-1e+06 scene units"),
         ("huge", RESULT + "not valid JSON: a number beyond the range of a double (+-1.8e308) at char ", ""),
@@ -152,6 +152,14 @@ def test_nothing_a_refiner_started_outlives_it(request_, tmp_path, behaviour):
             os.kill(int(pid_file.read_text()), 9)
 
 
+def test_a_command_is_labelled_by_its_program_without_a_script_extension():
+    assert resolve(None, _command()).name == "scripted_refiner"  # python SCRIPT: the script
+    assert resolve(None, "./refine.sh {request} {result}").name == "refine"
+    assert resolve(None, "/opt/garf/bin/garf-infer").name == "garf-infer"
+    assert resolve("mine", "./refine.py").name == "mine"  # --refiner NAME wins
+    assert command_label("model.v2") == "model.v2" and command_label("R.EXE") == "R"
+
+
 def test_unknown_refiner_and_bad_command_are_refused():
     with pytest.raises(RefinerError, match="unknown refiner 'nope'; available: classical"):
         resolve("nope")
@@ -185,5 +193,5 @@ def test_entry_point_plug_in_is_found_and_run_in_a_child_process(request_, tmp_p
     spec = resolve("shifty")
     poses = run_refiner(spec, _with(request_), tmp_path / "ok", 120)
     assert np.isclose(poses[1 - request_.anchor, 2], 0.125)
-    with pytest.raises(RefinerError, match="refiner shifty: returned 1 poses for 2 parts"):
+    with pytest.raises(RefinerError, match="refiner shifty: returned 1 pose for 2 parts"):
         run_refiner(spec, _with(request_, count=1), tmp_path / "short", 120)
