@@ -41,6 +41,7 @@ import numpy as np
 
 from aw.camera import IMAGE_HEIGHT, IMAGE_WIDTH, VERTICAL_FOV_DEG
 from aw.formats import (
+    EndReason,
     FinalState,
     RecordingError,
     Task,
@@ -199,7 +200,9 @@ class Episode:
         self.run_dir = Path(run_dir)
         self._meshes = list(meshes)
         self._renderer_factory = renderer_factory
-        self._renderer = None
+        self._renderer: Any = (
+            None  # the factory's renderer (aw.render.OffscreenRenderer by default), made on first capture
+        )
         self._clock = clock
         self._lock = threading.RLock()
         self._seq = 0
@@ -208,7 +211,7 @@ class Episode:
         self._timed_out = False
         self._closed = False
         self._timer: threading.Timer | None = None
-        self.end_reason: str | None = None
+        self.end_reason: EndReason | None = None
         # Why the recording failed (a full disk, ...); from then on no call is taken.
         self.recording_failure: str | None = None
 
@@ -477,14 +480,14 @@ class Episode:
         raise _RecordingFailed(reason)
 
     # ------------------------------------------------------------------ ending
-    def close(self, reason: str = "disconnect", message: str = "") -> str:
+    def close(self, reason: EndReason = "disconnect", message: str = "") -> EndReason:
         """Write the closing line and ``final.json``; idempotent. Returns the recorded reason
         (``timeout`` wins if the budget ran out)."""
         with self._lock:
             if self._closed:
                 return self.end_reason or reason
             self._check_budget()
-            final_reason = "timeout" if self._timed_out else reason
+            final_reason: EndReason = "timeout" if self._timed_out else reason
             self._closed = True
             self.end_reason = final_reason
             if self._timer is not None:
@@ -513,7 +516,7 @@ class Episode:
                 log.exception("renderer close failed")
         return final_reason
 
-    def _write_final(self, reason: str) -> None:
+    def _write_final(self, reason: EndReason) -> None:
         try:
             write_final(
                 self.run_dir / FINAL_FILE,

@@ -148,9 +148,9 @@ def matrix_to_quat(m) -> np.ndarray:
         else:
             s = np.sqrt(1.0 + r[2, 2] - r[0, 0] - r[1, 1]) * 2
             q = [(r[1, 0] - r[0, 1]) / s, (r[0, 2] + r[2, 0]) / s, (r[1, 2] + r[2, 1]) / s, 0.25 * s]
-        q = np.asarray(q)
-        q /= np.linalg.norm(q)
-        out[k] = -q if q[0] < 0 else q
+        quat = np.asarray(q)
+        quat /= np.linalg.norm(quat)
+        out[k] = -quat if quat[0] < 0 else quat
     return out.reshape(m.shape[:-2] + (4,))
 
 
@@ -440,7 +440,7 @@ def cube_rotations() -> np.ndarray:
     for perm in itertools.permutations(range(3)):
         for signs in itertools.product((1.0, -1.0), repeat=3):
             m = np.zeros((3, 3))
-            for row, (col, s) in enumerate(zip(perm, signs)):
+            for row, (col, s) in enumerate(zip(perm, signs, strict=True)):
                 m[row, col] = s
             if np.linalg.det(m) > 0:
                 mats.append(m)

@@ -275,7 +275,7 @@ class OffscreenRenderer:
     def _bounds(self, mats: np.ndarray, visible: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         lo = np.full(3, np.inf)
         hi = np.full(3, -np.inf)
-        for k, (m, v) in enumerate(zip(mats, self._verts)):
+        for k, (m, v) in enumerate(zip(mats, self._verts, strict=True)):
             if visible is not None and not visible[k]:
                 continue
             w = v @ m[:3].T
@@ -331,7 +331,7 @@ class OffscreenRenderer:
             ) from exc
         scene = pyrender.Scene(bg_color=[*BACKGROUND_COLOR, 1.0], ambient_light=[_AMBIENT] * 3)
         part_nodes = []
-        for mesh, color in zip(self._meshes, self.colors):
+        for mesh, color in zip(self._meshes, self.colors, strict=True):
             material = pyrender.MetallicRoughnessMaterial(
                 baseColorFactor=[*_srgb_to_linear(color), 1.0],
                 metallicFactor=0.0,
@@ -404,12 +404,12 @@ class OffscreenRenderer:
     ) -> np.ndarray:
         g = self._gl
         pyrender, scene = g["pyrender"], g["scene"]
-        for node, m in zip(g["parts"], mats):
+        for node, m in zip(g["parts"], mats, strict=True):
             scene.set_pose(node, m)
         lo, hi = self._bounds(mats, visible)
         # Ground at the lowest part's height, a hair below it so part bottoms never fight it.
-        extent = float(max(hi[0] - lo[0], hi[1] - lo[1], 1e-3))
-        size = float(max(np.linalg.norm(hi - lo), 1e-3))
+        extent = max(float(hi[0] - lo[0]), float(hi[1] - lo[1]), 1e-3)
+        size = max(float(np.linalg.norm(hi - lo)), 1e-3)
         step = grid_spacing(extent)
         centre = np.round(0.5 * (lo[:2] + hi[:2]) / step) * step
         z = lo[2] - 2e-3 * size

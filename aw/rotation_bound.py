@@ -269,7 +269,7 @@ def _grid_rows(levels, start_cubes):
     turning their centres into directions."""
     first = start_cubes**3
     total, count = 0, first
-    for q in range(len(levels)):
+    for _ in range(len(levels)):
         total += count
         count *= 8
     out = np.empty((total, 6), np.int32)

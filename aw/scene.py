@@ -387,6 +387,6 @@ def scene_from_meshes(part_ids: Iterable[str], meshes: Iterable, names: Iterable
     names = list(names) if names is not None else part_ids
     infos = [
         PartInfo(pid, nm, np.asarray(m.bounds[0], float), np.asarray(m.bounds[1], float))
-        for pid, m, nm in zip(part_ids, meshes, names)
+        for pid, m, nm in zip(part_ids, meshes, names, strict=True)
     ]
     return Scene(infos)

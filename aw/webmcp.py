@@ -519,7 +519,7 @@ class WebMcpPage:
 
     def _size(self, pid: str) -> list[float]:
         if self._sizes is None:
-            self._sizes = dict(zip(self.episode.part_ids, mesh_geom_sizes(self.episode.meshes)))
+            self._sizes = dict(zip(self.episode.part_ids, mesh_geom_sizes(self.episode.meshes), strict=True))
         return self._sizes[pid]
 
     def _object(self, pid: str, position: list[float], quaternion: list[float]) -> dict:
@@ -593,7 +593,6 @@ class WebMcpPage:
         return name, dict(a)
 
     def _reply(self, name: str, result: Any) -> PageReply:
-        scene = self.episode.scene
         if name in _MUTATIONS:
             self._states += 1
             out: dict[str, Any] = {"status": "completed"}

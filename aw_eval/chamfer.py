@@ -8,7 +8,9 @@ padded to a power of two, so memory stays bounded and few shapes are compiled.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import cache
+from typing import Any
 
 import numpy as np
 
@@ -21,17 +23,19 @@ CHUNK = 8
 
 
 @cache
-def _pairs_fn():
+def _pairs_fn() -> Callable[[np.ndarray, np.ndarray], Any]:
+    """The jitted CDs ``(G,)`` of ``x (G, n, 3)`` and ``y (G, m, 3)`` (a JAX array)."""
     jax, jnp = jax_modules()
 
-    def one(x, y):  # x: (n, 3), y: (m, 3)
+    def one(x: Any, y: Any) -> Any:  # jax arrays x: (n, 3), y: (m, 3)
         dx = x[:, 0, None] - y[None, :, 0]
         dy = x[:, 1, None] - y[None, :, 1]
         dz = x[:, 2, None] - y[None, :, 2]
         d = dx * dx + dy * dy + dz * dz
         return jnp.mean(jnp.min(d, axis=1)) + jnp.mean(jnp.min(d, axis=0))
 
-    return jax.jit(jax.vmap(one))
+    pairs: Callable[[np.ndarray, np.ndarray], Any] = jax.jit(jax.vmap(one))
+    return pairs
 
 
 def chamfer_pairs(x: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -14,13 +14,13 @@ changed. See docs/scoring.md.
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 import threading
 import time
 import warnings
 from collections.abc import Sequence
 
+from aw import interrupts
 from aw.cli.common import (
     CliError,
     UsageError,
@@ -83,6 +83,12 @@ def build_parser() -> argparse.ArgumentParser:
         "(default: the trajectory wins; the contradiction is listed either way)",
     )
     p.add_argument(
+        "--allow-running",
+        action="store_true",
+        help="score runs still being recorded (a live aw-serve holds their lock) at their last state, marked "
+        "running (default: leave them out, counted 0, and exit 1)",
+    )
+    p.add_argument(
         "--backend",
         choices=("auto", "numba", "jax"),
         default="auto",
@@ -134,6 +140,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="skip report.html and its folder report_files/ (pictures of every run, 3D views)",
     )
+    p.add_argument(
+        "--viewer-url",
+        metavar="URL",
+        help="the URL aw-view printed for these RUNS: report.html links each run to its episode page there "
+        "(default: no links, the report stays self-contained)",
+    )
     add_no_progress(p)
     return p
 
@@ -149,26 +161,25 @@ def protocol_note(final_mode: str, overrides: Sequence[tuple[str, float]] = ()) 
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    if threading.current_thread() is not threading.main_thread():
-        return run_main("aw-score", lambda: _locked(args))
-    before = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops as Ctrl-C does: workers ended, exit 130
-    try:
-        with warnings.catch_warnings():
+    typed = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(typed)
+    # SIGINT, SIGTERM and SIGHUP stop the study at once (workers ended, nothing written, exit
+    # 128 + signal), however deep in a compiled kernel they land (aw.interrupts)
+    with interrupts.handled(), warnings.catch_warnings():
+        if threading.current_thread() is threading.main_thread():
             warnings.showwarning = warnings_in_one_line("aw-score")
-            return run_main("aw-score", lambda: _locked(args))
-    finally:
-        signal.signal(signal.SIGTERM, before)
+        return run_main("aw-score", lambda: _locked(args, typed))
 
 
-def _interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt
-
-
-def _locked(args: argparse.Namespace) -> int:
-    """``_score`` holding ``--out``'s lock (aw.runlock): a second aw-score on the same --out is refused."""
+def _locked(args: argparse.Namespace, typed: Sequence[str]) -> int:
+    """``_score`` holding ``--out``'s lock (aw.runlock): a second aw-score on the same --out is
+    refused. SUITE and RUNS given as other kinds of folder are refused first, with what to type."""
+    from aw.cli.paths import check_paths
     from aw.runlock import RunDirBusy, RunDirLock, holder_of
+    from aw_eval.official_runs import is_official_package
 
+    if not is_official_package(args.suite_dir):  # a package's RUNS are the official runner's logs
+        check_paths("aw-score", typed, [(args.suite_dir, "suite"), (args.runs_dir, "runs")])
     out = check_out_dir(args.out)
     try:
         lock = RunDirLock(out).acquire()
@@ -199,12 +210,15 @@ def _score(args: argparse.Namespace) -> int:
     from aw_eval import official_runs
 
     out = check_out_dir(args.out)
+    if args.viewer_url is not None and not args.viewer_url.startswith(("http://", "https://")):
+        raise UsageError(f"--viewer-url must be the http:// URL that aw-view printed, got {args.viewer_url!r}")
     if official_runs.is_official_package(args.suite_dir):  # an official package and its run logs
         return official_runs.main(args.suite_dir, args.runs_dir, args.out, args.jobs)
 
     from aw_eval.report import AnalysisSettings, write_outputs
     from aw_eval.report.markdown import system_label
     from aw_eval.study import ScoreSettings, ScoringFailed, StudyError, score_study
+    from aw_eval.study.runner import running_line
 
     def log(msg: str) -> None:
         print(f"aw-score: {msg}", file=sys.stderr)
@@ -233,11 +247,15 @@ def _score(args: argparse.Namespace) -> int:
             progress=not args.no_progress,
             log=log,
             geometry_cache=args.geometry_cache,
+            allow_running=args.allow_running,
         )
     except ScoringFailed as exc:  # the tool failed, not the runs: no report of zeros
+        interrupts.reraise_if_interrupted(exc)
         raise CliError(str(exc)) from None
     except StudyError as exc:
+        interrupts.reraise_if_interrupted(exc)
         raise UsageError(str(exc)) from None
+    interrupts.check()  # an interrupt that a library swallowed: no report of a partial study
     t_score = time.perf_counter() - t0
     res = write_outputs(
         study,
@@ -250,6 +268,7 @@ def _score(args: argparse.Namespace) -> int:
             "scored_runs": stats.scored,
             "missing_runs": stats.missing,
             "errors": stats.errors,
+            "running_runs": len(stats.running),
             "tasks_dispatched": stats.tasks_dispatched,
             "executor": stats.executor,
             "scoring_seconds": round(t_score, 3),
@@ -263,6 +282,7 @@ def _score(args: argparse.Namespace) -> int:
         html=not args.no_html,
         log=log,
         jobs=args.jobs,
+        viewer_url=args.viewer_url,
     )
     doc = res["doc"]
     unscored = ", ".join(f"{len(v)} {k}" for k, v in sorted(doc["unscored_runs"].items()))
@@ -282,12 +302,16 @@ def _score(args: argparse.Namespace) -> int:
     cov = stats.coverage
     for s in doc["uncertainty"].get("order", study.systems):
         o = q[s]["overall"]
-        have = cov.runs.get(s, cov.n_tasks) if cov else None
-        short = (
-            f"  [WARNING: runs for only {have} of {plural(cov.n_tasks, 'task')}; the rest count 0]"
-            if cov and have < cov.n_tasks
-            else ""
-        )
+        short = ""
+        if cov is not None and (have := cov.runs.get(s, cov.n_tasks)) < cov.n_tasks:
+            short = f"  [WARNING: runs for only {have} of {plural(cov.n_tasks, 'task')}; the rest count 0]"
+        live = sum(1 for sys_, _ in stats.running if sys_ == s)
+        if live:
+            short += (
+                f"  [WARNING: {plural(live, 'run')} still running, scored at {'its' if live == 1 else 'their'} last state]"
+                if args.allow_running
+                else f"  [WARNING: {plural(live, 'run')} still running, left out (counted 0)]"
+            )
         print(f"{system_label(doc, s)}: Overall SR {o['sr']:.2f}%  PA {o['pa']:.2f}%{note}{short}")
     print(f"wrote {res['files']['report']}")
     if "html" in res["files"]:
@@ -295,6 +319,9 @@ def _score(args: argparse.Namespace) -> int:
     if doc.get("partial"):
         failed = {k: len(doc["unscored_runs"][k]) for k in ("error", "task_error") if k in doc["unscored_runs"]}
         log(f"error: the study is partial: runs not scored {failed} (marked in scores.json and the report)")
+        return 1
+    if stats.running and not args.allow_running:
+        log(f"error: {running_line(stats.running, False)}")
         return 1
     return 0
 

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from aw.kernels.delaunay import DelaunayGraph
+from aw.kernels.kdtree import KDTree
 from aw.pair_search import registration_groups
 from aw.pose import cube_rotations, pca_frame
 from aw_eval.kernels import ICPProblem, build_tree, graph_for
@@ -37,11 +39,11 @@ def pair_cd(
     q_i: np.ndarray,
     q_j: np.ndarray,
     settings: ProtocolSettings,
-    tree_i=None,
-    tree_j=None,
+    tree_i: KDTree | None = None,
+    tree_j: KDTree | None = None,
     decide: bool = False,
-    graph_i=None,
-    graph_j=None,
+    graph_i: DelaunayGraph | None = None,
+    graph_j: DelaunayGraph | None = None,
 ) -> float:
     """Best CD of ``q_i -> q_j`` (both in their PCA frames) over the 24 starts ``(S, 0)``.
 
@@ -78,9 +80,11 @@ def equivalence_groups(
     :func:`aw.pair_search.local_workers`. The groups do not depend on it."""
     settings = settings or ProtocolSettings()
     qs = part_frames(clouds, float(divisor))
-    structures: dict[int, tuple] = {}
+    structures: dict[int, tuple[KDTree, DelaunayGraph | None]] = {}
 
-    def search(i: int) -> tuple:  # built once per part, only for parts that are registered
+    def search(
+        i: int,
+    ) -> tuple[KDTree, DelaunayGraph | None]:  # built once per part, only for parts that are registered
         if i not in structures:  # two threads may both build one: the same, and the last kept
             tree = build_tree(qs[i])
             structures[i] = (tree, graph_for(tree, clouds[i]))  # Qhull run shared with the task's index

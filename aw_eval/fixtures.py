@@ -147,7 +147,7 @@ def random_checkpoints(
     subset of parts (others exact or tiny), and optionally moves the whole prediction rigidly."""
     rng = np.random.default_rng(seed)
     p = len(obj.meshes)
-    centres = np.stack([_assembled_centre(m, t) for m, t in zip(obj.meshes, obj.target_poses)])
+    centres = np.stack([_assembled_centre(m, t) for m, t in zip(obj.meshes, obj.target_poses, strict=True)])
     out = np.empty((n, p, 7))
     for k in range(n):
         kind = kinds[rng.integers(len(kinds))]
@@ -180,7 +180,7 @@ def make_points_geometry(n_parts: int, n_points: int, seed: int = 0, settings=No
     legs = obj.identical[0] if obj.identical else []
     clouds = []
     leg_cloud = None
-    for i, (mesh, target) in enumerate(zip(obj.meshes, obj.target_poses)):
+    for i, (mesh, target) in enumerate(zip(obj.meshes, obj.target_poses, strict=True)):
         assembled = apply_pose(target, np.asarray(mesh.vertices))
         m = trimesh.Trimesh(assembled, np.asarray(mesh.faces), process=False)
         if i in legs and leg_cloud is not None:
@@ -217,13 +217,13 @@ def synthetic_trajectory(obj: SyntheticObject, n_steps: int, seed: int = 0) -> n
     placement errors from tiny to small and occasional gross mistakes."""
     rng = np.random.default_rng(seed)
     p = len(obj.meshes)
-    centres = np.stack([_assembled_centre(m, t) for m, t in zip(obj.meshes, obj.target_poses)])
+    centres = np.stack([_assembled_centre(m, t) for m, t in zip(obj.meshes, obj.target_poses, strict=True)])
     g = np.concatenate([rng.uniform(-1.5, 1.5, 3), random_rotation_quat(rng)])
     poses = np.tile(IDENTITY_POSE, (p, 1))
     out = [poses.copy()]
     order = rng.permutation(p)
     placed: list[int] = []
-    for step in range(n_steps):
+    for _ in range(n_steps):
         if len(placed) < p and (rng.random() < 0.7 or not placed):
             i = int(order[len(placed)])
             placed.append(i)
@@ -240,7 +240,8 @@ def trajectory_checkpoints(obj: SyntheticObject, n: int, seed: int) -> np.ndarra
     part each, seeds ``seed, seed + 1, ...``). Prefix-stable: the first ``k`` rows do not depend
     on ``n >= k``."""
     p = len(obj.meshes)
-    out, k = [], 0
+    out: list[np.ndarray] = []
+    k = 0
     while sum(len(t) for t in out) < n:
         out.append(synthetic_trajectory(obj, 3 * p, seed=seed + k))
         k += 1

@@ -35,6 +35,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
@@ -80,7 +81,7 @@ class FractureMetrics:
 def wrapped_euler_error(r_pred: np.ndarray, r_target: np.ndarray) -> np.ndarray:
     """Per-part RMS of the wrapped intrinsic-XYZ Euler differences (degrees), rotations ``(P, 3, 3)``."""
     out = []
-    for rp, rt in zip(np.reshape(r_pred, (-1, 3, 3)), np.reshape(r_target, (-1, 3, 3))):
+    for rp, rt in zip(np.reshape(r_pred, (-1, 3, 3)), np.reshape(r_target, (-1, 3, 3)), strict=True):
         d = np.abs(
             Rotation.from_matrix(rp).as_euler("XYZ", degrees=True)
             - Rotation.from_matrix(rt).as_euler("XYZ", degrees=True)
@@ -97,48 +98,52 @@ def _chamfer(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def fracture_metrics_from_samples(
-    samples, pred_poses, target_poses, scale: float = 1.0, pa_threshold: float = PA_THRESHOLD
+    samples: Sequence[ArrayLike],
+    pred_poses: ArrayLike,
+    target_poses: ArrayLike,
+    scale: float = 1.0,
+    pa_threshold: float = PA_THRESHOLD,
 ) -> FractureMetrics:
     """Fracture metrics from per-part samples (``(n_i, 3)`` each, in the frame the poses act on),
     ``pred_poses (P, 7)`` (the free joints' coordinates of the state, as stored) and
     ``target_poses (P, 7)``, both ``[tx, ty, tz, qw, qx, qy, qz]``; coordinates are divided by
     ``scale`` (the divisor)."""
-    samples = [np.asarray(s, dtype=np.float64) for s in samples]
-    pred_poses = np.asarray(pred_poses, dtype=np.float64).reshape(-1, 7)
-    target_poses = np.asarray(target_poses, dtype=np.float64).reshape(-1, 7)
-    p = len(samples)
+    clouds = [np.asarray(s, dtype=np.float64) for s in samples]
+    state = np.asarray(pred_poses, dtype=np.float64).reshape(-1, 7)
+    goal = np.asarray(target_poses, dtype=np.float64).reshape(-1, 7)
+    p = len(clouds)
     if (
         p < 1
-        or len(pred_poses) != p
-        or len(target_poses) != p
-        or any(s.ndim != 2 or s.shape[1:] != (3,) or len(s) < 1 for s in samples)
+        or len(state) != p
+        or len(goal) != p
+        or any(s.ndim != 2 or s.shape[1:] != (3,) or len(s) < 1 for s in clouds)
     ):
         raise ValueError("need one non-empty (n, 3) sample set and one pred/target pose per part")
-    if not all(np.isfinite(x).all() for x in (*samples, pred_poses, target_poses)):
+    if not all(np.isfinite(x).all() for x in (*clouds, state, goal)):
         raise ValueError("samples and poses must be finite")
     if not (np.isfinite(scale) and scale > 0):
         raise ValueError("scale must be positive")
     points, predicted, target = [], [], []
-    for s, pp, r, tp in zip(samples, pred_poses, free_body_rotations(pred_poses[:, 3:]), target_poses):
+    for s, pp, r, tp in zip(clouds, state, free_body_rotations(state[:, 3:]), goal, strict=True):
         centre = s.mean(0)
         points.append((s - centre) / scale)
         predicted.append((r, (r @ centre + pp[:3]) / scale))
         target.append((rotation_of(tp[3:]), (centre @ rotation_of(tp[3:]).T + tp[:3]) / scale))
-    counts = np.array([len(s) for s in samples])
+    counts = np.array([len(s) for s in clouds])
     anchor = int(np.argmax(counts))
     ra, ta = predicted[anchor]
     rg, tg = target[anchor]
     turn = rg @ ra.T
     shift = tg - turn @ ta
     aligned = [(turn @ r, turn @ t + shift) for r, t in predicted]
-    pred = [q @ r.T + t for q, (r, t) in zip(points, aligned)]
-    gt = [q @ r.T + t for q, (r, t) in zip(points, target)]
+    pred = [q @ r.T + t for q, (r, t) in zip(points, aligned, strict=True)]
+    gt = [q @ r.T + t for q, (r, t) in zip(points, target, strict=True)]
     pred_tree, gt_tree = cKDTree(np.concatenate(pred)), cKDTree(np.concatenate(gt))
     part_re = wrapped_euler_error(np.stack([r for r, _ in aligned]), np.stack([r for r, _ in target]))
-    part_te = np.array([np.sqrt(np.mean((a[1] - b[1]) ** 2)) for a, b in zip(aligned, target)])
-    part_cd = np.array([_chamfer(a, b) for a, b in zip(pred, gt)])
+    part_te = np.array([np.sqrt(np.mean((a[1] - b[1]) ** 2)) for a, b in zip(aligned, target, strict=True)])
+    part_cd = np.array([_chamfer(a, b) for a, b in zip(pred, gt, strict=True)])
     shape_cd = np.array(
-        [np.mean(gt_tree.query(a)[0] ** 2) + np.mean(pred_tree.query(b)[0] ** 2) for a, b in zip(pred, gt)]
+        [np.mean(gt_tree.query(a)[0] ** 2) + np.mean(pred_tree.query(b)[0] ** 2) for a, b in zip(pred, gt, strict=True)]
     )
     return FractureMetrics(
         re=float(np.mean(part_re)),
@@ -156,10 +161,10 @@ def fracture_metrics_from_samples(
 
 
 def fracture_metrics(
-    meshes: Sequence[tuple[np.ndarray, Sequence[Sequence[int]]]],
+    meshes: Sequence[tuple[np.ndarray, ArrayLike]],
     part_ids: Sequence[str],
-    pred_poses,
-    target_poses,
+    pred_poses: ArrayLike,
+    target_poses: ArrayLike,
     dataset: str,
     sample_id: str,
     divisor: float,

@@ -14,19 +14,35 @@ import hashlib
 import json
 import os
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import trimesh
+from numpy.typing import ArrayLike
 
 from aw.formats import FormatError
+from aw.formats.strict_json import parse_json
 from aw.pose import apply_pose, as_finite, pca_frame, quat_to_matrix
 from aw_eval.settings import PROTOCOL_VERSION, ProtocolSettings
 
-__all__ = ["TaskGeometry", "Checkpoint", "load_task_geometry", "part_divisor", "default_cache_dir", "normalize_groups"]
+if TYPE_CHECKING:  # imported where it is built: the kernels are loaded on first use
+    from aw_eval.kernels import TaskIndex
+
+__all__ = [
+    "TaskGeometry",
+    "Checkpoint",
+    "GroupsLike",
+    "load_task_geometry",
+    "part_divisor",
+    "default_cache_dir",
+    "normalize_groups",
+]
+
+# Equivalence groups as given by a caller: each group a collection of part ids or part indices.
+GroupsLike = Iterable[Iterable[str | int | np.integer]]
 
 
 def default_cache_dir() -> Path:
@@ -43,14 +59,14 @@ def part_divisor(vertices: np.ndarray) -> float:
     return float(np.linalg.norm(local.max(axis=0) - local.min(axis=0)))
 
 
-def normalize_groups(groups, part_ids: Sequence[str]) -> tuple[tuple[int, ...], ...]:
+def normalize_groups(groups: GroupsLike, part_ids: Sequence[str]) -> tuple[tuple[int, ...], ...]:
     """Groups given as part ids or indices -> a partition of ``range(P)`` as sorted index tuples,
     ordered by first member; parts not named form singletons. Raises ``ValueError`` on unknown,
     repeated or mixed-up entries."""
     p = len(part_ids)
     pos = {pid: k for k, pid in enumerate(part_ids)}
     seen: set[int] = set()
-    out = []
+    out: list[tuple[int, ...]] = []
     for g in groups:
         idx = []
         for item in g:
@@ -121,7 +137,7 @@ class TaskGeometry:
         if missing:
             raise ValueError(f"all_part_ids lacks scored parts {missing}")
 
-    def __getstate__(self):  # derived caches (KD-trees) are per process
+    def __getstate__(self) -> dict[str, Any]:  # derived caches (KD-trees) are per process
         state = dict(self.__dict__)
         state["_derived"] = {}
         return state
@@ -138,7 +154,8 @@ class TaskGeometry:
     @property
     def centroids(self) -> np.ndarray:
         """``(P, 3)`` sample centroids in the baked frame."""
-        return self.clouds.mean(axis=1)
+        centroids: np.ndarray = self.clouds.mean(axis=1)
+        return centroids
 
     @property
     def group_ids(self) -> list[list[str]]:
@@ -148,7 +165,8 @@ class TaskGeometry:
         """``(P, n, 3)`` normalized target points (cached)."""
         if "target_parts" not in self._derived:
             self._derived["target_parts"] = apply_pose(self.target_poses, self.clouds) / self.divisor
-        return self._derived["target_parts"]
+        parts: np.ndarray = self._derived["target_parts"]
+        return parts
 
     def target_rotations(self) -> np.ndarray:
         """``(P, 3, 3)`` rotation matrices of the target poses (cached)."""
@@ -156,7 +174,8 @@ class TaskGeometry:
             rot = quat_to_matrix(self.target_poses[:, 3:])
             rot.flags.writeable = False
             self._derived["target_rotations"] = rot
-        return self._derived["target_rotations"]
+        rotations: np.ndarray = self._derived["target_rotations"]
+        return rotations
 
     def target_frame(self) -> tuple[np.ndarray, np.ndarray]:
         """The start frame of the joined normalized target (:func:`aw_eval.starts.start_frame`, cached)."""
@@ -164,9 +183,10 @@ class TaskGeometry:
             from aw_eval.starts import start_frame
 
             self._derived["target_frame"] = start_frame(self.index().target)
-        return self._derived["target_frame"]
+        frame: tuple[np.ndarray, np.ndarray] = self._derived["target_frame"]
+        return frame
 
-    def index(self):
+    def index(self) -> TaskIndex:
         """The task's search structures (:class:`aw_eval.kernels.TaskIndex`), built once per process."""
         if "index" not in self._derived:
             from aw_eval.kernels import TaskIndex
@@ -174,23 +194,24 @@ class TaskGeometry:
             self._derived["index"] = TaskIndex(
                 self.target_parts(), self.clouds, self.target_poses, self.divisor, self.target_rotations()
             )
-        return self._derived["index"]
+        index: TaskIndex = self._derived["index"]
+        return index
 
-    def checkpoint(self, poses) -> Checkpoint:
+    def checkpoint(self, poses: ArrayLike) -> Checkpoint:
         """One checkpoint ``poses (P, 7)`` checked, with its rotations and clouds computed once."""
-        poses = self.check_poses(poses)
-        if poses.ndim != 2:
-            raise ValueError(f"one checkpoint has poses (P, 7), got {poses.shape}")
-        rotations = quat_to_matrix(poses[:, 3:])
+        arr = self.check_poses(poses)
+        if arr.ndim != 2:
+            raise ValueError(f"one checkpoint has poses (P, 7), got {arr.shape}")
+        rotations = quat_to_matrix(arr[:, 3:])
         rotations.flags.writeable = False
-        parts = apply_pose(poses, self.clouds, rotations) / self.divisor
-        return Checkpoint(poses, rotations, parts, np.ascontiguousarray(parts.reshape(-1, 3)))
+        parts = apply_pose(arr, self.clouds, rotations) / self.divisor
+        return Checkpoint(arr, rotations, parts, np.ascontiguousarray(parts.reshape(-1, 3)))
 
-    def pred_parts(self, poses) -> np.ndarray:
+    def pred_parts(self, poses: ArrayLike) -> np.ndarray:
         """``(P, n, 3)`` normalized predicted points for ``poses (P, 7)``."""
         return self.checkpoint(poses).parts
 
-    def check_poses(self, poses) -> np.ndarray:
+    def check_poses(self, poses: ArrayLike) -> np.ndarray:
         """Validated ``(P, 7)`` or ``(N, P, 7)`` float64 poses (quaternions must be non-zero)."""
         arr = as_finite(poses, (7,), "poses")
         if arr.ndim < 2 or arr.shape[-2] != self.n_parts:
@@ -216,7 +237,7 @@ class TaskGeometry:
         clouds: np.ndarray,
         target_poses: np.ndarray,
         divisor: float,
-        groups=None,
+        groups: GroupsLike | None = None,
         settings: ProtocolSettings | None = None,
         all_part_ids: Sequence[str] | None = None,
     ) -> TaskGeometry:
@@ -273,11 +294,11 @@ class TaskGeometry:
             raise
 
     @classmethod
-    def load(cls, path: Path, **extra) -> TaskGeometry:
+    def load(cls, path: Path, **extra: Any) -> TaskGeometry:
         with np.load(Path(path), allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"]))
+            meta = parse_json(str(z["meta"]))
             labels = z["group_labels"]
-            groups = [tuple(np.flatnonzero(labels == g).tolist()) for g in np.unique(labels)]
+            groups = tuple(tuple(np.flatnonzero(labels == g).tolist()) for g in np.unique(labels))
             return cls(
                 tuple(meta["part_ids"]),
                 z["clouds"],
@@ -377,8 +398,8 @@ def geometry_from_meshes(
     target_poses: np.ndarray,
     settings: ProtocolSettings | None = None,
     divisor: float | None = None,
-    groups=None,
-    **extra,
+    groups: GroupsLike | None = None,
+    **extra: Any,
 ) -> TaskGeometry:
     """Geometry from baked meshes (no cache): samples + FPS, divisor (unless given), groups."""
     from aw_eval.equivalence import equivalence_groups
@@ -390,7 +411,8 @@ def geometry_from_meshes(
     clouds = part_clouds(list(meshes), settings)
     if groups is None:
         groups = equivalence_groups(clouds, divisor, settings)
-    geom = TaskGeometry(tuple(part_ids), clouds, target_poses, divisor, groups, settings, **extra)
+    ids = tuple(part_ids)
+    geom = TaskGeometry(ids, clouds, target_poses, divisor, normalize_groups(groups, ids), settings, **extra)
     if not geom.key:
         h = hashlib.sha256()
         h.update(settings.fingerprint().encode())

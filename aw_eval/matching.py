@@ -44,8 +44,7 @@ def match_parts(index, moved_parts: np.ndarray, groups, to_baked: tuple) -> tupl
     p = moved_parts.shape[0]
     assign = np.arange(p)
     errors = np.empty(p)
-    tm = tlo = thi = None
-    pm = plo = phi = None
+    bounds: tuple[np.ndarray, ...] | None = None  # only groups of equivalent parts need them
     for g in groups:
         g = list(g)
         if len(g) == 1:
@@ -53,9 +52,10 @@ def match_parts(index, moved_parts: np.ndarray, groups, to_baked: tuple) -> tupl
             errors[i] = index.part_cd(moved_parts, to_baked, i, i)
             continue
         k = len(g)
-        if pm is None:  # only groups of equivalent parts need the bounds
-            tm, (tlo, thi) = index.part_bounds()
-            pm, plo, phi = moved_parts.mean(axis=1), moved_parts.min(axis=1), moved_parts.max(axis=1)
+        if bounds is None:
+            means, (lows, highs) = index.part_bounds()
+            bounds = (means, lows, highs, moved_parts.mean(axis=1), moved_parts.min(axis=1), moved_parts.max(axis=1))
+        tm, tlo, thi, pm, plo, phi = bounds
         cost = np.array(
             [[_box_gap_sq(pm[i], tlo[j], thi[j]) + _box_gap_sq(tm[j], plo[i], phi[i]) for j in g] for i in g]
         )

@@ -11,6 +11,7 @@ errors of :mod:`aw_eval.matching` and the registration's objective:
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from aw_eval.geometry import Checkpoint, TaskGeometry
 from aw_eval.matching import match_parts, match_within_groups
@@ -22,7 +23,6 @@ __all__ = ["finalize", "finalize_costs", "rescore_thresholds"]
 def finalize(geom: TaskGeometry, ck: Checkpoint, reg: Registration, mode: str) -> ScoreResult:
     """Metrics of checkpoint ``ck`` under registration ``reg``: part CDs, Hungarian within groups,
     PA/SR/SCD/SR^a."""
-    st = geom.settings
     moved = ck.parts @ reg.rotation.T + reg.translation
     # registered normalized y = R_reg (R_i c + t_i) / div + t_reg  <=>  c = A_i y + b_i
     a = geom.divisor * np.einsum("pji,kj->pik", ck.rotations, reg.rotation)  # div R_i^T R_reg^T
@@ -58,7 +58,7 @@ def _result(geom: TaskGeometry, reg: Registration, assign: np.ndarray, errors: n
     )
 
 
-def rescore_thresholds(part_errors, thresholds) -> tuple[np.ndarray, np.ndarray]:
+def rescore_thresholds(part_errors: ArrayLike, thresholds: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """PA and SR at other thresholds with registration and matching held fixed.
 
     ``part_errors (..., P)``, ``thresholds (T,)`` -> ``(pa (..., T), sr (..., T))``; a part is
@@ -71,4 +71,4 @@ def rescore_thresholds(part_errors, thresholds) -> tuple[np.ndarray, np.ndarray]
     if thr.ndim != 1 or not np.all(np.isfinite(thr)):
         raise ValueError("thresholds must be a 1-D array of finite numbers")
     ok = e[..., None, :] <= thr[:, None]
-    return ok.mean(axis=-1), ok.all(axis=-1)
+    return ok.mean(axis=-1), np.asarray(ok.all(axis=-1))

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from aw import interrupts
 from aw.cli.common import plural
 from aw.formats import FormatError
 from aw.official.evaluation_cache import EvaluationInputs
@@ -44,7 +45,7 @@ from aw.official.runlog import (
     systems,
 )
 from aw_eval.study.runner import ScoringFailed
-from aw_eval.workers import stop_pool, watch_parent
+from aw_eval.workers import stop_pool, worker_init
 
 __all__ = [
     "is_official_package",
@@ -128,7 +129,7 @@ def score_state(inputs: EvaluationInputs, poses: np.ndarray) -> dict[str, Any]:
             }
             for k, p in enumerate(ids)
         ),
-        key=lambda r: r["part_id"],
+        key=lambda r: str(r["part_id"]),
     )
     kind, index = start_label(res.start_index)
     alignment = {
@@ -174,6 +175,7 @@ def score_attempt(attempt: SampleAttempt, sources: OfficialPackage) -> dict[str,
             scale_divisor=float(inputs.divisor),
         )
     except Exception as exc:  # every failure of one sample is that sample's error row
+        interrupts.reraise_if_interrupted(exc)  # but an interrupt inside a kernel is no sample's failure
         return error_row(base, exc)
 
 
@@ -194,11 +196,13 @@ def evaluate_system(
         pool = ProcessPoolExecutor(
             max_workers=jobs,
             mp_context=multiprocessing.get_context("spawn"),
-            initializer=watch_parent,
+            initializer=worker_init,
             initargs=(os.getpid(),),
         )  # a killed aw-score takes its workers with it
         try:
-            rows = list(pool.map(_score_job, [(a, sources) for a in items]))
+            with interrupts.blocked_for_children():  # the workers are started by the submissions
+                scored = pool.map(_score_job, [(a, sources) for a in items])
+            rows = list(scored)
         except BrokenProcessPool as exc:  # a worker died: the tool failed, not the runs
             stop_pool(pool)
             raise ScoringFailed(
@@ -254,6 +258,7 @@ def evaluate(
         for name, attempts in by_system.items():
             log(f"{name}: scoring {plural(len(attempts), 'attempt')}")
             summaries[name] = evaluate_system(attempts, sources, tmp / name, jobs)
+        interrupts.check()  # an interrupt that a library swallowed: no evaluation of a part
         tmp.rename(out)
     finally:
         if tmp.exists():
@@ -288,7 +293,10 @@ def _overall_text(summary: Mapping[str, Any]) -> str:
     overall = summary.get("official_overall")
     if overall is None:
         return f"partial run ({summary['attempted']}/{summary['expected']} attempted): no Overall"
-    fmt = lambda v: "n/a" if v is None else f"{v:.4f}"  # noqa: E731
+
+    def fmt(v: float | None) -> str:
+        return "n/a" if v is None else f"{v:.4f}"
+
     return f"Overall SCD {fmt(overall['SCD'])}  PA {fmt(overall['PA'])}  SR {fmt(overall['SR'])}"
 
 

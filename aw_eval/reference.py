@@ -62,6 +62,7 @@ def nn_sq(query: np.ndarray, ref: np.ndarray, tree: cKDTree | None = None) -> tu
     distance (n,))``; squared distances are recomputed from coordinates (not from the tree)."""
     tree = cKDTree(ref) if tree is None else tree
     _, idx = tree.query(query)
+    idx = np.asarray(idx)
     return idx, np.sum((query - ref[idx]) ** 2, axis=1)
 
 
@@ -137,7 +138,7 @@ def part_starts(poses: np.ndarray, target_poses: np.ndarray, divisor: float) -> 
     """Same-ID starts in part order: ``R0 = R*_i R_i^T``, ``t0 = (t*_i - R0 t_i) / divisor`` maps
     predicted part ``i`` exactly onto target part ``i`` (normalized units)."""
     out = []
-    for pose, tgt in zip(poses, target_poses):
+    for pose, tgt in zip(poses, target_poses, strict=True):
         r0 = quat_to_matrix(tgt[3:]) @ quat_to_matrix(pose[3:]).T
         out.append((r0, (tgt[:3] - r0 @ pose[:3]) / divisor))
     return out
@@ -156,12 +157,14 @@ def register(pred: np.ndarray, target: np.ndarray, starts, settings: ProtocolSet
     """Best ICP result over ``starts`` (lowest objective, ties to the earlier start)."""
     tree_t, tree_p = cKDTree(target), cKDTree(pred)
     objs = []
-    best = None
+    best: tuple[float, np.ndarray, np.ndarray, int] | None = None
     for k, (r0, t0) in enumerate(starts):
         obj, r, t = icp(pred, target, r0, t0, settings.max_iters, settings.tol, tree_t, tree_p)
         objs.append(obj)
         if best is None or obj < best[0]:
             best = (obj, r, t, k)
+    if best is None:
+        raise ValueError("register needs at least one start")
     return RefRegistration(best[0], best[1], best[2], best[3], np.asarray(objs))
 
 

@@ -20,12 +20,18 @@ guaranteed; see docs/performance.md).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from aw.pose import as_finite
 from aw_eval.geometry import Checkpoint, TaskGeometry
 from aw_eval.kernels import (
     ICPProblem,
+    ICPResult,
+    TaskIndex,
     accelerator_present,
     build_tree,
     coarse_to_fine,
@@ -34,7 +40,7 @@ from aw_eval.kernels import (
     icp_batch,
     same_basin,
 )
-from aw_eval.results import Registration
+from aw_eval.results import Registration, ScoreResult
 from aw_eval.settings import ProtocolSettings
 from aw_eval.starts import pca_starts, same_id_starts, start_frame
 
@@ -70,21 +76,31 @@ def checkpoint_starts(geom: TaskGeometry, ck: Checkpoint) -> tuple[np.ndarray, n
 
 
 def register_points(
-    prob: ICPProblem, r0: np.ndarray, t0: np.ndarray, max_iters: int, tol: float, after_first=None
+    prob: ICPProblem,
+    r0: np.ndarray,
+    t0: np.ndarray,
+    max_iters: int,
+    tol: float,
+    after_first: Callable[[ICPProblem, ICPResult], ICPProblem] | None = None,
 ) -> Registration:
-    """Every start refined by the protocol's ICP; the lowest objective wins, ties to the earlier.
-    ``after_first``: optional ``(problem, first start's ICPResult) -> problem`` for the remaining
-    starts (the same registration problem with another search structure: same answers)."""
+    """Every start ``r0 (S, 3, 3)``, ``t0 (S, 3)`` refined by the protocol's ICP; the lowest
+    objective wins, ties to the earlier. ``after_first``: optional ``(problem, first start's
+    ICPResult) -> problem`` for the remaining starts (the same registration problem with another
+    search structure: same answers)."""
+    if len(r0) < 1:
+        raise ValueError("register_points needs at least one start")
     objs = np.empty(len(r0))
-    best = None
+    best: ICPResult | None = None
+    best_k = 0
     for k in range(len(r0)):
         res = prob.run(r0[k], t0[k], max_iters, tol)
         objs[k] = res.objective
-        if best is None or res.objective < best[0]:
-            best = (res.objective, res.rotation, res.translation, k)
+        if best is None or res.objective < best.objective:
+            best, best_k = res, k
         if k == 0 and after_first is not None:
             prob = after_first(prob, res)
-    return Registration(float(best[0]), best[1], best[2], int(best[3]), objs)
+    assert best is not None  # at least one start ran
+    return Registration(float(best.objective), best.rotation, best.translation, best_k, objs)
 
 
 # Part walks per backward search from which a prediction gets its own Delaunay graph (see
@@ -95,7 +111,9 @@ def register_points(
 CONTACT_WALKS = 1.3
 
 
-def _own_graph_where_parts_touch(index, pred_parts: np.ndarray):
+def _own_graph_where_parts_touch(
+    index: TaskIndex, pred_parts: np.ndarray
+) -> Callable[[ICPProblem, ICPResult], ICPProblem]:
     """``after_first`` hook of :func:`register_points` for ``exact``: where the first start's
     backward search walked more than ``CONTACT_WALKS`` parts per query (parts in contact: every
     query near a contact walks both parts), the remaining starts search the prediction's own
@@ -103,7 +121,7 @@ def _own_graph_where_parts_touch(index, pred_parts: np.ndarray):
     checkpoint). The neighbours are exact either way; only the objective's summation order
     changes (last digits)."""
 
-    def after_first(prob: ICPProblem, first) -> ICPProblem:
+    def after_first(prob: ICPProblem, first: ICPResult) -> ICPProblem:
         if first.part_searches == 0 or first.part_walks <= CONTACT_WALKS * first.part_searches:
             return prob
         own, has_graph = index.own_problem(pred_parts)
@@ -124,7 +142,9 @@ def jax_part_maps(geom: TaskGeometry, cks: list[Checkpoint]) -> np.ndarray:
     return np.concatenate([rt, -(rt @ t[..., None])], axis=3)
 
 
-def register_exact_many(geom: TaskGeometry, cks: list[Checkpoint], stats: dict | None = None) -> list[Registration]:
+def register_exact_many(
+    geom: TaskGeometry, cks: list[Checkpoint], stats: dict[str, Any] | None = None
+) -> list[Registration]:
     """The protocol's registration of every checkpoint of ``cks`` at once (``jax`` backend): all
     starts of all checkpoints batched, neighbours certified by the task's leaf boxes
     (:meth:`aw_eval.kernels.TaskIndex.part_leaves`: the joined target forward, the parts' baked
@@ -173,7 +193,7 @@ def register_fast(geom: TaskGeometry, ck: Checkpoint) -> Registration:
     return Registration(res.objective, res.rotation, res.translation, start, None)
 
 
-def near_threshold(result, settings: ProtocolSettings, margin: float) -> bool:
+def near_threshold(result: ScoreResult, settings: ProtocolSettings, margin: float) -> bool:
     """True when a PA/SR or SR^a decision of ``result`` is within a factor ``margin`` of its threshold."""
     e = np.asarray(result.part_errors)
     thr, sra = settings.threshold, settings.sra_threshold
@@ -196,30 +216,35 @@ def escalate(geom: TaskGeometry, ck: Checkpoint, reg: Registration, warm: Regist
     near = warm is not None and same_basin(
         warm.rotation, warm.translation, reg.rotation, reg.translation, fast.warm_deg, fast.warm_t
     )
-    start = warm if near else reg
+    start = warm if near and warm is not None else reg
     res = _full_problem(geom, ck).run(start.rotation, start.translation, st.max_iters, st.tol)
     if res.objective < reg.scd:
         return Registration(res.objective, res.rotation, res.translation, reg.start_index, None)
     return reg
 
 
-def register(pred, target, starts=None, settings=None) -> Registration:
+def register(
+    pred: ArrayLike,
+    target: ArrayLike,
+    starts: tuple[ArrayLike, ArrayLike] | None = None,
+    settings: ProtocolSettings | None = None,
+) -> Registration:
     """Protocol ICP of ``pred (n, 3)`` onto ``target (m, 3)`` from ``starts`` (``(R0 (S, 3, 3),
     t0 (S, 3))``; default: the 24 PCA starts), best objective over starts (ties to the earlier)."""
     settings = settings or ProtocolSettings()
-    pred = as_finite(pred, (3,), "pred")
-    target = as_finite(target, (3,), "target")
-    if pred.ndim != 2 or target.ndim != 2 or len(pred) < 1 or len(target) < 1:
-        raise ValueError(f"register takes point sets (n, 3) and (m, 3), got {pred.shape} and {target.shape}")
+    pts = as_finite(pred, (3,), "pred")
+    tgt = as_finite(target, (3,), "target")
+    if pts.ndim != 2 or tgt.ndim != 2 or len(pts) < 1 or len(tgt) < 1:
+        raise ValueError(f"register takes point sets (n, 3) and (m, 3), got {pts.shape} and {tgt.shape}")
     if starts is None:
-        r0, t0 = pca_starts(start_frame(pred), start_frame(target))
+        r0, t0 = pca_starts(start_frame(pts), start_frame(tgt))
     else:
         r0 = as_finite(starts[0], (3, 3), "start rotations").reshape(-1, 3, 3)
         t0 = as_finite(starts[1], (3,), "start translations").reshape(-1, 3)
         if len(r0) != len(t0) or len(r0) < 1:
             raise ValueError("starts need as many rotations as translations (at least one)")
-    tree_p, tree_t = build_tree(pred), build_tree(target)
-    prob = ICPProblem(pred, target, tree_t=tree_t, tree_p=tree_p, graph_t=graph_for(tree_t), graph_p=graph_for(tree_p))
+    tree_p, tree_t = build_tree(pts), build_tree(tgt)
+    prob = ICPProblem(pts, tgt, tree_t=tree_t, tree_p=tree_p, graph_t=graph_for(tree_t), graph_p=graph_for(tree_p))
     return register_points(prob, r0, t0, settings.max_iters, settings.tol)
 
 
@@ -241,7 +266,7 @@ def resolve_backend(backend: str, mode: str) -> str:
     return backend
 
 
-def register_checkpoint(geom: TaskGeometry, poses, mode: str = "exact") -> Registration:
+def register_checkpoint(geom: TaskGeometry, poses: ArrayLike, mode: str = "exact") -> Registration:
     """The protocol's registration of one checkpoint ``poses (P, 7)`` (all starts in ``exact``)."""
     check_mode(mode)
     ck = geom.checkpoint(poses)

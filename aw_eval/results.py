@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -82,7 +83,7 @@ class BatchScores:
     start_index: np.ndarray
     mode: str = "exact"
     n_unique: int = 0
-    stats: dict = field(default_factory=dict)
+    stats: dict[str, Any] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.pa.shape[0])
@@ -106,7 +107,25 @@ class BatchScores:
         )
 
     @classmethod
-    def stack(cls, rows: list[ScoreResult], mode: str, n_unique: int, stats: dict | None = None) -> BatchScores:
+    def empty(cls, n_parts: int, mode: str) -> BatchScores:
+        """No rows, for a task of ``n_parts`` scored parts."""
+        return cls(
+            part_errors=np.zeros((0, n_parts)),
+            assignment=np.zeros((0, n_parts), dtype=np.int64),
+            pa=np.zeros(0),
+            sr=np.zeros(0, dtype=bool),
+            scd=np.zeros(0),
+            sra=np.zeros(0, dtype=bool),
+            reg_rotation=np.zeros((0, 3, 3)),
+            reg_translation=np.zeros((0, 3)),
+            start_index=np.zeros(0, dtype=np.int64),
+            mode=mode,
+        )
+
+    @classmethod
+    def stack(
+        cls, rows: list[ScoreResult], mode: str, n_unique: int, stats: dict[str, Any] | None = None
+    ) -> BatchScores:
         p = len(rows[0].part_errors) if rows else 0
         return cls(
             part_errors=np.array([r.part_errors for r in rows]).reshape(len(rows), p),

@@ -19,9 +19,12 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from aw import progress as _progress
 from aw_eval.chamfer import chamfer_pairs
@@ -49,20 +52,20 @@ __all__ = ["MODES", "BACKENDS", "JAX_CHUNK", "score", "score_batch", "part_diagn
 JAX_CHUNK = 32
 
 
-def score(geom: TaskGeometry, poses, mode: str = "exact", backend: str = "auto") -> ScoreResult:
+def score(geom: TaskGeometry, poses: ArrayLike, mode: str = "exact", backend: str = "auto") -> ScoreResult:
     """Score one checkpoint ``poses (P, 7)`` (scored parts, in ``geom.part_ids`` order)."""
     check_mode(mode)
     backend = resolve_backend(backend, mode)
-    poses = geom.check_poses(poses)
-    if poses.ndim != 2:
-        raise ValueError(f"score takes one checkpoint (P, 7); use score_batch for {poses.shape}")
+    arr = geom.check_poses(poses)
+    if arr.ndim != 2:
+        raise ValueError(f"score takes one checkpoint (P, 7); use score_batch for {arr.shape}")
     if backend == "jax":
-        return _score_many_jax(geom, [geom.checkpoint(poses)], mode)[0]
-    return _score_one(geom, geom.checkpoint(poses), mode, None)[0]
+        return _score_many_jax(geom, [geom.checkpoint(arr)], mode)[0]
+    return _score_one(geom, geom.checkpoint(arr), mode, None)[0]
 
 
 def _score_many_jax(
-    geom: TaskGeometry, cks: list[Checkpoint], mode: str, stats: dict | None = None
+    geom: TaskGeometry, cks: list[Checkpoint], mode: str, stats: dict[str, Any] | None = None
 ) -> list[ScoreResult]:
     """``exact`` scores of ``cks`` on the jax backend: registration and the part CDs within
     equivalence groups batched over the checkpoints; the Hungarian step and the metrics on the
@@ -73,13 +76,14 @@ def _score_many_jax(
     padded = cks + [cks[-1]] * (size - len(cks))
     geom.index().part_leaves(geom.divisor)  # built once per task
     t1 = time.perf_counter()
-    icp_stats: dict = {}
+    icp_stats: dict[str, Any] = {}
     regs = register_exact_many(geom, padded, icp_stats)
     t2 = time.perf_counter()
-    moved = np.stack([ck.parts @ r.rotation.T + r.translation for ck, r in zip(padded, regs)])
+    moved = np.stack([ck.parts @ r.rotation.T + r.translation for ck, r in zip(padded, regs, strict=True)])
     costs = part_cd_batch(moved, geom.target_parts(), [(i, j) for g in geom.groups for i in g for j in g])
     t3 = time.perf_counter()
-    out = [finalize_costs(geom, r, c, mode) for r, c in zip(regs[: len(cks)], costs)]
+    n = len(cks)  # the padding's results are dropped
+    out = [finalize_costs(geom, r, c, mode) for r, c in zip(regs[:n], costs[:n], strict=True)]
     if stats is not None:
         t4 = time.perf_counter()
         for key, v in (
@@ -115,7 +119,13 @@ def _score_one(
     return res, refined
 
 
-def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None, backend: str = "auto") -> BatchScores:
+def score_batch(
+    geom: TaskGeometry,
+    poses: ArrayLike,
+    mode: str = "exact",
+    progress: Callable[[int, int], object] | None = None,
+    backend: str = "auto",
+) -> BatchScores:
     """Score ``poses (N, P, 7)`` in row order (identical rows are scored once, at their first
     occurrence). ``exact`` rows equal :func:`score`'s. In ``fast`` mode the rows are taken as a
     trajectory: a row refined near a threshold starts its refinement from the previous row's
@@ -131,23 +141,19 @@ def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None, b
     """
     check_mode(mode)
     backend = resolve_backend(backend, mode)
-    poses = geom.check_poses(poses)
-    if poses.ndim != 3:
-        raise ValueError(f"score_batch takes (N, P, 7) poses, got {poses.shape}")
-    n = poses.shape[0]
+    rows_poses = geom.check_poses(poses)
+    if rows_poses.ndim != 3:
+        raise ValueError(f"score_batch takes (N, P, 7) poses, got {rows_poses.shape}")
+    n = rows_poses.shape[0]
     if n == 0:
-        empty = ScoreResult(
-            0.0, False, 0.0, False, np.zeros(geom.n_parts), np.arange(geom.n_parts), np.eye(3), np.zeros(3), 0
-        )
-        out = BatchScores.stack([empty], mode, 0)
-        return BatchScores(**{k: (v[:0] if isinstance(v, np.ndarray) else v) for k, v in out.__dict__.items()})
-    flat = np.ascontiguousarray(poses.reshape(n, -1))
+        return BatchScores.empty(geom.n_parts, mode)
+    flat = np.ascontiguousarray(rows_poses.reshape(n, -1))
     _, first, inverse = np.unique(flat, axis=0, return_index=True, return_inverse=True)
     t0 = time.perf_counter()
-    results = {}
-    warm = None
-    order = sorted(first)
-    stats = {"seconds": 0.0}
+    results: dict[int, ScoreResult] = {}
+    warm: Registration | None = None
+    order = [int(k) for k in sorted(first)]
+    stats: dict[str, Any] = {"seconds": 0.0}
     long_work = _LongWork(
         len(first), f"scoring {len(first)} states of a {geom.n_parts}-part task ({mode}, {backend})", t0
     )
@@ -156,13 +162,17 @@ def score_batch(geom: TaskGeometry, poses, mode: str = "exact", progress=None, b
         for lo in range(0, len(order), JAX_CHUNK):
             keys = order[lo : lo + JAX_CHUNK]
             results.update(
-                zip(keys, _score_many_jax(geom, [geom.checkpoint(poses[k]) for k in keys], mode, stats["jax"]))
+                zip(
+                    keys,
+                    _score_many_jax(geom, [geom.checkpoint(rows_poses[k]) for k in keys], mode, stats["jax"]),
+                    strict=True,
+                )
             )
             long_work.done(lo + len(keys))
             if progress is not None:
                 progress(lo + len(keys), len(first))
     for done, k in enumerate(order if backend == "numba" else []):
-        results[k], warm = _score_one(geom, geom.checkpoint(poses[k]), mode, warm)
+        results[k], warm = _score_one(geom, geom.checkpoint(rows_poses[k]), mode, warm)
         long_work.done(done + 1)
         if progress is not None:
             progress(done + 1, len(first))
@@ -217,7 +227,7 @@ class PartDiagnostics:
         return ~self.never_moved
 
 
-def _row(result, row: int | None) -> ScoreResult:
+def _row(result: ScoreResult | BatchScores, row: int | None) -> ScoreResult:
     if isinstance(result, BatchScores):
         if row is None:
             if len(result) != 1:
@@ -227,18 +237,24 @@ def _row(result, row: int | None) -> ScoreResult:
     return result
 
 
-def part_diagnostics(geom: TaskGeometry, poses, result, row: int | None = None, atol: float = 1e-9) -> PartDiagnostics:
+def part_diagnostics(
+    geom: TaskGeometry,
+    poses: ArrayLike,
+    result: ScoreResult | BatchScores,
+    row: int | None = None,
+    atol: float = 1e-9,
+) -> PartDiagnostics:
     """Diagnostics of one checkpoint ``poses (P, 7)`` scored as ``result`` (a :class:`ScoreResult`,
     or a :class:`BatchScores` with ``row``)."""
     res = _row(result, row)
-    poses = geom.check_poses(poses)
-    if poses.ndim != 2:
-        raise ValueError(f"part_diagnostics takes one checkpoint (P, 7), got {poses.shape}")
-    moved = geom.checkpoint(poses).parts @ res.reg_rotation.T + res.reg_translation
+    arr = geom.check_poses(poses)
+    if arr.ndim != 2:
+        raise ValueError(f"part_diagnostics takes one checkpoint (P, 7), got {arr.shape}")
+    moved = geom.checkpoint(arr).parts @ res.reg_rotation.T + res.reg_translation
     matched = geom.target_parts()[res.assignment]
     mc, tc = moved.mean(axis=1), matched.mean(axis=1)
     offset = np.linalg.norm(mc - tc, axis=1)
     centred = chamfer_pairs(moved - mc[:, None, :], matched - tc[:, None, :])
-    q = poses[:, 3:] / np.linalg.norm(poses[:, 3:], axis=1, keepdims=True)
-    never = (np.abs(poses[:, :3]).max(axis=1) <= atol) & (np.abs(np.abs(q[:, 0]) - 1.0) <= atol)
+    q = arr[:, 3:] / np.linalg.norm(arr[:, 3:], axis=1, keepdims=True)
+    never = (np.abs(arr[:, :3]).max(axis=1) <= atol) & (np.abs(np.abs(q[:, 0]) - 1.0) <= atol)
     return PartDiagnostics(offset, centred, never, np.asarray(res.part_errors), np.asarray(res.assignment))

@@ -2,8 +2,10 @@
 
 A scoring worker watches its parent: when the parent is gone (killed with SIGKILL, or ended
 without stopping its pool) the worker exits within :data:`WATCH_SECONDS`, rather than scoring
-on for minutes with nobody to receive the result. :func:`stop_pool` ends a pool's workers at
-once (Ctrl-C, SIGTERM, a failure), where ``shutdown`` would wait for the running tasks.
+on for minutes with nobody to receive the result. A worker ignores SIGINT and SIGHUP, which a
+terminal sends to the whole process group: the parent acts on them (:mod:`aw.interrupts`).
+:func:`stop_pool` ends a pool's workers at once (Ctrl-C, SIGTERM, a failure), where ``shutdown``
+would wait for the running tasks.
 """
 
 from __future__ import annotations
@@ -13,7 +15,9 @@ import threading
 import time
 from concurrent.futures import ProcessPoolExecutor
 
-__all__ = ["WATCH_SECONDS", "watch_parent", "stop_pool"]
+from aw import interrupts
+
+__all__ = ["WATCH_SECONDS", "watch_parent", "worker_init", "stop_pool"]
 
 WATCH_SECONDS = 0.5
 
@@ -29,6 +33,13 @@ def watch_parent(parent: int) -> None:
         os._exit(1)
 
     threading.Thread(target=watch, name="aw-watch-parent", daemon=True).start()
+
+
+def worker_init(parent: int) -> None:
+    """A pool ``initializer`` (``initargs=(os.getpid(),)``): signals left to the parent, and an
+    end with it."""
+    interrupts.ignore_in_worker()
+    watch_parent(parent)
 
 
 def stop_pool(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:

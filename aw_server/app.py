@@ -7,7 +7,7 @@ rejected calls too), and turns results into MCP content and errors into ``ToolEr
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Literal
 
 import anyio.to_thread
 from mcp.server.mcpserver import Image, MCPServer
@@ -98,6 +98,7 @@ def _make_tool(spec: ToolSpec, episode: Episode) -> EpisodeTool:
         parameters=input_schema(spec),
         fn_metadata=meta,
         is_async=False,
+        context_kwarg=None,
         annotations=_annotations(spec),
         spec=spec,
         episode=episode,
@@ -132,7 +133,7 @@ def _reference_resources(task: Task) -> list[FunctionResource]:
 def _prompt(task: Task) -> Prompt:
     def render() -> list[UserMessage]:
         messages = [UserMessage(task.prompt)]
-        for i, path in enumerate(task.reference_paths(), start=1):
+        for path in task.reference_paths():
             fmt = _MIME.get(path.suffix.lower(), "image/png").split("/")[1]
             messages.append(UserMessage(Image(data=path.read_bytes(), format=fmt)))
         return messages
@@ -146,10 +147,14 @@ def _prompt(task: Task) -> Prompt:
     )
 
 
-def build_server(episode: Episode, *, log_level: str = "WARNING") -> MCPServer:
+# The server's log levels (aw-serve --log-level offers the first four).
+LogLevel = Literal["DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL"]
+
+
+def build_server(episode: Episode, *, log_level: LogLevel = "WARNING") -> MCPServer:
     """An ``MCPServer`` exposing ``episode``'s tools, its task prompt and its reference images."""
     task = episode.task
-    tools = [_make_tool(spec, episode) for spec in TOOL_SPECS]
+    tools: list[Tool] = [_make_tool(spec, episode) for spec in TOOL_SPECS]
     resources = _reference_resources(task)
     prompt_text = FunctionResource(
         uri=PROMPT_URI,

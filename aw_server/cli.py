@@ -23,8 +23,12 @@ import select
 import signal
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from aw.cli.common import EXIT_USAGE, add_overwrite, new_parser
+
+if TYPE_CHECKING:  # the server's imports wait until the arguments are checked
+    from aw.formats import EndReason
 
 REFUSAL_WAIT_S = 3.0  # how long a refused stdio start waits for the client's initialize request
 
@@ -140,15 +144,17 @@ def _refuse_initialize(message: str, wait_s: float = REFUSAL_WAIT_S) -> None:
     Gives up ``wait_s`` seconds after the last request (or after starting, if none comes)."""
     import json
 
+    from aw.formats.strict_json import parse_json
+
     try:
         if sys.stdin is None or sys.stdin.isatty():
             return
         while select.select([sys.stdin], [], [], wait_s)[0]:
-            line = sys.stdin.readline()
+            line = sys.stdin.readline(1 << 20)  # a request is small: a longer line is not one
             if not line:
                 return  # the client closed our stdin: it has read the replies
             try:
-                request = json.loads(line)
+                request = parse_json(line)
             except ValueError:
                 return
             if isinstance(request, dict) and "id" in request and "method" in request:
@@ -181,14 +187,18 @@ def next_attempt_dir(parent: Path, task_id: str) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    typed = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(typed)
+    from aw.cli.common import UsageError
+    from aw.cli.paths import check_paths
     from aw.formats import FormatError, read_task
 
     serving = not (args.print_prompt or args.print_references)
     stdio = serving and args.transport == "stdio"
     try:
+        check_paths("aw-serve", typed, [(args.task_dir, "task")])
         task = read_task(args.task_dir)
-    except FormatError as exc:
+    except (FormatError, UsageError) as exc:
         return _fail(str(exc), tell_client=stdio)
     if args.print_prompt or args.print_references:
         try:
@@ -257,7 +267,8 @@ def main(argv: list[str] | None = None) -> int:
     else:
         from aw_server.app import build_server
 
-    reason, message = "disconnect", ""
+    reason: EndReason = "disconnect"
+    message = ""
     try:
         server = build_server(episode, log_level=args.log_level)
         if args.transport == "stdio":

@@ -37,6 +37,7 @@ from PIL import Image as PILImage
 
 from aw.episode import Episode
 from aw.webmcp import BadInput, NotRegistered, WebMcpPage, check_arguments, parse_tool_input, short_repr
+from aw_server.app import LogLevel
 from aw_server.tools import CONVENTIONS_TEXT
 
 log = logging.getLogger(__name__)
@@ -125,6 +126,7 @@ def _tool(name: str, handler: Callable[[dict], CallToolResult], read_only: bool,
         parameters=META_SCHEMAS[name],
         fn_metadata=FuncMetadata(arg_model=_RawArgs),
         is_async=False,
+        context_kwarg=None,
         annotations=ToolAnnotations(read_only_hint=read_only, open_world_hint=False),
         handler=handler,
         episode=episode,
@@ -189,14 +191,14 @@ class OfficialSurface:
         try:
             data = path.read_bytes()
             with PILImage.open(path) as picture:
-                mime = PILImage.MIME[picture.format]
+                mime = PILImage.MIME[picture.format or ""]  # no format: KeyError, refused below
         except (OSError, KeyError):
             return _text(f"reference page {page} cannot be read", error=True)
         return CallToolResult(
             content=[ImageContent(type="image", data=base64.b64encode(data).decode("ascii"), mime_type=mime)]
         )
 
-    def tools(self) -> list[_MetaTool]:
+    def tools(self) -> list[Tool]:
         return [
             _tool("list_pages", self.list_pages, True, self.episode),
             _tool("list_webmcp_tools", self.list_webmcp_tools, True, self.episode),
@@ -205,7 +207,7 @@ class OfficialSurface:
         ]
 
 
-def build_official_server(episode: Episode, *, log_level: str = "WARNING") -> MCPServer:
+def build_official_server(episode: Episode, *, log_level: LogLevel = "WARNING") -> MCPServer:
     """An ``MCPServer`` with the official agent-facing tools over ``episode``."""
     surface = OfficialSurface(episode)
     return MCPServer(

@@ -10,6 +10,7 @@ line's top level, else ``null`` as JSON-RPC 2.0 prescribes.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from typing import Any
 
 import anyio
@@ -95,7 +96,7 @@ def error_reply(exc: Exception) -> JSONRPCError | None:
     if not isinstance(exc, ValidationError):
         return None
     errors = exc.errors()
-    first = errors[0] if errors else {}
+    first: Mapping[str, Any] = errors[0] if errors else {}
     raw: Any = first.get("input")
     if first.get("type") == "json_invalid":
         detail = str(first.get("msg", "invalid JSON"))

@@ -71,8 +71,13 @@ def bench_parts(p: int, args, rows: list, agree: list) -> None:
         "compile_s": max(0.0, first_fast - warm_fast),
     }
     same = cks[: max(args.ref, args.exact)]
-    ref_score = lambda c: ref.score(geom.clouds, geom.target_poses, geom.divisor, geom.groups, c, geom.settings)  # noqa: E731
-    exact_score = lambda c: aw_eval.score(geom, c, mode="exact")  # noqa: E731
+
+    def ref_score(c):
+        return ref.score(geom.clouds, geom.target_poses, geom.divisor, geom.groups, c, geom.settings)
+
+    def exact_score(c):
+        return aw_eval.score(geom, c, mode="exact")
+
     # reference and exact alternate checkpoint by checkpoint, so that a shared machine's load
     # changes weigh on both alike
     t_ref = t_exact = 0.0
@@ -94,10 +99,10 @@ def bench_parts(p: int, args, rows: list, agree: list) -> None:
         if args.ref:
             k = min(args.ref, args.exact)
             row["exact_vs_reference_identical_pa_sr"] = sum(
-                (e.pa, e.sr) == (r.pa, r.sr) for e, r in zip(eres[:k], rres[:k])
+                (e.pa, e.sr) == (r.pa, r.sr) for e, r in zip(eres[:k], rres[:k], strict=True)
             )
             row["exact_vs_reference_max_rel_scd"] = max(
-                abs(e.scd - r.scd) / max(r.scd, 1e-300) for e, r in zip(eres[:k], rres[:k])
+                abs(e.scd - r.scd) / max(r.scd, 1e-300) for e, r in zip(eres[:k], rres[:k], strict=True)
             )
             row["exact_vs_reference_compared"] = k
     t, fres = time_calls(lambda c: aw_eval.score(geom, c, mode="fast"), same if len(same) else cks[:1])
@@ -438,15 +443,16 @@ def main(argv=None) -> int:
     print(f"wrote {out}")
     print("\n| parts | reference s/ck | exact s/ck | fast s/ck | exact x | fast x | compile s | peak MiB |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+
+    def cell(r, k, fmt="{:.3g}"):
+        v = r.get(k)
+        return fmt.format(v) if isinstance(v, (int, float)) else "-"
+
     for r in rows:
-
-        def f(k, fmt="{:.3g}"):
-            v = r.get(k)
-            return fmt.format(v) if isinstance(v, (int, float)) else "-"
-
         print(
-            f"| {r['parts']} | {f('reference_s_per_ck')} | {f('exact_s_per_ck')} | {f('fast_s_per_ck_same')} | "
-            f"{f('exact_speedup', '{:.1f}')} | {f('fast_speedup', '{:.0f}')} | {f('compile_s', '{:.2f}')} | {f('peak_mib', '{:.0f}')} |"
+            f"| {r['parts']} | {cell(r, 'reference_s_per_ck')} | {cell(r, 'exact_s_per_ck')} | "
+            f"{cell(r, 'fast_s_per_ck_same')} | {cell(r, 'exact_speedup', '{:.1f}')} | "
+            f"{cell(r, 'fast_speedup', '{:.0f}')} | {cell(r, 'compile_s', '{:.2f}')} | {cell(r, 'peak_mib', '{:.0f}')} |"
         )
     for r in rows:
         for b in args.fast_batches:

@@ -182,7 +182,7 @@ def _run(cmd: list[str], limit: float) -> dict:
         return {"error": f"stopped after {limit:.0f} s", "warnings": [x for x in err.splitlines() if "Warning" in x]}
     wall = time.perf_counter() - t
     if done.returncode != 0:
-        return {"error": (done.stderr.strip().splitlines() or ["exit %d" % done.returncode])[-1]}
+        return {"error": (done.stderr.strip().splitlines() or [f"exit {done.returncode}"])[-1]}
     out = json.loads(done.stdout.strip().splitlines()[-1])
     out["wall_s"] = wall
     out["warnings"] = [line for line in done.stderr.splitlines() if "Warning" in line]

@@ -101,7 +101,7 @@ async def run(task_dir: Path, run_dir: Path, args) -> dict:
         out["capture_first_s"] = time.perf_counter() - t
         assert not r.is_error
         samples, sizes = [], []
-        for i in range(args.captures):
+        for _ in range(args.captures):
             await c.call_tool("move_camera", {"yaw": 7})
             t = time.perf_counter()
             r = await c.call_tool("capture_scene", {})

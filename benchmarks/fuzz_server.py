@@ -258,23 +258,23 @@ class OfficialGen(ArgGen):
         kind = r.randrange(9)
         if kind == 0:  # deep nesting: past orjson's and Python's limits
             d = r.choice([33, 253, 254, 300, 1000, 5000, 20000])
-            return '{"ids": %s, "delta": [0, 0, 0]}' % ("[" * d + "]" * d)
+            return '{"ids": ' + "[" * d + "]" * d + ', "delta": [0, 0, 0]}'
         if kind == 1:  # lone UTF-16 surrogates, in a value or a key
-            sur = "\\u%04x" % r.choice([0xD800, 0xDBFF, 0xDC00, 0xDFFF])
+            sur = f"\\u{r.choice([0xD800, 0xDBFF, 0xDC00, 0xDFFF]):04x}"
             return r.choice(
                 [
-                    '{"ids": %s, "name": "a%sb"}' % (json.dumps(self.r.sample(self.ids, 2)), sur),
-                    '{"%s": 1}' % sur,
-                    '{"id": "%s"}' % sur,
+                    '{"ids": ' + json.dumps(self.r.sample(self.ids, 2)) + ', "name": "a' + sur + 'b"}',
+                    '{"' + sur + '": 1}',
+                    '{"id": "' + sur + '"}',
                 ]
             )
         if kind == 2:  # integers beyond float range, or beyond Python's 4300-digit text limit
             digits = "9" * r.choice([309, 400, 4300, 4301, 6000])
             return r.choice(
                 [
-                    '{"ids": ["part-0001"], "delta": [%s, 0, 0]}' % digits,
-                    '{"yaw": -%s}' % digits,
-                    '{"id": "part-0001", "position": [0, 0, %s]}' % digits,
+                    '{"ids": ["part-0001"], "delta": [' + digits + ", 0, 0]}",
+                    '{"yaw": -' + digits + "}",
+                    '{"id": "part-0001", "position": [0, 0, ' + digits + "]}",
                 ]
             )
         if kind == 3:

@@ -137,7 +137,10 @@ def main() -> None:
             row = {"parts": parts, "points_per_part": args.n_fps}
             for name, (ts, ps, cand) in structs.items():
                 row[name] = {"build_s_once_per_task": round(build[name], 4)}
-                for label, transforms in (("starts", list(zip(r0, t0_))), ("final", [(reg.rotation, reg.translation)])):
+                for label, transforms in (
+                    ("starts", list(zip(r0, t0_, strict=True))),
+                    ("final", [(reg.rotation, reg.translation)]),
+                ):
                     fwd, bwd = [], []
                     for r, t in transforms:
                         x = ck.points @ r.T + t

@@ -66,8 +66,10 @@ def profile_fast(geom, poses: np.ndarray) -> dict:
         t = time.perf_counter()
         cold = [aw_eval.score(geom, p, mode="fast") for p in poses]
         out["one_at_a_time"] = {"seconds": time.perf_counter() - t, "refinements": c.runs, "iterations": c.iterations}
-    out["pa_sr_identical"] = int(sum(a.pa == pa and a.sr == sr for a, pa, sr in zip(cold, traj.pa, traj.sr)))
-    out["scd_max_rel_diff"] = float(max(abs(a.scd - b) / b for a, b in zip(cold, traj.scd)))
+    out["pa_sr_identical"] = int(
+        sum(a.pa == pa and a.sr == sr for a, pa, sr in zip(cold, traj.pa, traj.sr, strict=True))
+    )
+    out["scd_max_rel_diff"] = float(max(abs(a.scd - b) / b for a, b in zip(cold, traj.scd, strict=True)))
     return out
 
 

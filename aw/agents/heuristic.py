@@ -19,8 +19,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from aw.agents.base import AgentContext, AgentOutcome, ObjectInfo, aim_camera, begin, inspect_objects, look_around
+from aw.agents.session import ToolSession
 from aw.pose import matrix_to_quat, quat_to_matrix
-from aw.runner.tools import ToolSession
 
 STICK_ASPECT = 2.5
 SAME_LENGTH = 0.15
@@ -104,7 +104,7 @@ async def run(tools: ToolSession, ctx: AgentContext) -> AgentOutcome:
     top = leg_height + float(p_hi[2] - p_lo[2])
 
     corners = [(-1, -1), (1, 1), (1, -1), (-1, 1)]
-    for (o, ax), (sx, sy) in zip(legs, corners):
+    for (o, ax), (sx, sy) in zip(legs, corners[: len(legs)], strict=True):  # two to four legs
         await ctx.think()
         # Stand the stick up: 90 degrees about the horizontal axis across it.
         rot = Rotation.from_euler("xyz", [90.0, 0, 0] if ax == 1 else [0, 90.0, 0], degrees=True).as_matrix()

@@ -3,21 +3,25 @@
 - Help is plain text (no markup); every flag has a help line.
 - ``--overwrite`` is the only replace-existing flag (``--force`` / ``--fresh`` are accepted,
   hidden, for old scripts).
-- ``--jobs J`` defaults to the number of CPU cores this process may use (:func:`default_jobs`).
+- ``--jobs J`` defaults to the number of CPU cores this process may use (:func:`aw.cores.available_cores`).
 - Exit status 2: a usage error (bad flag or value, a path that cannot be used), said before any
   work starts; 1: a failure while working (including a run in which every episode failed);
-  130: interrupted. Errors are one line, ``PROG: error: ...``, never a traceback.
+  130: interrupted (128 + the signal: 143 for SIGTERM, 129 for SIGHUP, where the command
+  handles those). Errors are one line, ``PROG: error: ...``, never a traceback.
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
 import os
+import signal
 import sys
 import textwrap
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
+
+from aw.cores import available_cores
 
 __all__ = [
     "EXIT_OK",
@@ -32,7 +36,6 @@ __all__ = [
     "add_hidden_alias",
     "add_jobs",
     "add_no_progress",
-    "default_jobs",
     "positive_int",
     "positive_float",
     "nonnegative_float",
@@ -84,14 +87,18 @@ def new_parser(prog: str, description: str, epilog: str | None = None) -> argpar
     return argparse.ArgumentParser(prog=prog, description=description, epilog=epilog, formatter_class=_Formatter)
 
 
-def add_commands(p: argparse.ArgumentParser) -> argparse._SubParsersAction:
+class _CommandParser(argparse.ArgumentParser):
+    """A subcommand's parser: the same plain help as :func:`new_parser`."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", _Formatter)
+        super().__init__(*args, **kwargs)
+
+
+def add_commands(p: argparse.ArgumentParser) -> argparse._SubParsersAction[_CommandParser]:
     """Subcommands (``args.command``, required) whose parsers speak the same plain help."""
     return p.add_subparsers(
-        dest="command",
-        metavar="COMMAND",
-        required=True,
-        help="one of:",
-        parser_class=functools.partial(argparse.ArgumentParser, formatter_class=_Formatter),
+        dest="command", metavar="COMMAND", required=True, help="one of:", parser_class=_CommandParser
     )
 
 
@@ -110,14 +117,6 @@ def add_overwrite(p: argparse.ArgumentParser, what: str) -> None:
     """``--overwrite`` (``args.overwrite``): replace ``what``; ``--force``/``--fresh`` are hidden aliases."""
     p.add_argument("--overwrite", action="store_true", help=f"replace {what}")
     add_hidden_alias(p, "--force", "--fresh", dest="overwrite", action="store_true")
-
-
-def default_jobs() -> int:
-    """The CPU cores this process may run on (the affinity mask where the OS has one)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
 
 
 def positive_int(name: str) -> Callable[[str], int]:
@@ -159,9 +158,9 @@ def add_jobs(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument(
         "--jobs",
         type=positive_int("--jobs"),
-        default=default_jobs(),
+        default=available_cores(),
         metavar="J",
-        help=f"{what} in parallel (default: the number of CPU cores, here {default_jobs()})",
+        help=f"{what} in parallel (default: the number of CPU cores, here {available_cores()})",
     )
 
 
@@ -216,9 +215,11 @@ def run_main(prog: str, body: Callable[[], int]) -> int:
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         print(f"{prog}: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return EXIT_FAILURE
-    except KeyboardInterrupt:
-        print(f"\n{prog}: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as exc:  # Ctrl-C, or a signal turned into aw.interrupts.Interrupted
+        status = getattr(exc, "exit_status", EXIT_INTERRUPTED)
+        how = "" if status == EXIT_INTERRUPTED else f" ({signal.Signals(status - 128).name})"
+        print(f"\n{prog}: interrupted{how}", file=sys.stderr)
+        return status
     except OSError as exc:  # e.g. a full disk (ENOSPC) or a file too large: one line, never a traceback
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         print(f"{prog}: error: {where}{exc.strerror or exc}", file=sys.stderr)

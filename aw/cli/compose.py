@@ -178,7 +178,7 @@ def _cmd_official(args: argparse.Namespace) -> int:
     try:
         if args.episodes is None:
             manifest = convert_package(args.package, args.out, force=args.overwrite)
-            runs = []
+            runs: list[Path] = []
         else:
             skipped: list[str] = []
             manifest, runs = convert(
@@ -215,31 +215,59 @@ def register_official_export(sub) -> None:
     where.add_argument("--suite", metavar="SUITE", help="the suite the run was recorded on")
     where.add_argument("--initial", metavar="ARCHIVE", help="the initial (setup) episode archive the run started from")
     add_overwrite(p, "an existing archive at --out")
+    p.add_argument(
+        "--trust-final",
+        action="store_true",
+        help="export a run whose closing state (final.json, the end record) contradicts its calls, as recorded "
+        "(default: refuse it, as aw-score flags it and scores the calls' state)",
+    )
     p.set_defaults(func=_cmd_official_export)
 
 
 def _cmd_official_export(args: argparse.Namespace) -> int:
     from aw.cli.common import CliError, UsageError
+    from aw.cli.paths import check_paths
     from aw.formats import read_trajectory
     from aw.formats.suite import suite_paths
     from aw.official.convert import initial_archive_path
     from aw.official.export import export_run, export_task_run
 
+    check_paths("aw-prepare", args.typed, [(args.run, "run"), (args.suite, "suite")])
     if Path(args.out).exists() and not args.overwrite:
         raise UsageError(f"--out {args.out}: already exists; pass --overwrite to replace it")
+    gap = _closing_contradiction(Path(args.run))
     if args.initial:
-        ep = export_run(args.run, args.initial, args.out)
+        ep = export_run(args.run, args.initial, args.out, args.trust_final)
     else:
         task_id = read_trajectory(Path(args.run) / "trajectory.jsonl").header.task_id
         initial = initial_archive_path(args.suite, task_id)
         task_dir = suite_paths(args.suite, task_id)[0]
         if initial.is_file():
-            ep = export_run(args.run, initial, args.out)
+            ep = export_run(args.run, initial, args.out, args.trust_final)
         elif task_dir.is_dir():
-            ep = export_task_run(args.run, task_dir, args.out)
+            ep = export_task_run(args.run, task_dir, args.out, args.trust_final)
         else:
             raise CliError(f"{args.suite}: neither {initial} nor {task_dir} exists for task {task_id!r}")
     print(
         f"wrote {args.out}: {plural(len(ep.calls), 'call')}, {plural(len(ep.states), 'state')}, final state {ep.final_state().index}"
     )
+    if gap:  # exported with --trust-final (export refuses it otherwise)
+        print(
+            f"aw-prepare: warning: {args.run}: the closing state contradicts the calls (parts {gap}); exported as "
+            "recorded (--trust-final): the official scorer scores a state that aw-score does not",
+            file=sys.stderr,
+        )
     return 0
+
+
+def _closing_contradiction(run_dir: Path) -> list[str]:
+    """The parts whose closing pose contradicts the run's calls ([] if unreadable: export says why)."""
+    from aw.formats import FormatError, read_final, read_trajectory
+    from aw.formats.agreement import closing_contradiction
+
+    try:
+        traj = read_trajectory(run_dir / "trajectory.jsonl")
+        final = read_final(run_dir / "final.json").poses if (run_dir / "final.json").is_file() else None
+        return closing_contradiction(traj, final)
+    except (FormatError, KeyError, OSError):
+        return []

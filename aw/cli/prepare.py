@@ -18,7 +18,7 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from aw.cli.common import CliError, UsageError, add_commands, new_parser, run_main
+from aw.cli.common import CliError, UsageError, add_commands, new_parser, plural, run_main
 from aw.cli.suite import add_suite_options, check_unique_task_ids, run_suite
 from aw.formats import FormatError
 from aw.prepare import ObjectError, ObjectSpec, SuiteExistsError
@@ -98,10 +98,19 @@ def register_folder(sub) -> None:
         "Z-up), or auto (default: Y where upright parts stand along Y and the object rests on them, else "
         "Z; the choice is printed per object; see docs/datasets.md)",
     )
+    p.add_argument(
+        "--allow-overlap",
+        action="store_true",
+        help="keep, with a warning, an object whose parts' bounding boxes mostly overlap (by default refused: "
+        "parts saved each at its own origin; see docs/datasets.md)",
+    )
     p.set_defaults(func=_cmd_folder)
 
 
 def _cmd_folder(args: argparse.Namespace) -> int:
+    import warnings
+
+    from aw.assembly import piled_parts
     from aw.sources.folder import load_object, read_meta, scan_folder
 
     if not Path(args.src).is_dir():
@@ -125,6 +134,7 @@ def _cmd_folder(args: argparse.Namespace) -> int:
     check_unique_task_ids([(s, f.object_id, f.conditions) for s, f in zip(sources, found, strict=True)])
     # load every object once here: bad meshes and objects that cannot be assessed are reported
     # before any work is done, and the up axis chosen for each is said
+    piles: list[str] = []
     for f in found:
         obj = load_object(f.path, args.source, args.up_axis)
         if obj.n_parts < 2:
@@ -135,6 +145,19 @@ def _cmd_folder(args: argparse.Namespace) -> int:
             )
         up = obj.meta["up_axis"]
         print(f"{f.object_id}: up axis {up['axis'].upper()} ({up['how']})", file=sys.stderr)
+        pile = piled_parts(obj)
+        if pile is not None:
+            piles.append(
+                f"{f.path}: {pile.reason()}: each part was likely exported centred at its own origin, not where it "
+                "sits in the assembled object, so the target would be a pile on one point"
+            )
+    if piles and not args.allow_overlap:
+        more = f" (and {plural(len(piles) - 1, 'more object')})" if len(piles) > 1 else ""
+        raise CliError(
+            f"{piles[0]}{more}; export the parts in the assembled frame, or pass --allow-overlap if they truly nest"
+        )
+    for line in piles:
+        warnings.warn(f"{line}; kept (--allow-overlap)", stacklevel=1)
     return run_suite(
         args, specs, sources, name=f"folder-{Path(args.src).resolve().name}", generator="aw.sources.folder"
     )
@@ -166,7 +189,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     import warnings
 
-    args = build_parser().parse_args(argv)
+    typed = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(typed)
+    args.typed = typed  # as the user typed them: path errors say what to type instead
 
     def body() -> int:
         try:

@@ -55,7 +55,7 @@ def variant_plans(specs: Sequence[ObjectSpec], sources: Sequence[str], k: int, s
     A spec without a donor gets no distractor."""
     plans: list[VariantPlan | None] = []
     taken: dict[str, int] = {}
-    for spec, source in zip(specs, sources):
+    for spec, source in zip(specs, sources, strict=True):
         n = taken.get(source, 0)
         taken[source] = n + 1
         if n >= k:

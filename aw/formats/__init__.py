@@ -4,6 +4,7 @@ Every reader validates and raises :class:`FormatError` naming the file and the p
 The schemas are documented in ``docs/formats.md``.
 """
 
+from aw.formats.common import CONDITIONS, Condition, EndReason, RunEnded, VariantKind, as_condition
 from aw.formats.errors import FormatError
 from aw.formats.run import RunInfo, TokenUsage, read_run_info, write_run_info
 from aw.formats.suite import SuiteEntry, SuiteManifest, read_manifest, suite_paths, write_manifest
@@ -15,6 +16,7 @@ from aw.formats.trajectory import (
     Trajectory,
     TrajectoryCall,
     TrajectoryEnd,
+    TrajectoryFollower,
     TrajectoryHeader,
     TrajectoryWriter,
     read_final,
@@ -23,6 +25,12 @@ from aw.formats.trajectory import (
 )
 
 __all__ = [
+    "CONDITIONS",
+    "Condition",
+    "EndReason",
+    "RunEnded",
+    "VariantKind",
+    "as_condition",
     "RunInfo",
     "TokenUsage",
     "read_run_info",
@@ -46,6 +54,7 @@ __all__ = [
     "TrajectoryHeader",
     "TrajectoryCall",
     "TrajectoryEnd",
+    "TrajectoryFollower",
     "TrajectoryWriter",
     "RecordingError",
     "FinalState",

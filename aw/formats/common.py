@@ -3,17 +3,35 @@
 from __future__ import annotations
 
 import math
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import AfterValidator
 
 PART_ID_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+# A category is a short name (chair, StorageFurniture); it is printed in summaries and reports.
+MAX_CATEGORY_CHARS = 100
 SOURCES = ("partnet", "ikea_manual", "assemblybench", "fantastic_breaks")
-CONDITIONS = ("none", "image", "manual")
+# What the agent is shown beside the parts: nothing, an image of the assembly, or manual pages.
+Condition = Literal["none", "image", "manual"]
+CONDITIONS: tuple[Condition, ...] = ("none", "image", "manual")
+# A task as prepared, or one of the robustness variants of Appendix E.
+VariantKind = Literal["original", "layout", "missing", "distractor"]
+# Why an episode ended (a trajectory's end record and final.json).
+EndReason = Literal["finished", "timeout", "error", "disconnect", "interrupted"]
+# How a harness run ended (run.json).
+RunEnded = Literal["finished", "timeout", "error", "crashed", "hung"]
 # Sanity bounds of a recorded pose: far beyond any scene (edits stop at +-1000 units), well inside
 # what the evaluator's float arithmetic handles (1e308 positions broke its eigen-solver).
 MAX_POSE_POSITION = 1e6
 MAX_POSE_QUAT_COMPONENT = 1e6
+
+
+def as_condition(text: str) -> Condition:
+    """``text`` as a :data:`Condition`; ``ValueError`` when it is none of :data:`CONDITIONS`."""
+    for condition in CONDITIONS:
+        if text == condition:
+            return condition
+    raise ValueError(f"condition must be one of {', '.join(CONDITIONS)}, got {text!r}")
 
 
 def _check_pose(values: list[float]) -> list[float]:

@@ -1,11 +1,14 @@
-"""JSON reading and writing shared by the format modules (orjson, validated with pydantic)."""
+"""Models read and written as JSON by the format modules (parsed by :mod:`aw.formats.strict_json`,
+validated with pydantic), atomic writes, and bounded reading of what child processes write."""
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import tempfile
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TypeVar, get_args
 
@@ -13,6 +16,7 @@ import orjson
 from pydantic import BaseModel, ValidationError
 
 from aw.formats.errors import FormatError
+from aw.formats.strict_json import read_json
 
 M = TypeVar("M", bound=BaseModel)
 
@@ -26,48 +30,6 @@ def describe_validation_error(exc: ValidationError) -> str:
         loc = ".".join(str(p) for p in err["loc"]) or "<root>"
         lines.append(f"{loc}: {err['msg']}")
     return "; ".join(lines)
-
-
-class _DuplicateKey(ValueError):
-    pass
-
-
-def _no_duplicates(pairs: list[tuple[str, object]]) -> dict:
-    out = {}
-    for k, v in pairs:
-        if k in out:
-            raise _DuplicateKey(f"duplicate key {k!r}")
-        out[k] = v
-    return out
-
-
-def _no_constants(name: str) -> object:
-    raise ValueError(f"{name} is not valid JSON")
-
-
-def parse_json_text(raw: bytes) -> object:
-    """Strict JSON: UTF-8, no NaN/Infinity, no duplicate keys (a duplicate id would otherwise
-    silently replace the first). Raises ``ValueError`` with the position."""
-    text = raw.decode("utf-8")  # UnicodeDecodeError is a ValueError
-    return json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constants)
-
-
-def load_json(path: str | Path) -> object:
-    path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise FormatError(path, "file not found") from None
-    except IsADirectoryError:
-        raise FormatError(path, "is a directory, not a file") from None
-    except OSError as exc:
-        raise FormatError(path, f"cannot be read ({exc.strerror})") from None
-    try:
-        return parse_json_text(raw)
-    except _DuplicateKey as exc:
-        raise FormatError(path, f"not valid: {exc}") from None
-    except ValueError as exc:
-        raise FormatError(path, f"not valid JSON ({exc})") from None
 
 
 def check_format_tag(model: type[BaseModel], data: object) -> str | None:
@@ -98,7 +60,7 @@ def parse_model(model: type[M], data: object, path: str | Path) -> M:
 
 
 def read_model(model: type[M], path: str | Path) -> M:
-    return parse_model(model, load_json(path), path)
+    return parse_model(model, read_json(path), path)
 
 
 def dump_json(obj: object) -> bytes:
@@ -162,3 +124,85 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> None:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def read_tail(path: str | Path, max_bytes: int = 64 << 10) -> str:
+    """The last ``max_bytes`` of a file a child process wrote (its log or output), decoded with
+    replacement; "" when it cannot be read. Memory stays bounded however large the file grew."""
+    try:
+        with open(path, "rb") as fh:
+            fh.seek(max(0, os.fstat(fh.fileno()).st_size - max_bytes))
+            data = fh.read(max_bytes)
+    except OSError:
+        return ""
+    return data.decode("utf-8", errors="replace")
+
+
+def last_line(path: str | Path, max_chars: int = 300) -> str:
+    """The last non-blank line of a child's log (its own verdict, usually), at most ``max_chars``
+    printable characters (a log padded with NUL bytes or escape codes shows its text)."""
+    lines = ["".join(c for c in line if c.isprintable()).strip() for line in read_tail(path).splitlines()]
+    lines = [line for line in lines if line]
+    return lines[-1][:max_chars] if lines else ""
+
+
+def _named(exc: OSError, path: Path) -> OSError:
+    """``exc`` naming ``path`` (a write error of a temporary file, or one without a file name)."""
+    return OSError(exc.errno, exc.strerror or str(exc), str(path))
+
+
+@contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """A temporary path beside ``path`` (same extension, so writers that read the format from it
+    still do) for the block to write; renamed onto ``path`` when the block succeeds. The rename
+    gives ``path`` a new file: a hard link to an older file (a staged copy) keeps the old bytes.
+    On failure the temporary file is removed, and an ``OSError`` names ``path``."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}-{threading.get_ident()}{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise _named(exc, path) from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_text_atomic(path: str | Path, text: str) -> None:
+    """:func:`write_bytes_atomic` of ``text`` in UTF-8."""
+    write_bytes_atomic(path, text.encode("utf-8"))
+
+
+def link_tree(src: Path, dst: Path, skip: Callable[[str], bool] = lambda _name: False) -> None:
+    """``dst`` a copy of the folder ``src`` made of hard links (a real copy where the file system
+    refuses them), without the files whose name ``skip`` accepts: a staged folder that starts
+    as the published one at no cost. Write into it only through :func:`atomic_path`."""
+
+    def link(s: str, d: str) -> None:
+        try:
+            os.link(s, d)
+        except OSError:
+            shutil.copy2(s, d)
+
+    shutil.copytree(src, dst, copy_function=link, ignore=lambda _d, names: [n for n in names if skip(n)])
+
+
+def publish_staged(stage: Path, dest: Path) -> list[Path]:
+    """Move every entry of the folder ``stage`` onto the same name in ``dest``: a file by one
+    rename (atomic), a folder by renaming the published one aside, the new one in, and removing
+    the old. Returns the published paths. Call it with signals deferred (``aw.interrupts``)."""
+    published = []
+    for entry in sorted(p for p in stage.iterdir() if not p.name.startswith(".published-")):
+        target = dest / entry.name
+        if entry.is_dir() and not entry.is_symlink():
+            old = stage / f".published-{entry.name}"  # removed with the stage, or by the next staging_dir
+            if target.exists():
+                os.replace(target, old)
+            os.replace(entry, target)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(entry, target)
+        published.append(target)
+    return published

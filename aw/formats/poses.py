@@ -9,18 +9,19 @@ exactly the task's parts.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Final, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from aw.formats.common import PoseList
 from aw.formats.errors import FormatError
-from aw.formats.io import parse_json_text, parse_model, write_json_atomic
+from aw.formats.io import parse_model, write_json_atomic
+from aw.formats.strict_json import read_json
 from aw.formats.trajectory import FinalState
 
 __all__ = ["POSES_FORMAT", "PosesFile", "initial_poses_file", "read_initial_poses", "write_poses"]
 
-POSES_FORMAT = "assemblyworld.poses"
+POSES_FORMAT: Final = "assemblyworld.poses"
 
 
 class PosesFile(BaseModel):
@@ -43,10 +44,7 @@ def read_initial_poses(path: str | Path, task_id: str, part_ids: list[str]) -> d
     path = Path(path)
     if not path.is_file():
         raise FormatError(path, "initial-poses file not found")
-    try:
-        data = parse_json_text(path.read_bytes())
-    except (OSError, ValueError) as exc:
-        raise FormatError(path, f"not JSON ({exc})") from None
+    data = read_json(path)
     kind = data.get("format") if isinstance(data, dict) else None
     if kind == "assemblyworld.final":
         doc: PosesFile | FinalState = parse_model(FinalState, data, path)

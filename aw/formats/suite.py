@@ -7,6 +7,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from aw.formats.common import MAX_CATEGORY_CHARS, Condition, VariantKind
 from aw.formats.errors import FormatError
 from aw.formats.io import read_model, write_json_atomic
 
@@ -15,12 +16,12 @@ class SuiteEntry(BaseModel):
     model_config = ConfigDict(extra="forbid")
     task_id: str
     source: str
-    condition: Literal["none", "image", "manual"]
+    condition: Condition
     object_id: str
-    category: str = ""
+    category: str = Field(default="", max_length=MAX_CATEGORY_CHARS)
     n_parts: int = Field(ge=1)
     weight: float = Field(default=1.0, gt=0)
-    variant: Literal["original", "layout", "missing", "distractor"] = "original"
+    variant: VariantKind = "original"
     base_task_id: str | None = None
 
 

@@ -7,7 +7,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from aw.formats.common import PoseList
+from aw.formats.common import PoseList, VariantKind
 from aw.formats.io import read_model, write_json_atomic
 
 
@@ -22,7 +22,7 @@ class Variant(BaseModel):
     """Robustness variant of Appendix E (none for the original task)."""
 
     model_config = ConfigDict(extra="forbid")
-    kind: Literal["original", "layout", "missing", "distractor"] = "original"
+    kind: VariantKind = "original"
     base_task_id: str | None = None
     layout_seed: int | None = None
     removed_source_names: list[str] = Field(default_factory=list)

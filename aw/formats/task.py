@@ -6,19 +6,19 @@ This is the only thing ``aw-serve`` is given.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Final, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from aw.formats.common import PART_ID_PATTERN
+from aw.formats.common import MAX_CATEGORY_CHARS, PART_ID_PATTERN, Condition
 from aw.formats.errors import FormatError
 from aw.formats.io import read_model, write_json_atomic
 
 # Longest execution budget (about 69 days): a longer one overflows the server's expiry timer.
 MAX_BUDGET_MINUTES = 100_000.0
 
-TASK_FORMAT = "assemblyworld.task"
-TASK_FORMAT_VERSION = 1
+TASK_FORMAT: Final = "assemblyworld.task"
+TASK_FORMAT_VERSION: Final = 1
 MESH_SUFFIXES = (".obj", ".ply", ".glb", ".stl", ".off")
 
 CONVENTIONS: dict[str, str] = {
@@ -48,9 +48,9 @@ class Task(BaseModel):
     task_id: str = Field(pattern=r"^[A-Za-z0-9_.-]{1,128}$")
     source: str = Field(min_length=1, description="partnet | ikea_manual | assemblybench | fantastic_breaks | custom")
     dataset: str = Field(min_length=1, description="where the geometry came from, e.g. synthetic, partnet, folder")
-    category: str = ""
+    category: str = Field(default="", max_length=MAX_CATEGORY_CHARS)
     object_id: str = Field(min_length=1, description="paired conditions share an object_id")
-    condition: Literal["none", "image", "manual"] = "none"
+    condition: Condition = "none"
     prompt: str = Field(min_length=1)
     parts: list[TaskPart] = Field(min_length=1)
     references: list[str] = Field(default_factory=list, description="image paths relative to the task dir, in order")

@@ -40,7 +40,7 @@ with per-edge ``coords (3, nnz)`` and ``half_inv (nnz,)`` (see :class:`DelaunayG
 from __future__ import annotations
 
 import hashlib
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from llvmlite import ir
@@ -174,8 +174,7 @@ def _padded(indptr: np.ndarray, indices: np.ndarray, pts: np.ndarray, half_inv: 
     return DelaunayGraph(new_ptr, new_idx, coords, new_half)
 
 
-@intrinsic
-def _scan(typingctx, cx, cy, cz, half_inv, lo, hi, x0, x1, x2, dj):
+def _scan_typing(typingctx, cx, cy, cz, half_inv, lo, hi, x0, x1, x2, dj):
     """``(min_k d_k, min_k (d_k - dj) half_inv[k])`` over ``k`` in ``lo:hi`` (a whole number of
     :data:`LANES`-vectors), ``d_k = |x - (cx, cy, cz)[k]|^2``, in explicit SIMD vectors: numba
     leaves min-reductions scalar. Each lane computes exactly the scalar arithmetic (no
@@ -231,6 +230,10 @@ def _scan(typingctx, cx, cy, cz, half_inv, lo, hi, x0, x1, x2, dj):
         return context.make_tuple(builder, signature.return_type, [lanes_min(next_best), lanes_min(next_margin)])
 
     return sig, codegen
+
+
+# Called from compiled code without the typing context; to a type checker, an untyped callable.
+_scan: Any = intrinsic(_scan_typing)
 
 
 # No reassociation or contraction: every distance is computed exactly as elsewhere (the walk's

@@ -114,9 +114,10 @@ class CertifiedNN:
 
     def __init__(self, ref: np.ndarray, tree: KDTree | None = None):
         self.tree = build_tree(ref) if tree is None else tree
-        self.cand = None
-        self.xref = None
-        self.d2 = None
+        # the last answers, kept to start the next query from (made at the first query)
+        self.cand: np.ndarray | None = None  # (k,) tree positions
+        self.xref: np.ndarray | None = None  # (k, 3) the query points they answer
+        self.d2: np.ndarray | None = None  # (k, 2) their two smallest squared distances
         self.n_searched = 0
         self._stack = np.empty(STACK, np.int64)
         self._bounds = np.empty(STACK)
@@ -124,8 +125,9 @@ class CertifiedNN:
     def query(self, x: np.ndarray) -> np.ndarray:
         """Exact nearest-neighbour rows (in the reference set's order) ``(k,)`` of ``x (k, 3)``."""
         x = np.ascontiguousarray(x, dtype=np.float64)
-        fresh = self.cand is None
-        if fresh:
+        fresh = False
+        if self.cand is None or self.xref is None or self.d2 is None:  # the first query
+            fresh = True
             self.cand = np.zeros(len(x), np.int64)
             self.xref = np.zeros((len(x), 3))
             self.d2 = np.zeros((len(x), 2))

@@ -37,7 +37,7 @@ class KDTree(NamedTuple):
     """Arrays of a compiled KD-tree (see the module docstring); pass ``tree`` to the kernels."""
 
     points: np.ndarray  # (n, 3) tree order
-    index: np.ndarray  # (n,) tree position -> caller's row
+    index: np.ndarray  # type: ignore[assignment]  # (n,) tree position -> caller's row; shadows tuple.index, never called
     lo: np.ndarray  # (N, 3)
     hi: np.ndarray  # (N, 3)
     left: np.ndarray  # (N,)
@@ -207,22 +207,22 @@ def _subtree(tree, x0, x1, x2, root, j1, d1, d2, stack, bounds):
         if bounds[sp] >= d2:
             continue
         node = stack[sp]
-        l = left[node]
-        while l >= 0:
-            r = right[node]
+        left_child = left[node]
+        while left_child >= 0:
+            right_child = right[node]
             dd = dim[node]
             xv = x0 if dd == 0 else (x1 if dd == 1 else x2)
             if xv <= split[node]:
-                near, far = l, r
+                near, far = left_child, right_child
             else:
-                near, far = r, l
+                near, far = right_child, left_child
             bf = box_d2(x0, x1, x2, lo, hi, far)
             if bf < d2:
                 stack[sp] = far
                 bounds[sp] = bf
                 sp += 1
             node = near
-            l = left[node]
+            left_child = left[node]
         for k in range(start[node], end[node]):
             a, b, c = x0 - pts[k, 0], x1 - pts[k, 1], x2 - pts[k, 2]
             d = a * a + b * b + c * c

@@ -37,8 +37,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import orjson
 
+from aw.formats.strict_json import MAX_DEPTH, JsonError, JsonLimits, parse_json
 from aw.official.errors import (
     ArchiveTooLargeError,
     HashInventoryError,
@@ -47,7 +47,6 @@ from aw.official.errors import (
     UnsafeMemberError,
     UnsupportedEpisodeError,
 )
-from aw.official.jsonio import MAX_DEPTH, nested_deeper
 
 __all__ = [
     "FORMAT",
@@ -179,8 +178,13 @@ class ArchiveLimits:
     max_ratio: int = 1000  # inflated / compressed, for members over 1 MiB
     max_json_bytes: int = 64 << 20  # all JSON members together, inflated
     max_row_bytes: int = 4 << 20  # one row of a JSONL member
-    max_json_depth: int = MAX_DEPTH  # nested arrays/objects in one row (aw.official.jsonio)
+    max_json_depth: int = MAX_DEPTH  # nested arrays/objects in one row (aw.formats.strict_json)
     max_state_value: float = 1e9  # |value| in an initial or state frame's vector (time, positions, ...)
+
+    @property
+    def json(self) -> JsonLimits:
+        """The JSON reader's limits for the members (a row's size is checked before, by name)."""
+        return JsonLimits(max_depth=self.max_json_depth, max_document_bytes=self.max_json_bytes)
 
 
 DEFAULT_LIMITS = ArchiveLimits()
@@ -323,12 +327,9 @@ def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, path: Path) -> byte
 
 def _json(data: bytes, path: Path, where: str, limits: ArchiveLimits = DEFAULT_LIMITS) -> Any:
     try:
-        value = orjson.loads(data)  # strict JSON: NaN and Infinity literals are refused
-    except orjson.JSONDecodeError as exc:
-        raise InconsistentEpisodeError(path, f"{where}: not valid JSON ({exc})") from None
-    if nested_deeper(value, limits.max_json_depth):
-        raise InconsistentEpisodeError(path, f"{where}: JSON nested deeper than {limits.max_json_depth} levels")
-    return value
+        return parse_json(data, limits.json)
+    except JsonError as exc:
+        raise InconsistentEpisodeError(path, f"{where}: {exc}") from None
 
 
 def _jsonl(
@@ -435,8 +436,8 @@ def _episode(
     finite = np.isfinite(vectors).all(axis=1)
     if not finite.all():
         raise bad(path, f"frames.bin: row {int(np.argmin(finite))} holds a non-finite value")
-    frames = {"initial": [], "state": [], "trace": []}
-    for k, (row, vector) in enumerate(zip(rows, vectors), start=1):
+    frames: dict[str, list[Frame]] = {"initial": [], "state": [], "trace": []}
+    for k, (row, vector) in enumerate(zip(rows, vectors, strict=True), start=1):
         kind = row.get("kind")
         if not isinstance(kind, str) or kind not in frames:
             raise bad(path, f"frames.jsonl: line {k}: kind {kind!r}, expected initial, state or trace")

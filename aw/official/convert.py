@@ -30,6 +30,7 @@ import numpy as np
 import orjson
 
 from aw.formats import (
+    EndReason,
     FinalState,
     FormatError,
     PartTarget,
@@ -43,13 +44,13 @@ from aw.formats import (
     write_targets,
 )
 from aw.formats.io import staging_dir
+from aw.formats.strict_json import read_json_object
 from aw.formats.suite import suite_paths
 from aw.formats.trajectory import CameraState, TrajectoryCall, TrajectoryEnd, TrajectoryHeader
 from aw.official.archive import EpisodeArchive, iso_timestamp, parse_timestamp
 from aw.official.episode import PartEpisode, read_part_episode
 from aw.official.eval_points import eval_points_path, write_eval_inputs
 from aw.official.ids import sample_id_from_slug, task_id_for_sample
-from aw.official.jsonio import read_json_object
 from aw.official.package import REFERENCE_CONDITIONS, OfficialPackage
 from aw.runlock import RunDirBusy, RunDirLock
 
@@ -109,7 +110,8 @@ def _write_suite(pkg: OfficialPackage, out: Path, chosen: list[tuple[str, str]])
         targets = Targets(
             task_id=tid,
             parts={
-                p: PartTarget(pose=[float(x) for x in pose]) for p, pose in zip(inputs.part_ids, inputs.target_poses)
+                p: PartTarget(pose=[float(x) for x in pose])
+                for p, pose in zip(inputs.part_ids, inputs.target_poses, strict=True)
             },
             equivalence_hint=hint,
             scale=1.0,
@@ -170,7 +172,7 @@ def convert_package(
 
 
 def _pose_dict(part_ids: list[str], poses: np.ndarray) -> dict[str, list[float]]:
-    return {p: [float(x) for x in pose] for p, pose in zip(part_ids, poses)}
+    return {p: [float(x) for x in pose] for p, pose in zip(part_ids, poses, strict=True)}
 
 
 def project_camera(camera: dict[str, list[float]]) -> CameraState | None:
@@ -187,11 +189,15 @@ def project_camera(camera: dict[str, list[float]]) -> CameraState | None:
     return CameraState(target=[float(x) for x in target], yaw=yaw, pitch=pitch, distance=distance)
 
 
-def _seconds(call: dict, t0: datetime) -> float:
-    return (parse_timestamp(call["timestamp"]) - t0).total_seconds()
+def _call_time(call: dict) -> datetime:
+    """A call's timestamp (the archive reader checked that every call's is an ISO-8601 time)."""
+    moment = parse_timestamp(call["timestamp"])
+    if moment is None:
+        raise ValueError(f"call timestamp {call['timestamp']!r} is not an ISO-8601 time")
+    return moment
 
 
-def end_reason(ep: EpisodeArchive) -> tuple[str, str]:
+def end_reason(ep: EpisodeArchive) -> tuple[EndReason, str]:
     """``(reason, message)`` of this project for an archive: an exported archive is a finished
     episode (the official browser exports ``active`` episodes); an ``ended`` one keeps its
     ``end.reason`` (and ``outcome``) as the message."""
@@ -207,7 +213,7 @@ def episode_records(ep: PartEpisode, task_id: str, system: str):
     that recorded a state carries that state's poses (and camera, when it moved), so writing the
     run back with :mod:`aw.official.export` gives the same state indices and vectors."""
     arc, ids, poses = ep.archive, ep.part_ids, ep.poses
-    t0 = parse_timestamp(arc.calls[0]["timestamp"]) if arc.calls else None
+    t0 = _call_time(arc.calls[0]) if arc.calls else None
     started = iso_timestamp(t0) if t0 is not None else _NO_CALLS_START
     header = TrajectoryHeader(
         task_id=task_id,
@@ -221,7 +227,7 @@ def episode_records(ep: PartEpisode, task_id: str, system: str):
     t = 0.0
     shown = 0  # the state the previous call line left
     for call in arc.calls:
-        t = max(t, _seconds(call, t0))
+        t = max(t, (_call_time(call) - _call_time(arc.calls[0])).total_seconds())
         ok = call["status"] == "completed"
         new_states = range(max(call["before_index"], shown) + 1, call["state_index"] + 1)
         for k, index in enumerate(new_states or [None]):
@@ -235,7 +241,7 @@ def episode_records(ep: PartEpisode, task_id: str, system: str):
             }
             if index is not None:
                 prev, cur = poses[shown], poses[index]
-                rec["changed"] = [p for p, a, b in zip(ids, cur, prev) if not np.array_equal(a, b)]
+                rec["changed"] = [p for p, a, b in zip(ids, cur, prev, strict=True) if not np.array_equal(a, b)]
                 rec["poses"] = _pose_dict(ids, cur)
                 cam = arc.state(index).record["camera"]
                 if cam != arc.state(shown).record["camera"]:
@@ -347,7 +353,8 @@ def archive_sample(archive: Path, pkg: OfficialPackage) -> tuple[str, str]:
 def _official_result(result: dict) -> dict:
     """What the runner's ``result.json`` says of the attempt (kept for information: the official
     scorer scores every saved archive, whatever the execution's end)."""
-    execution = result.get("execution") if isinstance(result.get("execution"), dict) else {}
+    found = result.get("execution")
+    execution = found if isinstance(found, dict) else {}
     return {"official_status": result.get("status"), "official_execution": execution.get("status")}
 
 
@@ -432,12 +439,12 @@ def convert(
     pkg = OfficialPackage(package, strict=False)
     suite, runs_root = Path(suite_out), Path(runs_out)
     _existing_suite(suite, force)
-    folder = Path(episodes) if isinstance(episodes, (str, Path)) else None
+    folder, listed = (Path(episodes), []) if isinstance(episodes, (str, Path)) else (None, [Path(p) for p in episodes])
     attempted: set[tuple[str, str]] = set()
     if folder is not None and folder.is_dir() and (is_run_dir(folder) or any(is_run_dir(p) for p in folder.iterdir())):
         items = run_log_archives(folder, pkg, skipped, attempted)
     else:
-        archives = find_archives(episodes) if folder is not None else [Path(p) for p in episodes]
+        archives = find_archives(folder) if folder is not None else listed
         name = archive_system(folder) if folder is not None and folder.is_dir() else "official"
         items = []
         for arc in archives:
@@ -461,7 +468,7 @@ def convert(
     staged_suite, staged_runs = staging_dir(suite, "aw-staging"), staging_dir(runs_root, "aw-staging")
     try:
         manifest = _write_suite(pkg, staged_suite, chosen)
-        for (name, block, sid, arc, extra), run_dir in zip(items, targets):
+        for (name, block, sid, arc, extra), run_dir in zip(items, targets, strict=True):
             inputs = pkg.evaluation_inputs(block, sid)
             ep = read_part_episode(arc, pkg.initial_archive(block, sid), inputs.part_ids)
             _write_run_files(ep, staged_runs / run_dir.relative_to(runs_root), system or name, run_dir.name, extra)

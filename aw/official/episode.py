@@ -220,7 +220,7 @@ def _bodies(model, names: list[str], where: Path) -> list[int]:
     import mujoco
 
     ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, n) for n in names]
-    missing = [n for n, b in zip(names, ids) if b <= 0]
+    missing = [n for n, b in zip(names, ids, strict=True) if b <= 0]
     if missing:
         raise WorldModelError(where, f"the world has no bodies {missing}")
     return ids
@@ -246,7 +246,7 @@ def state_poses(model, ep: EpisodeArchive, frames: list[Frame], names: list[str]
     for f, frame in enumerate(frames):
         mujoco.mj_setState(model, data, frame.integration, spec)
         mujoco.mj_forward(model, data)
-        for p, (b, adr) in enumerate(zip(bodies, free)):
+        for p, (b, adr) in enumerate(zip(bodies, free, strict=True)):
             if adr is None:
                 out[f, p, :3], out[f, p, 3:] = data.xpos[b], data.xquat[b]
             else:
@@ -272,7 +272,7 @@ def free_body_rotations(quaternions: np.ndarray) -> np.ndarray:
 
     quats = np.array(quaternions, dtype=np.float64).reshape(-1, 4)
     out = np.empty((len(quats), 9))
-    for quat, mat in zip(quats, out):
+    for quat, mat in zip(quats, out, strict=True):
         mujoco.mju_normalize4(quat)
         mujoco.mju_quat2Mat(mat, quat)
     return out.reshape(-1, 3, 3)

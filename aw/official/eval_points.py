@@ -80,7 +80,7 @@ def read_eval_inputs(path: str | Path, sample_id: str = "") -> EvalInputs:
     if raw["equivalence_groups"].dtype.kind not in "iu":
         raise FormatError(path, "equivalence_groups: expected integer group labels")
     by_label: dict[int, list[str]] = {}
-    for pid, label in zip(part_ids, raw["equivalence_groups"].tolist()):
+    for pid, label in zip(part_ids, raw["equivalence_groups"].tolist(), strict=True):
         by_label.setdefault(int(label), []).append(pid)
     groups = sorted(by_label.values(), key=lambda g: g[0])
     return EvalInputs(sample_id or path.stem, part_ids, points, targets, divisor, groups)

@@ -31,8 +31,8 @@ from typing import Any
 
 import numpy as np
 
+from aw.formats.strict_json import read_json
 from aw.official.errors import EvaluationCacheError
-from aw.official.jsonio import read_json
 
 __all__ = [
     "CACHE_FILE",
@@ -121,7 +121,7 @@ def read_evaluation(
     path = Path(path)
     if not path.is_file():
         raise _fail(path, "evaluation inputs not found")
-    value = read_json(path, EvaluationCacheError)  # strict JSON (no NaN), bounded depth and size
+    value = read_json(path, error=EvaluationCacheError)
     if not isinstance(value, dict) or not {
         "version",
         "key",
@@ -249,8 +249,13 @@ def write_evaluation(path: str | Path, inputs: EvaluationInputs) -> None:
         **({"provenance": inputs.provenance} if inputs.provenance is not None else {}),
         "part_ids": list(inputs.part_ids),
         "scale_divisor": float(inputs.divisor),
-        "points": {p: np.asarray(c, dtype=np.float64).tolist() for p, c in zip(inputs.part_ids, inputs.points)},
-        "gt_poses": {p: np.asarray(q, dtype=np.float64).tolist() for p, q in zip(inputs.part_ids, inputs.target_poses)},
+        "points": {
+            p: np.asarray(c, dtype=np.float64).tolist() for p, c in zip(inputs.part_ids, inputs.points, strict=True)
+        },
+        "gt_poses": {
+            p: np.asarray(q, dtype=np.float64).tolist()
+            for p, q in zip(inputs.part_ids, inputs.target_poses, strict=True)
+        },
         "equivalence": equivalence,
     }
     write_json(path, value)

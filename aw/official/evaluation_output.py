@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from aw.formats import FormatError
+from aw.formats.strict_json import read_json, read_json_lines
 from aw.official.runlog import SampleAttempt, write_json
 
 __all__ = [
@@ -210,17 +211,7 @@ def read_metrics(path: str | Path) -> list[dict[str, Any]]:
     the three metrics)."""
     file = Path(path)
     rows = []
-    try:
-        lines = file.read_text(encoding="utf-8").splitlines()
-    except FileNotFoundError:
-        raise FormatError(file, "file not found") from None
-    for n, line in enumerate(lines, 1):
-        if not line.strip():
-            continue
-        try:
-            row = json.loads(line)
-        except ValueError as exc:
-            raise FormatError(file, f"line {n}: not valid JSON ({exc})") from None
+    for n, row in read_json_lines(file):
         if not isinstance(row, dict):
             raise FormatError(file, f"line {n}: expected a JSON object")
         missing = [k for k in ("block", "sample_id", "status", *_METRICS) if k not in row]
@@ -235,12 +226,7 @@ def read_metrics(path: str | Path) -> list[dict[str, Any]]:
 def read_summary(path: str | Path) -> dict[str, Any]:
     """An official ``summary.json`` (checked for its protocol, status and blocks)."""
     file = Path(path)
-    try:
-        value = json.loads(file.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise FormatError(file, "file not found") from None
-    except ValueError as exc:
-        raise FormatError(file, f"not valid JSON ({exc})") from None
+    value = read_json(file)
     if not isinstance(value, dict) or value.get("protocol") != PROTOCOL:
         raise FormatError(file, f"not an official summary (protocol {PROTOCOL!r} expected)")
     if value.get("status") not in ("complete", "partial") or not isinstance(value.get("blocks"), dict):
@@ -272,7 +258,9 @@ def _compare_rows(key: tuple[str, str], a: Mapping[str, Any], b: Mapping[str, An
         def matches(parts):
             return [(p["part_id"], p["target_part_id"], p["correct"]) for p in parts]
 
-        if matches(pa) != matches(pb) or not all(_close(p["chamfer"], q["chamfer"], rtol) for p, q in zip(pa, pb)):
+        if matches(pa) != matches(pb) or not all(
+            _close(p["chamfer"], q["chamfer"], rtol) for p, q in zip(pa, pb, strict=True)
+        ):
             out.append(f"{where}: part matches or part Chamfers differ")
     return out
 

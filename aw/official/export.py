@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from aw.formats import FormatError, read_final, read_trajectory
+from aw.formats.agreement import closing_contradiction
 from aw.formats.trajectory import CameraState, Trajectory
 from aw.official.archive import TOOL_NAMES, EpisodeArchive, iso_timestamp, parse_timestamp, read_archive, write_archive
 from aw.official.episode import catalogue_part_ids, load_model, state_poses
@@ -61,12 +62,26 @@ def export_trajectory(
     out: str | Path,
     final_poses: dict[str, list[float]] | None = None,
     run_dir: Path | None = None,
+    trust_final: bool = False,
 ) -> EpisodeArchive:
     """Write ``traj`` (recorded from ``initial``'s initial state) as an official archive at
-    ``out``; captures are looked up below ``run_dir`` (default: the trajectory's folder)."""
+    ``out``; captures are looked up below ``run_dir`` (default: the trajectory's folder).
+
+    A closing state (``final_poses``, else the end record's) that contradicts the state the calls
+    leave (:func:`aw.formats.agreement.closing_contradiction`, the rule by which aw-score flags the
+    run and scores the calls' state) is refused with an :class:`ExportError`, unless
+    ``trust_final``: then it is exported as one more state, as it was recorded."""
     run_dir = Path(run_dir) if run_dir is not None else Path(traj.path).parent
     out = Path(out)
     where = traj.path
+    gap = closing_contradiction(traj, final_poses)
+    if gap and not trust_final:
+        raise ExportError(
+            where,
+            f"its closing state ({'final.json' if final_poses is not None else 'the end record'}) contradicts the "
+            f"state its calls leave (parts {gap}): edits that no call records; aw-score flags this run and scores "
+            "the calls' state. Pass --trust-final to export the closing state anyway",
+        )
     part_ids = catalogue_part_ids(initial)
     if sorted(traj.header.part_ids) != part_ids:
         raise ExportError(where, f"the run's parts {sorted(traj.header.part_ids)} are not the archive's {part_ids}")
@@ -86,7 +101,7 @@ def export_trajectory(
     )
     current = start.copy()
     view = _StateView(model, ep)
-    object_ids = dict(zip(part_ids, names))
+    object_ids = dict(zip(part_ids, names, strict=True))
 
     def record_state(poses: dict[str, list[float]] | None, camera: CameraState | None) -> int:
         target = current if poses is None else np.array([poses[p] for p in part_ids], dtype=float)
@@ -108,7 +123,7 @@ def export_trajectory(
             "arguments": _object_arguments(call.args, object_ids),
             "actor": "agent",
             "producer": dict(PRODUCER),
-            "timestamp": iso_timestamp(t0 + timedelta(seconds=max(call.t, 0.0))),
+            "timestamp": iso_timestamp(t0 + timedelta(seconds=max(call.t or 0.0, 0.0))),
             "before_index": before,
             "state_index": len(ep.states),
             "trace_start": 0,
@@ -225,7 +240,9 @@ def _result(call, index: int | None, view: _StateView, run_dir: Path) -> dict | 
             "objects": copy.deepcopy(m["objects"]),
         }
     if name == "get_object":
-        object_ids = dict(zip([o["name"][len("Part ") :] for o in m["objects"]], [o["id"] for o in m["objects"]]))
+        object_ids = dict(
+            zip([o["name"][len("Part ") :] for o in m["objects"]], [o["id"] for o in m["objects"]], strict=True)
+        )
         return view.object(object_ids.get(call.args.get("id"), call.args.get("id")))
     if name == "get_state":
         return {
@@ -267,14 +284,16 @@ def _append_call(ep: EpisodeArchive, row: dict) -> None:
         )
 
 
-def export_run(run_dir: str | Path, initial: str | Path | EpisodeArchive, out: str | Path) -> EpisodeArchive:
+def export_run(
+    run_dir: str | Path, initial: str | Path | EpisodeArchive, out: str | Path, trust_final: bool = False
+) -> EpisodeArchive:
     """Export ``RUN_DIR/trajectory.jsonl`` (and ``final.json`` when present) as an official
     archive continuing ``initial``."""
     run_dir = Path(run_dir)
     traj = read_trajectory(run_dir / "trajectory.jsonl")
     final = read_final(run_dir / "final.json").poses if (run_dir / "final.json").is_file() else None
     init = initial if isinstance(initial, EpisodeArchive) else read_archive(initial)
-    return export_trajectory(traj, init, out, final, run_dir)
+    return export_trajectory(traj, init, out, final, run_dir, trust_final)
 
 
 def task_setup_archive(
@@ -286,7 +305,7 @@ def task_setup_archive(
     from aw.meshes import load_task_meshes
 
     task = read_task(task_dir)
-    meshes = dict(zip(task.part_ids, load_task_meshes(task)))
+    meshes = dict(zip(task.part_ids, load_task_meshes(task), strict=True))
     ids = sorted(initial_poses)
     if set(ids) - set(meshes):
         raise FormatError(Path(task_dir), f"the run names parts {sorted(set(ids) - set(meshes))} the task lacks")
@@ -300,9 +319,12 @@ def task_setup_archive(
     )
 
 
-def export_task_run(run_dir: str | Path, task_dir: str | Path, out: str | Path) -> EpisodeArchive:
+def export_task_run(
+    run_dir: str | Path, task_dir: str | Path, out: str | Path, trust_final: bool = False
+) -> EpisodeArchive:
     """Export a run of one of this project's tasks (no official initial archive)."""
     run_dir = Path(run_dir)
     traj = read_trajectory(run_dir / "trajectory.jsonl")
     final = read_final(run_dir / "final.json").poses if (run_dir / "final.json").is_file() else None
-    return export_trajectory(traj, task_setup_archive(task_dir, dict(traj.header.initial_poses)), out, final, run_dir)
+    setup = task_setup_archive(task_dir, dict(traj.header.initial_poses))
+    return export_trajectory(traj, setup, out, final, run_dir, trust_final)

@@ -25,6 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from aw.formats import Condition
+from aw.formats.strict_json import read_json
 from aw.official.archive import EpisodeArchive, read_archive
 from aw.official.episode import read_part_episode
 from aw.official.errors import MissingPackageFileError, PackageError
@@ -37,7 +39,6 @@ from aw.official.evaluation_cache import (
     read_evaluation,
 )
 from aw.official.ids import sample_slug
-from aw.official.jsonio import read_json
 
 __all__ = [
     "REPO",
@@ -60,7 +61,7 @@ BENCHMARK_EVALUATION = {
 }
 EXPECTED_SAMPLES = 100
 # A block's reference_mode as this project's task condition.
-REFERENCE_CONDITIONS = {"none": "none", "final-image": "image", "manualbook": "manual"}
+REFERENCE_CONDITIONS: dict[str, Condition] = {"none": "none", "final-image": "image", "manualbook": "manual"}
 _HF_SNAPSHOT = re.compile(r"[0-9a-f]{40}")
 
 
@@ -175,7 +176,7 @@ class OfficialPackage:
         return path
 
     def _json(self, relative: str) -> Any:
-        return read_json(self.path(relative), PackageError)  # strict, bounded (aw.official.jsonio)
+        return read_json(self.path(relative), error=PackageError)
 
     # --- blocks and samples -------------------------------------------------------------------
 

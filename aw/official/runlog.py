@@ -31,9 +31,9 @@ from pathlib import Path
 from typing import Any
 
 from aw.formats import FormatError
+from aw.formats.strict_json import read_json_lines, read_json_object
 from aw.official.evaluation_cache import write_json
 from aw.official.ids import sample_slug
-from aw.official.jsonio import parse, read_json_object
 
 __all__ = [
     "RUN_KIND",
@@ -78,7 +78,7 @@ def new_run_id() -> str:
 
 
 def _json_object(path: Path) -> dict[str, Any]:
-    return read_json_object(path)  # strict JSON, bounded depth and size (aw.official.jsonio)
+    return read_json_object(path)
 
 
 def _objects(file: Path, meta: dict[str, Any], keys: tuple[str, ...]) -> None:
@@ -245,22 +245,15 @@ class SampleAttempt:
 def count_tool_calls(path: str | Path) -> int | None:
     """The ``{"type": "tool_call"}`` rows of a ``conversation.jsonl`` (every MCP call, read-only
     and failed ones included), or None when the file is missing; a row that is not a JSON object
-    (by the rule of :mod:`aw.official.jsonio`) is a :class:`FormatError` naming the line."""
+    (by the rule of :mod:`aw.formats.strict_json`) is a :class:`FormatError` naming the line."""
     file = Path(path)
     if not file.is_file():
         return None
     count = 0
-    with file.open("rb") as fh:
-        for n, line in enumerate(fh, 1):
-            if not line.strip():
-                continue
-            try:
-                row = parse(line)
-            except ValueError as exc:
-                raise FormatError(file, f"line {n}: {exc}") from None
-            if not isinstance(row, dict):
-                raise FormatError(file, f"line {n}: expected a JSON object")
-            count += row.get("type") == "tool_call"
+    for n, row in read_json_lines(file):
+        if not isinstance(row, dict):
+            raise FormatError(file, f"line {n}: expected a JSON object")
+        count += row.get("type") == "tool_call"
     return count
 
 

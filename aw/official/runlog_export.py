@@ -111,7 +111,7 @@ def _write_sample(run: RunLog, package: OfficialPackage, block: str, sid: str, t
     t0 = _parse_time(traj.header.started_at)
     conversation = []
     for call in traj.calls:
-        stamp = (t0 + timedelta(seconds=max(call.t, 0.0))).isoformat(timespec="microseconds")
+        stamp = (t0 + timedelta(seconds=max(call.t or 0.0, 0.0))).isoformat(timespec="microseconds")
         conversation.append(
             {
                 "timestamp": stamp,
@@ -142,8 +142,9 @@ def _write_sample(run: RunLog, package: OfficialPackage, block: str, sid: str, t
         archive = export_run(task_dir, package.initial_archive(block, sid), Path(tmp) / "final.episode.zip")
         data = archive.path.read_bytes()
     end = t0 + timedelta(seconds=info.wall_seconds) if info and info.wall_seconds is not None else None
+    status = "completed" if execution["status"] == "completed" else "failed"
     result = {
-        "status": "completed" if execution["status"] == "completed" else "failed",
+        "status": status,
         "started_at": t0.isoformat(timespec="microseconds"),
         **({"finished_at": end.isoformat(timespec="microseconds")} if end else {}),
         "duration_seconds": info.wall_seconds if info else None,
@@ -153,7 +154,7 @@ def _write_sample(run: RunLog, package: OfficialPackage, block: str, sid: str, t
     write_result(
         run, block, sid, result, conversation=conversation, final_archive=data, archive_calls=len(archive.calls)
     )
-    return result["status"]
+    return status
 
 
 def _parse_time(text: str) -> datetime:

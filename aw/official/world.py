@@ -37,7 +37,7 @@ def _obj(vertices: np.ndarray, faces: np.ndarray) -> bytes:
     faces = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     if len(vertices) == 3:  # MuJoCo needs four vertices: add the centroid, fan the triangle to it
         vertices = np.vstack([vertices, vertices.mean(axis=0)])
-        faces = np.array([[a, b, 3] for f in faces for a, b in zip(f, np.roll(f, -1))])
+        faces = np.array([[a, b, 3] for f in faces for a, b in zip(f, np.roll(f, -1), strict=True)])
     lines = ["v " + " ".join(_number(x) for x in v) for v in vertices]
     lines += ["f " + " ".join(str(int(i) + 1) for i in f) for f in faces]
     return ("\n".join(lines) + "\n").encode()
@@ -52,7 +52,9 @@ def world_files(meshes: Sequence[tuple[np.ndarray, np.ndarray]], initial_poses: 
     ET.SubElement(option, "flag", contact="disable", constraint="disable", autoreset="disable")
     asset, world = ET.SubElement(root, "asset"), ET.SubElement(root, "worldbody")
     files = {}
-    for k, ((vertices, faces), pose) in enumerate(zip(meshes, np.asarray(initial_poses, dtype=np.float64))):
+    for k, ((vertices, faces), pose) in enumerate(
+        zip(meshes, np.asarray(initial_poses, dtype=np.float64), strict=True)
+    ):
         name = body_name(k)
         files[f"world/meshes/{name}.obj"] = _obj(vertices, faces)
         ET.SubElement(asset, "mesh", name=name, file=f"meshes/{name}.obj", inertia="shell")
@@ -77,7 +79,7 @@ def camera_for(meshes: Sequence[tuple[np.ndarray, np.ndarray]], poses: np.ndarra
     from aw.pose import apply_pose
 
     points = np.concatenate(
-        [apply_pose(np.asarray(p, float), np.asarray(v, float)) for (v, _), p in zip(meshes, poses)]
+        [apply_pose(np.asarray(p, float), np.asarray(v, float)) for (v, _), p in zip(meshes, poses, strict=True)]
     )
     cam = Camera.framing(points.min(axis=0), points.max(axis=0))
     return {"position": [float(x) for x in cam.position], "target": [float(x) for x in cam.target]}

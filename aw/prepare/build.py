@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from aw.assembly import AssembledObject
-from aw.formats import SuiteEntry
+from aw.formats import CONDITIONS, SuiteEntry, as_condition
 from aw.prepare.references import IMAGE_SIZE, MANUAL_SIZE, reference_images
 from aw.prepare.standardize import PreparedObject, assembled_at_start, standardize
 from aw.prepare.variants import add_distractor, layout_variant, remove_part
@@ -15,7 +15,6 @@ from aw.prepare.writer import task_id_for, write_prepared
 
 __all__ = ["VariantPlan", "prepare_object", "CONDITIONS", "PROTOCOLS"]
 
-CONDITIONS = ("none", "image", "manual")
 PROTOCOLS = ("official", "native")
 
 
@@ -76,10 +75,11 @@ def prepare_object(
     ``official`` (the official preparation, :mod:`aw.prepare.official_task`: its layout, part ids,
     and ``eval_points/<task_id>.npz`` with its points, divisor and groups; no variants).
     """
-    conditions = list(dict.fromkeys(conditions))
-    bad = [c for c in conditions if c not in CONDITIONS]
-    if bad or not conditions:
-        raise ValueError(f"conditions must be a non-empty subset of {CONDITIONS}, got {list(conditions)}")
+    asked = list(dict.fromkeys(conditions))
+    bad = [c for c in asked if c not in CONDITIONS]
+    if bad or not asked:
+        raise ValueError(f"conditions must be a non-empty subset of {CONDITIONS}, got {asked}")
+    checked = [as_condition(c) for c in asked]
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol must be one of {PROTOCOLS}, got {protocol!r}")
     official = None
@@ -92,7 +92,7 @@ def prepare_object(
     else:
         prep = standardize(obj, seed)
     _check_assessable(prep)
-    refs = {c: reference_images(prep, c, image_size, manual_size) for c in conditions}
+    refs = {c: reference_images(prep, c, image_size, manual_size) for c in checked}
 
     derived: list[tuple[str, PreparedObject]] = []
     if variants is not None:
@@ -107,7 +107,7 @@ def prepare_object(
             derived.append(("distractor", add_distractor(prep, donor, variants.distractor_seed)))
 
     entries = []
-    for cond in conditions:
+    for cond in checked:
         base_id = task_id_for(obj.source, obj.object_id, cond)
         entries.append(write_prepared(prep, suite_dir, base_id, cond, refs[cond]))
         if official is not None:

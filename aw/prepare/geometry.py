@@ -33,7 +33,7 @@ def unique_vertices(vertices) -> np.ndarray:
     return v[np.sort(first)]
 
 
-def pca_box(points) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def pca_box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]:
     """PCA frame of ``points: (n, 3)`` and the extent of the points in it.
 
     Returns ``(origin (3,), axes (3, 3), (lo (3,), hi (3,)))`` with local coordinates

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.spatial.transform import Rotation
 
 from aw.pair_search import local_workers
@@ -123,7 +124,7 @@ def stream(seed: int, *identity: str) -> np.random.Generator:
 # ------------------------------------------------------------------ frames and poses
 
 
-def rotation_of(quaternion: Sequence[float]) -> np.ndarray:
+def rotation_of(quaternion: ArrayLike) -> np.ndarray:
     """``(3, 3)`` rotation of a ``(w, x, y, z)`` quaternion (normalized by SciPy)."""
     q = np.asarray(quaternion, dtype=np.float64)
     return Rotation.from_quat(q[[1, 2, 3, 0]]).as_matrix()
@@ -384,7 +385,7 @@ def allocate_fracture_samples(areas, total: int = FRACTURE_TOTAL, minimum: int =
 
 
 def fracture_samples(
-    meshes: Sequence[tuple[np.ndarray, Sequence[Sequence[int]]]],
+    meshes: Sequence[tuple[np.ndarray, ArrayLike]],
     part_ids: Sequence[str],
     dataset: str,
     sample_id: str,
@@ -402,7 +403,7 @@ def fracture_samples(
         sample_surface(
             np.asarray(v, dtype=np.float64), f, int(n), stream(seed, dataset, sample_id, pid, "garf-evaluation")
         )
-        for (v, f), pid, n in zip(meshes, part_ids, counts)
+        for (v, f), pid, n in zip(meshes, part_ids, counts, strict=True)
     ]
 
 
@@ -442,12 +443,12 @@ def prepare_official(
         poses = [adapter_pose(p.pose) for p in parts]
     except ValueError as exc:
         raise ValueError(f"{sample.dataset}/{sample.sample_id}: {exc}") from None
-    assembled = [moved(p.vertices, q) for p, q in zip(parts, poses)]
+    assembled = [moved(p.vertices, q) for p, q in zip(parts, poses, strict=True)]
     scale = 2 * max(float(np.linalg.norm(p.vertices - p.vertices.mean(0), axis=1).max()) for p in parts)
     to_task = _normalization(np.concatenate(assembled), np.asarray(sample.source_to_z_up, dtype=np.float64), scale)
 
     local, candidates, firsts, targets = {}, {}, {}, {}
-    for p, q in zip(parts, poses):
+    for p, q in zip(parts, poses, strict=True):
         center, basis = pca_frame(p.vertices)
         local[p.part_id] = (p.vertices - center) @ basis / scale
         target_center = moved(center, q) @ to_task[:3, :3].T + to_task[:3, 3]

@@ -88,7 +88,7 @@ def search_structures(cloud: np.ndarray) -> tuple:
 
 def _part_clouds(points: np.ndarray, vertices: list[np.ndarray], divisor: float) -> list[np.ndarray]:
     clouds = []
-    for cloud, v in zip(points, vertices):
+    for cloud, v in zip(points, vertices, strict=True):
         center, basis = pca_frame(v)
         clouds.append((cloud - center) @ basis / divisor)
     return clouds

@@ -69,7 +69,7 @@ def prepare_official_object(obj: AssembledObject, seed: int = 0) -> tuple[Prepar
     done = prepare_official(official_sample(obj), seed)
     meshes = {p.name: p.mesh for p in obj.parts}
     parts = []
-    for pid, baked, target in zip(done.part_ids, done.vertices, done.targets):
+    for pid, baked, target in zip(done.part_ids, done.vertices, done.targets, strict=True):
         parts.append(
             PreparedPart(pid, pid, trimesh.Trimesh(baked, np.asarray(meshes[pid].faces), process=False), target)
         )

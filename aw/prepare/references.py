@@ -86,7 +86,7 @@ def assembled_meshes(prep: PreparedObject) -> tuple[list[trimesh.Trimesh], np.nd
     return meshes, np.asarray(poses)
 
 
-def _font(size: int) -> ImageFont.ImageFont:
+def _font(size: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
     try:
         return ImageFont.load_default(size=size)
     except TypeError:  # Pillow < 10.1 has a single bitmap size
@@ -116,8 +116,8 @@ class ReferenceRenderer:
         self.meshes, self.poses = assembled_meshes(prep)
         self.n = len(self.meshes)
         self._renderer = _StepRenderer(self.meshes, _neutral_shades(self.n), size)
-        lo = np.min([m.vertices.min(axis=0) + c for m, c in zip(self.meshes, self.poses[:, :3])], axis=0)
-        hi = np.max([m.vertices.max(axis=0) + c for m, c in zip(self.meshes, self.poses[:, :3])], axis=0)
+        lo = np.min([m.vertices.min(axis=0) + c for m, c in zip(self.meshes, self.poses[:, :3], strict=True)], axis=0)
+        hi = np.max([m.vertices.max(axis=0) + c for m, c in zip(self.meshes, self.poses[:, :3], strict=True)], axis=0)
         self.camera = Camera.framing(lo, hi, margin=1.05)
 
     def image(self) -> Image.Image:
@@ -168,7 +168,7 @@ class _StepRenderer:
         lin = self._render_mod._srgb_to_linear(np.asarray(colors, dtype=np.float64))
 
         def draw():
-            for node, vis, col in zip(r._gl["parts"], visible, lin):
+            for node, vis, col in zip(r._gl["parts"], visible, lin, strict=True):
                 node.mesh.is_visible = bool(vis)
                 for prim in node.mesh.primitives:
                     prim.material.baseColorFactor = np.array([*col, 1.0])

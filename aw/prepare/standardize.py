@@ -176,7 +176,8 @@ def normalization_divisor(obj: AssembledObject, frames: list[PartFrame] | None =
     """``D``: twice the largest vertex radius about any part's centroid (source units)."""
     frames = frames if frames is not None else part_frames(obj)
     radius = max(
-        float(np.linalg.norm(unique_vertices(p.mesh) - f.centroid, axis=1).max()) for p, f in zip(obj.parts, frames)
+        float(np.linalg.norm(unique_vertices(p.mesh) - f.centroid, axis=1).max())
+        for p, f in zip(obj.parts, frames, strict=True)
     )
     if not radius > 0:
         raise ValueError(f"object {obj.object_id}: every part is a single point; nothing to normalize")
@@ -211,9 +212,9 @@ def footprint(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def clean_object(obj: AssembledObject) -> AssembledObject:
     """``obj`` with unreferenced vertices removed from every part (the same object if none)."""
     cleaned = [referenced_only(p.mesh) for p in obj.parts]
-    if all(c is p.mesh for c, p in zip(cleaned, obj.parts)):
+    if all(c is p.mesh for c, p in zip(cleaned, obj.parts, strict=True)):
         return obj
-    return replace(obj, parts=[SourcePart(p.name, c) for p, c in zip(obj.parts, cleaned)])
+    return replace(obj, parts=[SourcePart(p.name, c) for p, c in zip(obj.parts, cleaned, strict=True)])
 
 
 def standardize(obj: AssembledObject, seed: int = 0) -> PreparedObject:
@@ -234,27 +235,27 @@ def standardize(obj: AssembledObject, seed: int = 0) -> PreparedObject:
     ids = part_ids(n, rng.permutation(n))
     order = rng.permutation(n)
 
-    local = [yawed_local(p.mesh, f, scale, y) for p, f, y in zip(obj.parts, frames, yaws)]
+    local = [yawed_local(p.mesh, f, scale, y) for p, f, y in zip(obj.parts, frames, yaws, strict=True)]
     bounds = [footprint(v) for v in local]
     sizes = np.array([(hi - lo)[:2] for lo, hi in bounds])
     corners = shelf_pack(sizes, order)
 
     parts = []
-    for k, (src, frame, yaw, v, (lo, _hi)) in enumerate(zip(obj.parts, frames, yaws, local, bounds)):
+    for k, (src, frame, yaw, v, (lo, _hi)) in enumerate(zip(obj.parts, frames, yaws, local, bounds, strict=True)):
         offset = np.array([corners[k, 0] - lo[0], corners[k, 1] - lo[1], -lo[2]])
         mesh = trimesh.Trimesh(v + offset, np.asarray(src.mesh.faces), process=False)
         parts.append(PreparedPart(ids[k], src.name, mesh, target_pose(frame, scale, yaw, offset, centre)))
 
     name_to_id = {p.source_name: p.part_id for p in parts}
-    hint = None
+    hint: list[list[str]] | None = None
     if obj.equivalence:
-        hint = []
+        groups: list[list[str]] = []
         for group in obj.equivalence:
             unknown = [g for g in group if g not in name_to_id]
             if unknown:
                 raise ValueError(f"object {obj.object_id}: equivalence names unknown parts {unknown}")
             ids_g = sorted(name_to_id[g] for g in group)
             if len(ids_g) >= 2:
-                hint.append(ids_g)
-        hint = sorted(hint) or None
+                groups.append(ids_g)
+        hint = sorted(groups) or None
     return PreparedObject(obj, seed, scale, centre, sorted(parts, key=lambda p: p.part_id), hint)

@@ -41,7 +41,7 @@ def _reanonymize(
     prep: PreparedObject, parts: list[PreparedPart], rng: np.random.Generator, **changes
 ) -> PreparedObject:
     new_ids = part_ids(len(parts), rng.permutation(len(parts)))
-    renamed = {p.part_id: nid for p, nid in zip(parts, new_ids)}
+    renamed = {p.part_id: nid for p, nid in zip(parts, new_ids, strict=True)}
     out = [PreparedPart(renamed[p.part_id], p.source_name, p.mesh, p.target, p.distractor) for p in parts]
     hint = None
     if prep.equivalence_hint:

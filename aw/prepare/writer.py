@@ -11,7 +11,18 @@ from typing import Any
 
 from PIL import Image
 
-from aw.formats import FormatError, PartTarget, SuiteEntry, Targets, Task, TaskPart, write_targets, write_task
+from aw.formats import (
+    CONDITIONS,
+    Condition,
+    FormatError,
+    PartTarget,
+    SuiteEntry,
+    Targets,
+    Task,
+    TaskPart,
+    write_targets,
+    write_task,
+)
 from aw.formats.suite import suite_paths
 from aw.formats.targets import Variant
 from aw.prepare.objfile import write_obj
@@ -59,7 +70,7 @@ def write_prepared(
     prep: PreparedObject,
     suite_dir: str | Path,
     task_id: str,
-    condition: str,
+    condition: Condition,
     references: Sequence[Any] = (),
     base_task_id: str | None = None,
     weight: float = 1.0,
@@ -69,7 +80,7 @@ def write_prepared(
     ``references``: images in order (``PIL.Image`` or file paths), written as
     ``references/01.png, 02.png, ...``. An existing task directory of that id is replaced.
     """
-    if condition not in ("none", "image", "manual"):
+    if condition not in CONDITIONS:  # a caller's unchecked string
         raise ValueError(f"condition must be none, image or manual, got {condition!r}")
     if condition == "none" and references:
         raise ValueError("a task with condition 'none' takes no references")

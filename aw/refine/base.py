@@ -7,13 +7,26 @@ from typing import Any
 
 import numpy as np
 
+from aw.cli.common import plural
 from aw.prepare.official_protocol import rotation_of
 
-__all__ = ["ANCHOR_TOLERANCE", "RefineRequest", "RefinerError", "anchor_index", "check_poses", "identity_poses"]
+__all__ = [
+    "ANCHOR_TOLERANCE",
+    "SAME_AS_START",
+    "RefineRequest",
+    "RefinerError",
+    "anchor_index",
+    "check_poses",
+    "identity_poses",
+    "returned_start",
+]
 
 # How far the anchor may drift (position units; rotation-matrix entries) before it counts as moved:
 # JSON round trips and quaternion normalisation stay far below it.
 ANCHOR_TOLERANCE = 1e-6
+# How close (per pose component) a refiner's answer must be to its start to count as the start
+# returned unchanged: a refiner that found nothing better, not one that moved a part slightly.
+SAME_AS_START = 1e-9
 
 
 class RefinerError(Exception):
@@ -76,9 +89,9 @@ def check_poses(name: str, request: RefineRequest, poses: Any) -> np.ndarray:
             raise RefinerError(
                 f"refiner {name}: each pose needs 7 numbers [x, y, z, qw, qx, qy, qz], got {arr.shape[1]}"
             )
-        raise RefinerError(f"refiner {name}: returned {got} poses for {n} parts")
+        raise RefinerError(f"refiner {name}: returned {plural(got, 'pose')} for {plural(n, 'part')}")
     if arr.shape[0] != n:
-        raise RefinerError(f"refiner {name}: returned {arr.shape[0]} poses for {n} parts")
+        raise RefinerError(f"refiner {name}: returned {plural(arr.shape[0], 'pose')} for {plural(n, 'part')}")
     bad = [request.part_ids[i] for i in np.flatnonzero(~np.isfinite(arr).all(axis=1))]
     if bad:
         raise RefinerError(f"refiner {name}: non-finite pose for {', '.join(bad)}")
@@ -98,3 +111,13 @@ def check_poses(name: str, request: RefineRequest, poses: Any) -> np.ndarray:
             f"refiner {name}: moved the anchor {request.part_ids[a]} (by {moved:.3g}; it must keep its initial pose)"
         )
     return arr
+
+
+def returned_start(start: np.ndarray, poses: np.ndarray, tol: float = SAME_AS_START) -> bool:
+    """Whether a refiner's ``poses (P, 7)`` equal its ``start (P, 7)`` within ``tol`` in every
+    component (a quaternion and its negative being the same rotation)."""
+    start, poses = np.asarray(start, dtype=np.float64), np.asarray(poses, dtype=np.float64)
+    if start.shape != poses.shape:
+        return False
+    q_off = np.minimum(np.abs(poses[:, 3:] - start[:, 3:]).max(axis=1), np.abs(poses[:, 3:] + start[:, 3:]).max(axis=1))
+    return bool(np.abs(poses[:, :3] - start[:, :3]).max(initial=0.0) <= tol and q_off.max(initial=0.0) <= tol)

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 import os
 import shlex
-import signal
-import subprocess
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -22,12 +20,24 @@ from pathlib import Path
 
 import numpy as np
 
+from aw.formats.io import last_line
+from aw.processes import new_marker, run_supervised
 from aw.refine.base import RefineRequest, RefinerError, check_poses
 from aw.refine.exchange import read_result, write_request
 
-__all__ = ["BUILTIN", "ENTRY_POINT_GROUP", "RefinerSpec", "available", "load_refiner", "resolve", "run_refiner"]
+__all__ = [
+    "BUILTIN",
+    "ENTRY_POINT_GROUP",
+    "RefinerSpec",
+    "available",
+    "command_label",
+    "load_refiner",
+    "resolve",
+    "run_refiner",
+]
 
 ENTRY_POINT_GROUP = "assemblyworld.refiners"
+LEFTOVER_GRACE_S = 1.0  # processes a refiner left running after it exited: ended after this long
 BUILTIN = {"classical": "aw.refine.classical:refine"}
 
 
@@ -77,6 +87,17 @@ class RefinerSpec:
         return words
 
 
+# extensions of scripts and programs that a label leaves out (refine.py is labelled refine)
+SCRIPT_SUFFIXES = (".py", ".sh", ".bash", ".js", ".mjs", ".rb", ".pl", ".r", ".jl", ".exe", ".bat", ".cmd")
+
+
+def command_label(program: str) -> str:
+    """The label of an external refiner's program: its file name without a script extension
+    (``python refine.py`` and ``./refine.py`` are both ``refine``)."""
+    path = Path(program)
+    return path.stem if path.suffix.lower() in SCRIPT_SUFFIXES and path.stem else path.name
+
+
 def resolve(name: str | None, command: str | None = None) -> RefinerSpec:
     """Check a refiner choice before anything runs: a known Python refiner, or a command line
     (named ``name``, else its program's file name, the script's for ``python SCRIPT``)."""
@@ -88,7 +109,7 @@ def resolve(name: str | None, command: str | None = None) -> RefinerSpec:
         if not words:
             raise RefinerError("--refiner-command is empty")
         program = words[1] if Path(words[0]).name.startswith("python") and len(words) > 1 else words[0]
-        return RefinerSpec(name or Path(program).name, tuple(words))
+        return RefinerSpec(name or command_label(program), tuple(words))
     if not name:
         raise RefinerError("name a refiner (--refiner) or give --refiner-command")
     load_refiner(name)
@@ -96,51 +117,36 @@ def resolve(name: str | None, command: str | None = None) -> RefinerSpec:
 
 
 def run_refiner(spec: RefinerSpec, request: RefineRequest, work_dir: Path, timeout_s: float) -> np.ndarray:
-    """Run ``spec`` on ``request`` in a child process (its own session, killed with everything it
-    started after ``timeout_s``); the checked ``(P, 7)`` poses, or :class:`RefinerError`. The
-    request, result and the refiner's output stay in ``work_dir`` (``refiner.log``)."""
+    """Run ``spec`` on ``request`` in a child process (its own session); after ``timeout_s`` it is
+    killed with every process it started, those in sessions of their own (``setsid()``) and
+    orphans included (:mod:`aw.processes`), and nothing it started outlives a normal exit either.
+    Returns the checked ``(P, 7)`` poses, or raises :class:`RefinerError`. The request, result
+    and the refiner's output stay in ``work_dir`` (``refiner.log``)."""
     work_dir.mkdir(parents=True, exist_ok=True)
     req, res = work_dir / "refine-request.json", work_dir / "refine-result.json"
     res.unlink(missing_ok=True)
     write_request(req, request)
     log = work_dir / "refiner.log"
-    with open(log, "wb") as out:
-        try:
-            proc = subprocess.Popen(
-                spec.argv(req, res),
-                stdout=out,
-                stderr=subprocess.STDOUT,
-                stdin=subprocess.DEVNULL,
-                start_new_session=True,
-            )
-        except OSError as exc:
-            raise RefinerError(
-                f"refiner {spec.name}: cannot start {spec.argv(req, res)[0]} ({exc.strerror or exc})"
-            ) from None
-        try:
-            code = proc.wait(timeout=timeout_s)
-        except subprocess.TimeoutExpired:
-            _kill_group(proc)
-            raise RefinerError(f"refiner {spec.name}: timed out after {timeout_s:g} s (killed)") from None
+    try:
+        sup = run_supervised(
+            spec.argv(req, res),
+            env=dict(os.environ),
+            marker=new_marker(),
+            limit_seconds=timeout_s,
+            stdout_path=log,
+            stderr_path=log,
+            leftover_grace=LEFTOVER_GRACE_S,
+        )
+    except OSError as exc:
+        raise RefinerError(
+            f"refiner {spec.name}: cannot start {spec.argv(req, res)[0]} ({exc.strerror or exc})"
+        ) from None
+    if sup.timed_out:
+        raise RefinerError(f"refiner {spec.name}: timed out after {timeout_s:g} s (killed)")
+    code = sup.returncode
     if code != 0:
-        tail = _last_line(log)
+        tail = last_line(log)
         if tail.startswith(f"refiner {spec.name}: "):  # the worker's own verdict on the answer
             raise RefinerError(tail)
         raise RefinerError(f"refiner {spec.name}: exited with code {code}" + (f": {tail}" if tail else ""))
     return check_poses(spec.name, request, read_result(spec.name, res, request.part_ids))
-
-
-def _kill_group(proc: subprocess.Popen) -> None:
-    try:
-        os.killpg(proc.pid, signal.SIGKILL)
-    except (ProcessLookupError, PermissionError):
-        proc.kill()
-    proc.wait()
-
-
-def _last_line(path: Path) -> str:
-    try:
-        lines = [ln.strip() for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
-    except OSError:
-        return ""
-    return lines[-1][:300] if lines else ""

@@ -4,7 +4,9 @@ For each task: the request is built from the task's public files (part meshes, t
 samples), the start state is the task's layout or a given poses file (a run's ``final.json``),
 the refiner runs in a child process, and ``RUNS/<system>/<task_id>/`` gets ``trajectory.jsonl``
 (the start state in the header, one ``refine`` call carrying the refined poses, the end line),
-``final.json`` and ``run.json`` (``extra.refiner``, ``extra.initial_poses``). A refiner that
+``final.json`` and ``run.json`` (``extra.refiner``, ``extra.initial_poses``, and
+``extra.returned_start``: whether the answer equals the start within
+:data:`aw.refine.base.SAME_AS_START`). A refiner that
 fails or answers wrongly leaves the start state as the run's final state and ``ended:
 "error"`` with the one-line reason; the other tasks go on.
 """
@@ -22,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from aw.formats import (
+    EndReason,
     FinalState,
     FormatError,
     RunInfo,
@@ -36,8 +39,9 @@ from aw.formats import (
     write_run_info,
 )
 from aw.formats.poses import initial_poses_file, read_initial_poses
+from aw.formats.run import ExistingRuns, existing_runs
 from aw.formats.suite import suite_paths
-from aw.refine.base import RefineRequest, RefinerError, identity_poses
+from aw.refine.base import RefineRequest, RefinerError, identity_poses, returned_start
 from aw.refine.plugins import RefinerSpec, run_refiner
 
 __all__ = ["RefineConfig", "build_request", "fracture_identity", "refine_suite", "refine_task"]
@@ -124,11 +128,12 @@ def refine_task(
     error = None
     initial = read_initial_poses(start_file, task.task_id, task.part_ids) if start_file is not None else None
     request = build_request(task, suite_dir, initial, seed=seed, steps=steps, options=options)
-    start = {p: [float(v) for v in q] for p, q in zip(task.part_ids, request.initial_poses)}
+    start = {p: [float(v) for v in q] for p, q in zip(task.part_ids, request.initial_poses, strict=True)}
     final = start
     try:
         poses = run_refiner(spec, request, run_dir / "refine", timeout_s)
-        final = {p: [float(v) for v in q] for p, q in zip(task.part_ids, poses)}
+        final = {p: [float(v) for v in q] for p, q in zip(task.part_ids, poses, strict=True)}
+        extra["returned_start"] = returned_start(request.initial_poses, poses)
     except RefinerError as exc:
         error = str(exc)
     seconds = time.monotonic() - t0
@@ -155,7 +160,7 @@ def refine_task(
             poses=final if changed else None,
         )
     )
-    reason = "finished" if error is None else "error"
+    reason: EndReason = "finished" if error is None else "error"
     writer.end(
         TrajectoryEnd(reason=reason, t=round(seconds, 6), server_t=round(seconds, 6), message=error or "", poses=final)
     )
@@ -191,24 +196,31 @@ class RefineConfig:
     steps: int = 20
     options: dict[str, Any] = field(default_factory=dict)
     overwrite: bool = False
+    keep_failed: bool = False  # keep runs that failed (default: a rerun retries them)
     jobs: int = 1
     progress: bool = False
 
 
 def refine_suite(
-    cfg: RefineConfig, on_done: Callable[[RunInfo], None] | None = None
-) -> tuple[list[RunInfo], list[str]]:
-    """Refine every task (or ``cfg.tasks``) of the suite; ``(run infos, skipped task ids)``.
-    Tasks with a ``run.json`` already are skipped unless ``overwrite``; a task whose start state
-    is missing under ``start_from`` is recorded as an error run."""
+    cfg: RefineConfig, on_done: Callable[[RunInfo], None] | None = None, log: Callable[[str], None] | None = None
+) -> tuple[list[RunInfo], ExistingRuns]:
+    """Refine every task (or ``cfg.tasks``) of the suite; ``(run infos, what was done with the
+    runs already there)``. Without ``overwrite``, tasks with a finished run are skipped and runs
+    that failed are retried (said through ``log``), or kept with ``keep_failed``; a task whose
+    start state is missing under ``start_from`` is recorded as an error run."""
     from concurrent.futures import ThreadPoolExecutor
 
     try:
         ids = read_manifest(cfg.suite_dir).select(cfg.tasks)
     except ValueError as exc:
         raise RefinerError(str(exc)) from None
-    skipped = [t for t in ids if not cfg.overwrite and (cfg.out_dir / cfg.system / t / "run.json").is_file()]
-    todo = [t for t in ids if t not in skipped]
+    if cfg.overwrite:
+        existing = ExistingRuns(todo=list(ids))
+    else:
+        existing = existing_runs({t: cfg.out_dir / cfg.system / t for t in ids}, cfg.keep_failed)
+        if log is not None and existing.retry:
+            log(existing.retry_line())
+    todo = [t for t in ids if t not in set(existing.kept)]
     bar = None
     if cfg.progress:
         from aw.progress import progress
@@ -254,7 +266,7 @@ def refine_suite(
                 on_done(info)
     if bar is not None:
         bar.close()
-    return out, skipped
+    return out, existing
 
 
 def _failed(cfg: RefineConfig, run_dir: Path, task_id: str, error: str) -> RunInfo:

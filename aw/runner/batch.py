@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import socket
 import sys
 import tempfile
 import threading
@@ -22,7 +23,19 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from aw.formats import FormatError, RunInfo, read_manifest, read_run_info, read_trajectory, write_run_info
+from aw.formats import (
+    FormatError,
+    RunEnded,
+    RunInfo,
+    read_manifest,
+    read_run_info,
+    read_task,
+    read_trajectory,
+    write_run_info,
+)
+from aw.formats.io import parse_model, read_tail
+from aw.formats.run import BATCH_FILE, BatchPlan, ExistingRuns, existing_runs, system_label_problem, write_batch_plan
+from aw.formats.strict_json import read_json, read_json_object
 from aw.formats.suite import suite_paths
 from aw.formats.task import MAX_BUDGET_MINUTES
 from aw.formats.trajectory import FinalState, write_final
@@ -81,6 +94,7 @@ class BatchConfig:
     think_seconds: float = 0.0
     call_timeout: float = 120.0
     overwrite: bool = False
+    keep_failed: bool = False  # keep runs that failed (default: a rerun retries them)
     agent_options: dict[str, Any] = field(default_factory=dict)
     harness_bin: str | None = None
     harness_model: str | None = None
@@ -134,8 +148,9 @@ def check_config(cfg: BatchConfig) -> None:
         raise RunnerError(f"--budget-minutes must be positive and at most {MAX_BUDGET_MINUTES:g}")
     if cfg.think_seconds < 0 or cfg.call_timeout <= 0:
         raise RunnerError("--think-seconds must be >= 0 and --call-timeout positive")
-    if not cfg.system or "/" in cfg.system or cfg.system in (".", ".."):
-        raise RunnerError(f"--system must be a plain name (it becomes a directory), got {cfg.system!r}")
+    problem = system_label_problem(cfg.system)
+    if problem:
+        raise RunnerError(f"--system {problem} (it becomes a folder and a row of the reports)")
 
 
 def system_label(agent: str | None, harness: str | None, options: dict[str, Any] | None = None) -> str:
@@ -234,7 +249,11 @@ def check_reuse(cfg: BatchConfig, planned: list[Episode]) -> None:
     system_dir = cfg.out_dir / cfg.system
     if not system_dir.is_dir():
         return
-    replaced = {ep.task_id for ep in planned} if cfg.overwrite else set()
+    replaced = (
+        {ep.task_id for ep in planned}
+        if cfg.overwrite
+        else set(existing_runs({ep.task_id: ep.run_dir for ep in planned}, cfg.keep_failed).retry)
+    )
     now = run_settings(cfg)
     clashes: dict[str, list[str]] = {}
     for path in sorted(system_dir.glob("*/run.json")):
@@ -279,7 +298,7 @@ def plan_episodes(cfg: BatchConfig) -> list[Episode]:
             raise RunnerError(f"the oracle needs the targets file, missing: {targets}")
         start = None
         if cfg.initial_poses is not None:
-            from aw.formats.poses import initial_poses_file
+            from aw.formats.poses import initial_poses_file, read_initial_poses
 
             start = initial_poses_file(cfg.initial_poses, tid)
             if start is None:
@@ -287,6 +306,10 @@ def plan_episodes(cfg: BatchConfig) -> list[Episode]:
                     f"--initial-poses {cfg.initial_poses}: no start state for {tid} ({tid}/final.json or {tid}.json)"
                 )
             start = start.resolve()
+            try:  # the server reads it again; a bad file is named here, before anything runs
+                read_initial_poses(start, tid, read_task(task_dir).part_ids)
+            except FormatError as exc:
+                raise RunnerError(str(exc)) from None
         out.append(
             Episode(tid, task_dir.resolve(), targets.resolve(), (cfg.out_dir / cfg.system / tid).resolve(), start)
         )
@@ -304,8 +327,8 @@ def _server_args(cfg: BatchConfig, ep: Episode) -> list[str]:
 
 def _progress_state(path: Path) -> dict[str, Any] | None:
     try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
+        return read_json_object(path)
+    except FormatError:
         return None
 
 
@@ -354,6 +377,8 @@ def new_worker(env: dict[str, str]) -> WorkerProcess:
 def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worker: WorkerProcess) -> RunInfo:
     from aw.runner.episode import EpisodeResult, EpisodeSpec
 
+    if cfg.agent is None:
+        raise ValueError("an agent episode needs the batch's agent")
     work = ep.run_dir / ".runner"
     work.mkdir(parents=True, exist_ok=True)
     episode_marker = new_marker()
@@ -377,7 +402,10 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
     sup = worker.run(spec.model_dump_json(), cfg.limit_seconds, episode_marker)
     result: EpisodeResult | None = None
     if Path(spec.result_path).is_file():
-        result = EpisodeResult.model_validate_json(Path(spec.result_path).read_bytes())
+        try:
+            result = parse_model(EpisodeResult, read_json(spec.result_path), spec.result_path)
+        except FormatError as exc:  # the agent process wrote something else: a crash of its own
+            result = EpisodeResult(ended="crashed", error=f"the agent process left an unreadable result ({exc})")
     extra: dict[str, Any] = {
         "seed": cfg.seed,
         "think_seconds": cfg.think_seconds,
@@ -386,6 +414,8 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
     }
     if options:
         extra["options"] = options
+    ended: RunEnded
+    error: str | None
     if sup.timed_out:
         # No progress file yet: the agent was still connecting to the server.
         state = _progress_state(Path(spec.progress_path)) or {
@@ -405,11 +435,7 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
         extra["killed_pids"] = sup.killed
     elif result is None:
         ended = "crashed"
-        tail = ""
-        try:
-            tail = (ep.run_dir / "agent.log").read_text(errors="replace")[-1500:].strip()
-        except OSError:
-            pass
+        tail = read_tail(ep.run_dir / "agent.log", 1500).strip()
         error = f"the agent process died (exit code {sup.returncode}) without a result" + (f":\n{tail}" if tail else "")
     else:
         ended, error = result.ended, result.error
@@ -450,6 +476,8 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
 def _run_harness_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str]) -> RunInfo:
     from aw.runner.harness import HARNESSES, HarnessOptions
 
+    if cfg.harness is None:
+        raise ValueError("a harness episode needs the batch's harness")
     adapter = HARNESSES[cfg.harness]
     opts = HarnessOptions(
         binary=cfg.harness_bin,
@@ -476,6 +504,8 @@ def _run_harness_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str]) -> 
     shutil.rmtree(prepared.cwd, ignore_errors=True)
     facts = _trajectory_facts(ep.run_dir)
     final_source = _ensure_final(ep.run_dir, facts, ep.task_id)
+    ended: RunEnded
+    error: str | None
     if sup.timed_out:
         ended, error = "timeout", f"killed at the {cfg.limit_seconds:g} s limit"
     elif sup.returncode == 0 and not usage.is_error:
@@ -486,11 +516,8 @@ def _run_harness_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str]) -> 
         ended = "error"
         error = usage.error or f"the harness exited with code {sup.returncode}"
         if not usage.error:
-            try:
-                tail = (ep.run_dir / "harness.log").read_text(errors="replace")[-1500:].strip()
-                error += f":\n{tail}" if tail else ""
-            except OSError:
-                pass
+            tail = read_tail(ep.run_dir / "harness.log", 1500).strip()
+            error += f":\n{tail}" if tail else ""
     extra: dict[str, Any] = {
         "harness_command": prepared.display_command,
         "call_counts": facts.get("call_counts", {}),
@@ -584,26 +611,55 @@ class BatchResult:
     runs: list[RunInfo]
     skipped: list[str]
     wall_seconds: float
+    existing: ExistingRuns = field(default_factory=ExistingRuns)  # what was done with the runs already there
 
     def endings(self) -> Counter[str]:
         return Counter(r.ended for r in self.runs)
 
 
-def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None) -> BatchResult:
-    """Run every planned episode, ``cfg.jobs`` at a time, with a progress bar."""
+def _write_plan(cfg: BatchConfig, episodes: list[Episode]) -> BatchPlan:
+    """Say in ``RUNS/<system>/.aw-batch.json`` which episodes this batch runs (watchers show
+    those not started yet as queued)."""
+    plan = BatchPlan(
+        system=cfg.system,
+        suite_dir=str(Path(cfg.suite_dir).resolve()),
+        tasks=[ep.task_id for ep in episodes],
+        pid=os.getpid(),
+        host=socket.gethostname(),
+        started_unix=time.time(),
+        budget_minutes=cfg.budget_minutes,
+    )
+    write_batch_plan(cfg.out_dir / cfg.system / BATCH_FILE, plan)
+    return plan
+
+
+def _close_plan(cfg: BatchConfig, plan: BatchPlan) -> None:
+    plan.finished_unix = time.time()
+    try:
+        write_batch_plan(cfg.out_dir / cfg.system / BATCH_FILE, plan)
+    except OSError:  # a full disk: the batch's own error, if any, is the one to report
+        pass
+
+
+def run_batch(
+    cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None, log: Callable[[str], None] | None = None
+) -> BatchResult:
+    """Run every planned episode, ``cfg.jobs`` at a time, with a progress bar. Without
+    ``overwrite``, tasks with a finished run are skipped and runs that failed are retried (said
+    through ``log``), or kept with ``keep_failed``."""
     check_config(cfg)
     episodes = plan_episodes(cfg)
     check_reuse(cfg, episodes)
-    skipped = []
+    skipped: list[str] = []
+    existing = None
     if not cfg.overwrite:
-        todo = []
-        for ep in episodes:
-            if (ep.run_dir / "run.json").is_file():
-                skipped.append(ep.task_id)
-            else:
-                todo.append(ep)
-        episodes = todo
+        existing = existing_runs({ep.task_id: ep.run_dir for ep in episodes}, cfg.keep_failed)
+        skipped = existing.kept
+        episodes = [ep for ep in episodes if ep.task_id not in set(skipped)]
+        if log is not None and existing.retry:
+            log(existing.retry_line())
     (cfg.out_dir / cfg.system).mkdir(parents=True, exist_ok=True)
+    plan = _write_plan(cfg, episodes)
     env = episode_env()
     t0 = time.monotonic()
     runs: list[RunInfo] = []
@@ -655,6 +711,12 @@ def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None
             w.close()
         if bar is not None:
             bar.close()
+        _close_plan(cfg, plan)
     order = {ep.task_id: i for i, ep in enumerate(episodes)}
     runs.sort(key=lambda r: order.get(r.task_id, 0))
-    return BatchResult(runs=runs, skipped=skipped, wall_seconds=time.monotonic() - t0)
+    return BatchResult(
+        runs=runs,
+        skipped=skipped,
+        wall_seconds=time.monotonic() - t0,
+        existing=existing or ExistingRuns(todo=[ep.task_id for ep in episodes]),
+    )

@@ -25,6 +25,8 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from aw.formats.io import read_tail
+
 __all__ = ["CheckStep", "PROBE_PROMPT", "find_binary", "credential_sources", "check_harness", "DEFAULT_BINARIES"]
 
 DEFAULT_BINARIES = {"claude-code": "claude", "codex": "codex"}
@@ -154,7 +156,7 @@ def _probe(
         )
         usage = adapter.parse(transcript, opts)
         shutil.rmtree(prepared.cwd, ignore_errors=True)
-        tail = log.read_text(errors="replace").strip().splitlines()[-1:] if log.is_file() else []
+        tail = read_tail(log).strip().splitlines()[-1:]
     if sup.timed_out:
         return CheckStep(
             "probe",

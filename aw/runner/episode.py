@@ -21,6 +21,9 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from aw.formats import RunEnded
+from aw.formats.io import read_tail
+
 
 class EpisodeSpec(BaseModel):
     """Everything the worker needs; written by the runner as JSON."""
@@ -43,7 +46,7 @@ class EpisodeSpec(BaseModel):
 
 class EpisodeResult(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    ended: str  # finished | error | crashed | hung
+    ended: RunEnded  # finished | error | crashed | hung
     error: str | None = None
     report: str | None = None
     declared_complete: bool | None = None
@@ -55,10 +58,7 @@ class EpisodeResult(BaseModel):
 
 
 def _tail(path: Path, n: int = 1500) -> str:
-    try:
-        return path.read_text(errors="replace")[-n:].strip()
-    except OSError:
-        return ""
+    return read_tail(path, n).strip()
 
 
 async def run_episode(spec: EpisodeSpec) -> EpisodeResult:
@@ -68,7 +68,7 @@ async def run_episode(spec: EpisodeSpec) -> EpisodeResult:
 
     from aw.agents import AGENTS
     from aw.agents.base import AgentContext
-    from aw.runner.tools import ServerHung, ToolFailed, ToolSession
+    from aw.agents.session import ServerHung, ToolFailed, ToolSession
 
     agent = AGENTS[spec.agent]
     ctx = AgentContext(
@@ -98,25 +98,27 @@ async def run_episode(spec: EpisodeSpec) -> EpisodeResult:
                     agent_exc = exc
         except Exception as exc:  # connecting or disconnecting (anyio may wrap it in a group)
             conn_exc = _unwrap(exc)
-    exc = agent_exc or conn_exc
-    if exc is None and outcome is not None:
+    failure = agent_exc or conn_exc
+    if failure is None and outcome is not None:
         result = EpisodeResult(
             ended="finished", report=outcome.report, declared_complete=outcome.declared_complete, stats=outcome.stats
         )
-    elif exc is None:
+    elif failure is None:
         result = EpisodeResult(ended="error", error="the episode ended without an outcome")
-    elif isinstance(exc, ServerHung):
-        result = EpisodeResult(ended="hung", error=str(exc))
-    elif isinstance(exc, ToolFailed):
-        result = EpisodeResult(ended="error", error=f"tool error the agent could not handle: {exc}")
-    elif isinstance(exc, (MCPError, OSError, EOFError)) or exc is conn_exc:
+    elif isinstance(failure, ServerHung):
+        result = EpisodeResult(ended="hung", error=str(failure))
+    elif isinstance(failure, ToolFailed):
+        result = EpisodeResult(ended="error", error=f"tool error the agent could not handle: {failure}")
+    elif isinstance(failure, (MCPError, OSError, EOFError)) or failure is conn_exc:
         # Connection-level trouble: the server could not start, or went away mid-episode.
         log = _tail(log_path)
-        msg = f"MCP connection failed: {type(exc).__name__}: {exc}"
+        msg = f"MCP connection failed: {type(failure).__name__}: {failure}"
         result = EpisodeResult(ended="error", error=msg + (f"\nserver log tail:\n{log}" if log else ""))
     else:  # a bug in the agent itself
-        tb = traceback.format_exception(type(exc), exc, exc.__traceback__, limit=-4)
-        result = EpisodeResult(ended="crashed", error=f"agent raised {type(exc).__name__}: {exc}\n{''.join(tb)}")
+        tb = traceback.format_exception(type(failure), failure, failure.__traceback__, limit=-4)
+        result = EpisodeResult(
+            ended="crashed", error=f"agent raised {type(failure).__name__}: {failure}\n{''.join(tb)}"
+        )
     if tools is not None:
         result.call_counts = dict(tools.counts)
         result.tool_errors = dict(tools.errors)

@@ -20,7 +20,6 @@ each step adds). The diagrams are the ``manual`` reference (one per step).
 
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 from typing import Any
@@ -30,6 +29,7 @@ import trimesh
 
 from aw.assembly import AssembledObject, SourcePart, y_up_to_z_up
 from aw.formats import FormatError
+from aw.formats.strict_json import read_json
 from aw.pose import quat_to_matrix
 from aw.sources.meshdata import MESH_SUFFIXES, image_files, load_part_mesh, natural_key
 
@@ -38,13 +38,6 @@ __all__ = ["SOURCE", "read_poses", "load_object", "catalog"]
 SOURCE = "assemblybench"
 _VIEW = re.compile(r"^view_?(\d+)$")
 _STEP = re.compile(r"^step_?(\d+)$")
-
-
-def _read_json(path: Path) -> Any:
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise FormatError(path, f"not valid JSON ({exc})") from None
 
 
 def _check_pose_map(raw: Any, path: Path, field: str) -> dict[str, np.ndarray]:
@@ -76,7 +69,7 @@ def read_poses(obj_dir: str | Path) -> tuple[list[list[dict[str, np.ndarray]]], 
     single = obj_dir / "poses.json"
     folder = obj_dir / "poses"
     if single.is_file():
-        raw = _read_json(single)
+        raw = read_json(single)
         if isinstance(raw, dict):
             raw = raw.get("views")
         if not isinstance(raw, list) or not raw or not all(isinstance(v, list) and v for v in raw):
@@ -90,11 +83,11 @@ def read_poses(obj_dir: str | Path) -> tuple[list[list[dict[str, np.ndarray]]], 
     if not views:
         raise FormatError(folder, "poses: no view_<v> folders")
     out = []
-    for v, d in views:
+    for _view, d in views:
         steps = sorted((int(m.group(1)), f) for f in d.iterdir() if f.suffix == ".json" and (m := _STEP.match(f.stem)))
         if not steps:
             raise FormatError(d, "poses: no step_<s>.json files")
-        out.append([_check_pose_map(_read_json(f), f, "poses") for _, f in steps])
+        out.append([_check_pose_map(read_json(f), f, "poses") for _, f in steps])
     return out, folder
 
 
@@ -118,7 +111,7 @@ def load_object(root: str | Path, key: str, object_id: str | None = None) -> Ass
     if not obj_dir.is_dir():
         raise FormatError(obj_dir, "object folder not found")
     meta_path = obj_dir / "meta.json"
-    info = _read_json(meta_path) if meta_path.is_file() else {}
+    info = read_json(meta_path) if meta_path.is_file() else {}
     if not isinstance(info, dict):
         raise FormatError(meta_path, "expected an object")
     up = info.get("up_axis", "z")

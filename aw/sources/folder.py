@@ -21,14 +21,16 @@ from __future__ import annotations
 import os
 import warnings
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from aw.assembly import AssembledObject, SourcePart, y_up_to_z_up
 from aw.formats import FormatError
-from aw.formats.io import load_json, read_model
+from aw.formats.common import MAX_CATEGORY_CHARS
+from aw.formats.io import read_model
+from aw.formats.strict_json import read_json
 from aw.meshes import load_mesh
 from aw.sources.up_axis import guess_up_axis
 
@@ -67,8 +69,8 @@ class ObjectMeta(BaseModel):
 
     object_id: str | None = Field(default=None, min_length=1, max_length=100)
     source: str | None = Field(default=None, min_length=1, max_length=64)
-    dataset: str = Field(default="folder", min_length=1)
-    category: str = ""
+    dataset: str = Field(default="folder", min_length=1, max_length=64)
+    category: str = Field(default="", max_length=MAX_CATEGORY_CHARS)
     condition: Condition | None = None
     conditions: list[Condition] | None = Field(default=None, min_length=1)
     references: dict[Literal["image", "manual"], list[str]] = Field(default_factory=dict)
@@ -104,7 +106,7 @@ def unknown_keys(obj_dir: str | Path) -> list[str]:
     path = Path(obj_dir) / "meta.json"
     if not path.exists():
         return []
-    raw = load_json(path)
+    raw = read_json(path)
     return sorted(set(raw) - set(ObjectMeta.model_fields)) if isinstance(raw, dict) else []
 
 
@@ -185,12 +187,12 @@ def load_object(obj_dir: str | Path, default_source: str = "custom", up_axis: st
     meta_path = obj_dir / "meta.json"
     files = _part_files(obj_dir)
     meshes = [load_mesh(f) for f in files]
-    for f, mesh in zip(files, meshes):
+    for f, mesh in zip(files, meshes, strict=True):
         extent = np.ptp(np.asarray(mesh.vertices), axis=0)
         if not np.any(extent > 0):
             raise FormatError(f, "all vertices coincide; a part needs extent")
     axis, how = _up_axis(meta, up_axis, meshes)
-    parts = [SourcePart(f.stem, y_up_to_z_up(m) if axis == "y" else m) for f, m in zip(files, meshes)]
+    parts = [SourcePart(f.stem, y_up_to_z_up(m) if axis == "y" else m) for f, m in zip(files, meshes, strict=True)]
     names = {p.name for p in parts}
     for field_name, groups in (("equivalence", meta.equivalence), ("steps", meta.steps)):
         for group in groups or []:
@@ -209,7 +211,11 @@ def load_object(obj_dir: str | Path, default_source: str = "custom", up_axis: st
             paths.append(p)
         if paths:
             references[cond] = paths
-    extra = {"conditions": _conditions(meta), "folder": str(obj_dir), "up_axis": {"axis": axis, "how": how}}
+    extra: dict[str, Any] = {
+        "conditions": _conditions(meta),
+        "folder": str(obj_dir),
+        "up_axis": {"axis": axis, "how": how},
+    }
     if meta.steps:
         extra["steps"] = meta.steps
     return AssembledObject(

@@ -17,13 +17,13 @@ Part names are the part indices as strings (``"0"``, ``"1"``, ...), as in ``step
 
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 from typing import Any
 
 from aw.assembly import AssembledObject, SourcePart, y_up_to_z_up
 from aw.formats import FormatError
+from aw.formats.strict_json import read_json
 from aw.sources.meshdata import MESH_SUFFIXES, image_files, load_part_mesh
 
 __all__ = ["SOURCE", "read_main_data", "find_entry", "object_key", "load_object", "catalog", "step_parts"]
@@ -37,10 +37,7 @@ def read_main_data(root: str | Path) -> list[dict[str, Any]]:
     path = Path(root) / "main_data.json"
     if not path.is_file():
         raise FormatError(path, "main_data.json not found")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise FormatError(path, f"not valid JSON ({exc})") from None
+    data = read_json(path)
     if isinstance(data, dict):
         data = data.get("data", data.get("objects"))
     if not isinstance(data, list):

@@ -175,8 +175,8 @@ def _part_meshes(mesh_dir: Path, shape: ShapeData) -> tuple[list[trimesh.Trimesh
             )
         mesh = load_part_mesh(f, f"part mesh {i}")
         tree = cKDTree(np.asarray(mesh.vertices))
-        d_canon = tree.query(shape.part_pcs[i])[0].mean()
-        d_asm = tree.query(assembled[i])[0].mean()
+        d_canon = np.mean(tree.query(shape.part_pcs[i])[0])
+        d_asm = np.mean(tree.query(assembled[i])[0])
         if d_canon < d_asm:
             rot = quat_to_matrix(shape.part_poses[i, 3:])
             v = np.asarray(mesh.vertices) @ rot.T + shape.part_poses[i, :3]

@@ -356,7 +356,7 @@ def catalog(path: str | Path, source: str | None = None):
         src_col = _column(names, SOURCE_COLUMNS)
         srcs = small.column(src_col).to_pylist() if src_col else [None] * small.num_rows
         cats = small.column("category").to_pylist() if "category" in names else [None] * small.num_rows
-        for row, (oid, n, s, c) in enumerate(zip(small.column(id_col).to_pylist(), counts, srcs, cats)):
+        for row, (oid, n, s, c) in enumerate(zip(small.column(id_col).to_pylist(), counts, srcs, cats, strict=True)):
             n = _int(n, f, f"row {row}.parts_ct")
             named = source or s or source_of_download(f)
             src = normalize_source(named or "rehosted")

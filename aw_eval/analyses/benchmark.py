@@ -8,13 +8,14 @@ per-evaluation means over the records that exist.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from aw_eval.study.table import Study
+from aw_eval.study.table import RunRecord, Study
 
-__all__ = ["quality", "resources", "outcomes", "cell_label"]
+__all__ = ["quality", "resources", "outcomes", "cell_label", "first_stage"]
 
 _SHORT_SOURCE = {"partnet": "PartNet", "ikea_manual": "IKEA", "assemblybench": "AB", "fantastic_breaks": "FB"}
 _SHORT_COND = {"none": "NR", "image": "IR", "manual": "M"}
@@ -81,34 +82,76 @@ def quality(study: Study) -> dict[str, Any]:
     return out
 
 
-def _resource_values(study: Study, system: str) -> dict[str, list[float]]:
-    cols: dict[str, list[float]] = {"time_min": [], "mcp_calls": [], "tokens_m": [], "cost_usd": []}
-    src: dict[str, list[str]] = {"time_min": [], "mcp_calls": []}
-    for tid in study.original_ids:
-        rec = study.record(system, tid)
-        info, sc = rec.info, rec.score
-        if info is not None and info.wall_seconds is not None:
-            cols["time_min"].append(info.wall_seconds / 60.0)
-            src["time_min"].append("run.json")
-        elif sc.has_trajectory:
-            cols["time_min"].append(sc.end_t / 60.0)
-            src["time_min"].append("trajectory")
-        if info is not None and info.mcp_calls is not None:
-            cols["mcp_calls"].append(float(info.mcp_calls))
-            src["mcp_calls"].append("run.json")
-        elif sc.has_trajectory:
-            cols["mcp_calls"].append(float(len(sc.call_t)))
-            src["mcp_calls"].append("trajectory")
-        if info is not None and info.tokens is not None:
-            tok = info.tokens.total
-            if tok is None and info.tokens.input is not None and info.tokens.output is not None:
-                tok = info.tokens.input + info.tokens.output
-            if tok is not None:
-                cols["tokens_m"].append(tok / 1e6)
-        if info is not None and info.cost_usd is not None:
-            cols["cost_usd"].append(info.cost_usd)
-    cols["_sources"] = src  # type: ignore[assignment]
-    return cols
+RESOURCE_KEYS = ("time_min", "mcp_calls", "tokens_m", "cost_usd")
+MAX_STAGES = 8  # a chain of runs each started from the one before (a loop in the records stops here)
+
+
+def _own_resources(rec: RunRecord) -> dict[str, tuple[float, str] | None]:
+    """One run's own figures ``key -> (value, source)`` (None where not recorded)."""
+    info, sc = rec.info, rec.score
+    out: dict[str, tuple[float, str] | None] = dict.fromkeys(RESOURCE_KEYS)
+    if info is not None and info.wall_seconds is not None:
+        out["time_min"] = (info.wall_seconds / 60.0, "run.json")
+    elif sc.has_trajectory:
+        out["time_min"] = (sc.end_t / 60.0, "trajectory")
+    if info is not None and info.mcp_calls is not None:
+        out["mcp_calls"] = (float(info.mcp_calls), "run.json")
+    elif sc.has_trajectory:
+        out["mcp_calls"] = (float(len(sc.call_t)), "trajectory")
+    if info is not None and info.tokens is not None:
+        tok = info.tokens.total
+        if tok is None and info.tokens.input is not None and info.tokens.output is not None:
+            tok = info.tokens.input + info.tokens.output
+        if tok is not None:
+            out["tokens_m"] = (tok / 1e6, "run.json")
+    if info is not None and info.cost_usd is not None:
+        out["cost_usd"] = (info.cost_usd, "run.json")
+    return out
+
+
+def first_stage(study: Study, system: str, task_id: str) -> tuple[str | None, bool]:
+    """The system whose run of ``task_id`` this run started from (``run.json``
+    ``extra.initial_poses`` naming ``.../<system>/<task_id>/final.json``: composed refinement
+    arms, ``aw-run --initial-poses RUNS/<system>``), and whether the start came from elsewhere
+    (a run outside this study, a poses file). ``(None, False)``: a run from the task's layout."""
+    info = study.record(system, task_id).info
+    given = info.extra.get("initial_poses") if info is not None else None
+    if not given:
+        return None, False
+    path = Path(str(given))
+    if path.name == "final.json" and path.parent.name == task_id:
+        owner = path.parent.parent.parts
+        for s in study.systems:
+            parts = tuple(s.split("/"))
+            if s != system and owner[-len(parts) :] == parts:
+                return s, False
+    return None, True
+
+
+def _run_resources(study: Study, system: str, task_id: str) -> tuple[dict[str, tuple[float, str] | None], bool, bool]:
+    """``(figures, composed, left_out)``: a run's figures with those of the runs it started from
+    added (``composed``), and whether a stage's figures are missing from them (``left_out``)."""
+    total = _own_resources(study.record(system, task_id))
+    composed = left_out = False
+    seen, current = {system}, system
+    for _ in range(MAX_STAGES):
+        before, elsewhere = first_stage(study, current, task_id)
+        left_out |= elsewhere
+        if before is None or before in seen:
+            break
+        seen.add(before)
+        stage = _own_resources(study.record(before, task_id))
+        composed = True
+        for k, v in total.items():
+            add = stage[k]
+            if v is None:
+                continue
+            if add is None:
+                left_out = True
+            else:
+                total[k] = (v[0] + add[0], v[1])
+        current = before
+    return total, composed, left_out
 
 
 def resources(study: Study) -> dict[str, Any]:
@@ -117,17 +160,36 @@ def resources(study: Study) -> dict[str, Any]:
 
     Time and calls come from ``run.json`` (``wall_seconds``, ``mcp_calls``) and fall back to the
     trajectory (time of the end record or last call; number of recorded calls) when run.json
-    lacks them; tokens and cost only from run.json.
+    lacks them; tokens and cost only from run.json. A run started from another run's final state
+    (a composed refinement arm) counts both stages: ``composed`` says how many figures of a mean
+    add an earlier stage, ``stages_left_out`` how many leave one out (its run is not in this
+    study, or the start was a poses file); each key appears only where it is not zero.
     """
     out = {}
     for s in study.systems:
-        cols = _resource_values(study, s)
-        srcs = cols.pop("_sources")
-        row = {}
-        for k, v in cols.items():
-            row[k] = {"mean": float(np.mean(v)) if v else None, "n": len(v)}
-        for k, v in srcs.items():
-            row[k]["from_trajectory"] = int(sum(1 for x in v if x == "trajectory"))
+        cols: dict[str, list[float]] = {k: [] for k in RESOURCE_KEYS}
+        srcs: dict[str, list[str]] = {"time_min": [], "mcp_calls": []}
+        composed = dict.fromkeys(RESOURCE_KEYS, 0)
+        left_out = dict.fromkeys(RESOURCE_KEYS, 0)
+        for tid in study.original_ids:
+            figures, is_composed, is_short = _run_resources(study, s, tid)
+            for k, v in figures.items():
+                if v is None:
+                    continue
+                cols[k].append(v[0])
+                if k in srcs:
+                    srcs[k].append(v[1])
+                composed[k] += is_composed
+                left_out[k] += is_short
+        row: dict[str, dict[str, Any]] = {}
+        for k, vals in cols.items():
+            row[k] = {"mean": float(np.mean(vals)) if vals else None, "n": len(vals)}
+            if composed[k]:
+                row[k]["composed"] = composed[k]
+            if left_out[k]:
+                row[k]["stages_left_out"] = left_out[k]
+        for k, src in srcs.items():
+            row[k]["from_trajectory"] = int(sum(1 for x in src if x == "trajectory"))
         out[s] = row
     return out
 

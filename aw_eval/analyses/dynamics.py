@@ -104,7 +104,7 @@ def _summaries(evals: Sequence[EvalCalls], groups: list[np.ndarray], n_groups: i
     """Weighted medians across evaluations of per-evaluation medians, per group."""
     trans: list[list[tuple[float, float]]] = [[] for _ in range(n_groups)]
     rot: list[list[tuple[float, float]]] = [[] for _ in range(n_groups)]
-    for ev, g in zip(evals, groups):
+    for ev, g in zip(evals, groups, strict=True):
         for gi, (t, r) in enumerate(_edit_groups(ev, g, n_groups)):
             if t:
                 trans[gi].append((float(np.median(t)), ev.weight))
@@ -151,7 +151,7 @@ def stage_summary(evals: Sequence[EvalCalls]) -> dict[str, Any]:
 
 def _evals(study: Study, system: str, task_ids: Sequence[str], weights: np.ndarray) -> list[EvalCalls]:
     out = []
-    for tid, w in zip(task_ids, weights):
+    for tid, w in zip(task_ids, weights, strict=True):
         r = study.score(system, tid)
         if not r.scored or len(r.call_t) == 0:
             continue
@@ -176,7 +176,7 @@ def dynamics(study: Study, n_bins: int = N_BINS) -> dict[str, Any]:
         sr = {t: study.score(s, t).sr for t in d.task_ids}
         ok_ids = [t for t in d.task_ids if sr[t] == 1.0]
         bad_ids = [t for t in d.task_ids if sr[t] != 1.0]
-        widx = dict(zip(d.task_ids, d.weights))
+        widx = dict(zip(d.task_ids, d.weights, strict=True))
         out["systems"][s] = {
             "shares": [[None if np.isnan(x) else float(x) for x in row] for row in shares],
             "active": active.tolist(),

@@ -23,9 +23,20 @@ from typing import Any
 
 import numpy as np
 
+from aw_eval.study.model import RunScore
 from aw_eval.study.table import Study
 
-__all__ = ["CLASSES", "classify_parts", "translation_fractions", "failure_analysis", "OFFSET_GRID", "CENTRED_GRID"]
+__all__ = [
+    "CLASSES",
+    "classify_parts",
+    "translation_fractions",
+    "failure_analysis",
+    "far_from_assembled",
+    "placed_as_recorded",
+    "placed_parts",
+    "OFFSET_GRID",
+    "CENTRED_GRID",
+]
 
 CLASSES = (
     "correct",
@@ -124,10 +135,110 @@ def failure_analysis(study: Study) -> dict[str, Any]:
             "failed_tasks": n_failed,
             "wrong_parts": n_wrong,
             "unscored_runs": len(runs) - len(scored),
-            "class_counts": {c: int(n) for c, n in zip(CLASSES, counts)},
+            "class_counts": {c: int(n) for c, n in zip(CLASSES, counts, strict=True)},
             "translation_part_pooled": part,
             "translation_task_pooled": task,
             "grid": grid,
             "grid_range": [min(finite), max(finite)] if finite else None,
         }
     return out
+
+
+HIGH_PA = 0.25  # a PA from which a state far from assembled gets a note on why it scores
+PULLED_GAP = 0.25  # parts placed as recorded minus PA from which the one registration was pulled off them
+
+
+def placed_parts(
+    meshes: Sequence[Any], poses: np.ndarray, target_poses: np.ndarray, divisor: float, threshold: float
+) -> np.ndarray:
+    """``(P,)`` bool: the parts that lie at their targets as placed in ``poses (P, 7)``, before
+    any registration: each part's Chamfer distance to its own target part (normalized units) is
+    at most ``threshold``. Decided by a bound that needs no samples: a surface point moves by at
+    most its triangle's largest vertex displacement ``m`` between the two poses (the displacement
+    is affine in the point), so both Chamfer terms are at most ``(m / d) ** 2``."""
+    from aw.pose import poses_to_matrices
+
+    now, target = poses_to_matrices(poses), poses_to_matrices(target_poses)
+    out = np.zeros(len(meshes), dtype=bool)
+    for i, m in enumerate(meshes):
+        v = np.asarray(m.vertices, dtype=np.float64)
+        a = v @ now[i, :3, :3].T + now[i, :3, 3]
+        b = v @ target[i, :3, :3].T + target[i, :3, 3]
+        worst = float(np.sqrt(((a - b) ** 2).sum(axis=1)).max()) / divisor
+        out[i] = 2.0 * worst**2 <= threshold
+    return out
+
+
+def placed_as_recorded(
+    suite_dir: str, run_dir: str, final_from: str | None, task_id: str, part_ids: Sequence[str], divisor: float
+) -> tuple[list[Any], np.ndarray, np.ndarray] | None:
+    """``(meshes, final poses (P, 7), target poses (P, 7))`` of a scored run's final state as
+    recorded (``final_from`` says where its scoring took it), for :func:`placed_parts`; None when
+    the task has no meshes (an official package) or a file cannot be read again."""
+    from pathlib import Path
+
+    from aw.formats import FormatError, read_final, read_targets, read_task, read_trajectory
+    from aw.formats.suite import suite_paths
+    from aw.meshes import load_task_meshes
+
+    try:
+        task_dir, targets_path = suite_paths(suite_dir, task_id)
+        task, targets = read_task(task_dir), read_targets(targets_path)
+        by_id = dict(zip(task.part_ids, load_task_meshes(task), strict=True))
+        if final_from == "final.json":
+            final = read_final(Path(run_dir) / "final.json").poses
+        else:
+            final = read_trajectory(Path(run_dir) / "trajectory.jsonl").final_poses()
+        poses = np.array([final[p] for p in part_ids], dtype=np.float64)
+        target = np.array([targets.parts[p].pose for p in part_ids], dtype=np.float64)
+        return [by_id[p] for p in part_ids], poses, target
+    except (FormatError, OSError, ValueError, KeyError):
+        return None
+
+
+DISPLACED_SHARE = 0.5  # a state is far from assembled when at least this share of parts is displaced
+
+
+def far_from_assembled(
+    r: RunScore,
+    part_ids: Sequence[str],
+    *,
+    threshold: float = CORRECT_CD,
+    sra_threshold: float = 0.02,
+    offset_cutoff: float = OFFSET_CUTOFF,
+    placed: np.ndarray | None = None,
+) -> dict[str, Any] | None:
+    """Why a final state far from assembled scores well, as data for the report's note; None
+    unless the run's PA is at least ``HIGH_PA`` or its SR^a holds while at least
+    ``DISPLACED_SHARE`` of its parts are displaced: their centroids more than ``offset_cutoff`` (Table
+    A-11's translation cutoff, in largest-part diagonals) from their matched targets
+    after the registration. A heap of parts around the object's middle is such a state: the one
+    registration fits it as well as it can, and parts whose targets lie near the middle pass.
+    ``placed (P,)``: the parts at their targets as recorded (:func:`placed_parts`); when their
+    share exceeds PA by ``PULLED_GAP`` the state is partly assembled and the registration pulled
+    off it by parts left away, which the card says instead (None: not known).
+
+    Returns ``n_parts``, ``displaced`` (part ids), ``passed`` (per passing part: ``part``,
+    ``cd`` its matched Chamfer distance, ``offset``), ``pa``, ``sr``, ``sra``, ``scd`` and the
+    ``threshold``, ``sra_threshold`` and ``offset_cutoff`` used. ``part_ids``: the scored parts, in the run's order."""
+    if not r.scored or not r.n_parts or r.sr or len(r.offset) != r.n_parts or len(part_ids) != r.n_parts:
+        return None
+    errors, offset = np.asarray(r.part_errors, dtype=np.float64), np.asarray(r.offset, dtype=np.float64)
+    displaced = offset > offset_cutoff
+    if displaced.mean() < DISPLACED_SHARE or not (r.pa >= HIGH_PA or r.sra):
+        return None
+    if placed is not None and len(placed) == r.n_parts and placed.mean() - r.pa >= PULLED_GAP:
+        return None
+    passing = np.flatnonzero(errors <= threshold)
+    return {
+        "n_parts": int(r.n_parts),
+        "displaced": [part_ids[int(i)] for i in np.flatnonzero(displaced)],
+        "passed": [{"part": part_ids[int(i)], "cd": float(errors[i]), "offset": float(offset[i])} for i in passing],
+        "pa": float(r.pa),
+        "sr": float(r.sr),
+        "sra": float(r.sra),
+        "scd": float(r.scd),
+        "threshold": threshold,
+        "sra_threshold": sra_threshold,
+        "offset_cutoff": offset_cutoff,
+    }

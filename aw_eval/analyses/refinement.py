@@ -4,26 +4,29 @@ anchor-aligned), and paired per-object changes.
 
 Reads ``RUNS/refinement_study.json`` (written by ``aw-run --refinement-study``) for the arms'
 systems. Each run's final state is its trajectory's last recorded state (``final.json`` when the
-trajectory cannot be read); a run whose ``run.json`` says it did not finish counts as failed. The table averages over the tasks where every arm finished (the
-matched comparison); failed runs are listed per arm. Paired changes compare one arm with another
+trajectory cannot be read); a run whose ``run.json`` says it did not finish counts as failed.
+The table averages over the tasks where every arm finished (the matched comparison); failed
+runs are listed per arm. For the arms that end with the refiner it counts the tasks where the
+refiner returned its start unchanged (``run.json`` ``extra.returned_start``). Paired changes compare one arm with another
 task by task: PA improved / degraded / unchanged, and shape CD likewise (lower is better), a
 difference within ``TOLERANCE`` counting as unchanged.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from aw.formats import FormatError, read_final, read_manifest, read_run_info, read_targets, read_task, read_trajectory
+from aw.formats.strict_json import read_json_object
 from aw.formats.suite import suite_paths
 from aw.meshes import load_task_meshes
 from aw.prepare.official_protocol import fracture_samples
+from aw.refine.base import SAME_AS_START
 from aw.refine.runs import fracture_identity
-from aw.refine.study import ARMS, STUDY_FILE
+from aw.runner.refinement_study import ARMS, REFINER_ARMS, STUDY_FILE
 from aw_eval.fracture import SEED, fracture_metrics_from_samples
 
 __all__ = ["ARM_LABELS", "PAIRS", "TOLERANCE", "paired_changes", "refinement_study"]
@@ -77,10 +80,12 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
     if not path.is_file():
         return None
     try:
-        study = json.loads(path.read_text())
+        study = read_json_object(path)
         systems = {a["arm"]: a["system"] for a in study["arms"]}
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        return {"error": f"{path}: unreadable ({exc})"}
+    except FormatError as exc:
+        return {"error": f"{path}: unreadable ({exc.problem})"}
+    except (KeyError, TypeError) as exc:
+        return {"error": f"{path}: unreadable ({type(exc).__name__}: {exc})"}
     missing = [a for a in ARMS if a not in systems]
     if missing:
         return {"error": f"{path}: arms missing: {', '.join(missing)}"}
@@ -107,9 +112,15 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
         samples = fracture_samples(meshes, ids, dataset, sample_id, SEED)
         target = np.array([targets.parts[p].pose for p in ids])
         divisor, divisor_from = _divisor(suite_dir, tid, meshes, target, targets.scale)
-        row: dict[str, Any] = {"divisor": divisor, "divisor_from": divisor_from, "arms": {}}
+        row: dict[str, Any] = {
+            "divisor": divisor,
+            "divisor_from": divisor_from,
+            "benchmark_divisor": _benchmark_divisor(suite_dir, tid, meshes, targets.eval_divisor),
+            "arms": {},
+        }
         for arm in ARMS:
             run_dir = runs_dir / systems[arm] / tid
+            info = None
             if (run_dir / "run.json").is_file():  # optional, as for aw-score; when present, it says how the run ended
                 try:
                     info = read_run_info(run_dir / "run.json")
@@ -127,6 +138,8 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
                 continue
             m = fracture_metrics_from_samples(samples, np.array([poses[p] for p in ids]), target, divisor)
             row["arms"][arm] = {"re": m.re, "te": m.te, "pa": m.pa, "cd": m.cd, "anchor": ids[m.anchor]}
+            if arm in REFINER_ARMS:  # recorded by the refiner's run (None: not recorded)
+                row["arms"][arm]["returned_start"] = None if info is None else info.extra.get("returned_start")
         rows[tid] = row
     matched = [t for t, r in rows.items() if all(a in r["arms"] for a in ARMS)]
 
@@ -141,6 +154,10 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
             "failed": len(failures[arm]),
             **({k: float(values(arm, k).mean()) for k in ("re", "te", "pa", "cd")} if matched else {}),
         }
+        if arm in REFINER_ARMS:
+            said = [rows[t]["arms"][arm]["returned_start"] for t in matched]
+            table[arm]["returned_start"] = sum(1 for x in said if x)
+            table[arm]["returned_start_unknown"] = sum(1 for x in said if x is None)
     pairs = []
     for arm, base, metric in PAIRS:
         counts = paired_changes(values(arm, metric), values(base, metric), metric == "pa") if matched else {}
@@ -160,9 +177,26 @@ def refinement_study(suite_dir: str | Path, runs_dir: str | Path) -> dict[str, A
         "pairs": pairs,
         "scatter": scatter,
         "tolerance": TOLERANCE,
+        "same_as_start": SAME_AS_START,
         "failures": failures,
         "per_task": rows,
     }
+
+
+def _benchmark_divisor(suite_dir: Path, task_id: str, meshes, eval_divisor: float | None) -> float:
+    """The benchmark protocol's unit for the same task (Table 1's): ``scale_divisor`` from
+    ``eval_points/<task>.npz``, else the targets' ``eval_divisor``, else the largest part's PCA box
+    diagonal (:func:`aw_eval.geometry.part_divisor`), as the evaluator takes it."""
+    path = suite_dir / "eval_points" / f"{task_id}.npz"
+    if path.is_file():
+        with np.load(path, allow_pickle=False) as npz:
+            if "scale_divisor" in npz.files:
+                return float(npz["scale_divisor"])
+    if eval_divisor is not None:
+        return float(eval_divisor)
+    from aw_eval.geometry import part_divisor
+
+    return max(part_divisor(v) for v, _ in meshes)
 
 
 def _divisor(suite_dir: Path, task_id: str, meshes, target: np.ndarray, scale: float) -> tuple[float, str]:
@@ -177,5 +211,5 @@ def _divisor(suite_dir: Path, task_id: str, meshes, target: np.ndarray, scale: f
                 return float(npz["fracture_divisor"]), "eval_points"
     from aw.prepare.official_protocol import moved
 
-    extent = max(float(np.ptp(moved(v, p), axis=0).max()) for (v, _), p in zip(meshes, target))
+    extent = max(float(np.ptp(moved(v, p), axis=0).max()) for (v, _), p in zip(meshes, target, strict=True))
     return max(float(scale), extent), "targets scale and assembled extent"

@@ -37,6 +37,8 @@ def compile_kernels() -> None:
     parts = rng.normal(size=(2, 20, 3))
     trees = [build_tree(c) for c in parts]
     clouds = build_part_clouds([(tree, graph_for(tree)) for tree in trees])
+    if clouds is None:  # Qhull triangulates these random clouds; a failure here is a broken install
+        raise RuntimeError("compile_kernels: no Delaunay graph for the warm-up clouds")
     poses = np.array([[0.1, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], [0.0, 0.2, 0.0, 0.0, 1.0, 0.0, 0.0]])
     turns = np.array([np.eye(3), np.diag([1.0, -1.0, -1.0])])  # the poses' rotations: identity, half turn about x
     ICPProblem.for_assembly(parts, poses, 1.0, clouds, b, turns, tree_t=tb, graph_t=graph_for(tb)).run(

@@ -56,7 +56,7 @@ def fps_batch(points: np.ndarray, k: int, threads: int = 1) -> np.ndarray:
     cols = np.ascontiguousarray(np.swapaxes(pts, 1, 2))  # (B, 3, n): three rows per cloud
     out = np.empty((pts.shape[0], k), np.int64)
     before = numba.get_num_threads()
-    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))  # type: ignore[attr-defined]  # numba.config sets its options at import
     try:
         _fps_many(cols, int(k), out)
     finally:

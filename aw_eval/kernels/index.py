@@ -19,7 +19,7 @@ import numpy as np
 from aw.kernels.icp import ICPProblem, graph_for, nearest_positions
 from aw.kernels.kdtree import build_tree
 from aw.kernels.partwalk import build_part_clouds, part_maps
-from aw_eval.kernels.leafbox import build_leaf_boxes, build_part_leaves
+from aw_eval.kernels.leafbox import LeafBoxes, build_leaf_boxes, build_part_leaves
 
 __all__ = ["TaskIndex", "mean_squared_norm"]
 
@@ -40,6 +40,8 @@ class TaskIndex:
         divisor: float | None = None,
         rotations: np.ndarray | None = None,
     ):
+        if poses is not None and (divisor is None or rotations is None):
+            raise ValueError("TaskIndex: the target poses come with their divisor and rotations")
         self.target_parts = target_parts
         self.target = np.ascontiguousarray(target_parts.reshape(-1, 3))  # (P n, 3)
         self.tree_t = build_tree(self.target)
@@ -50,7 +52,7 @@ class TaskIndex:
         self._graph_t = _UNBUILT
         self._parts_built = False
         self._medium: dict[int, tuple] = {}
-        self._leaves = None
+        self._leaves: tuple[float, LeafBoxes, LeafBoxes] | None = None
 
     @property
     def graph_t(self):
@@ -68,7 +70,9 @@ class TaskIndex:
         self.baked = [(tree, graph_for(tree, c)) for tree, c in ((build_tree(c), c) for c in self._clouds)]
         self.part_clouds = build_part_clouds(self.baked)  # None: a part has no graph
         # normalized target -> baked frames (c = A y + b), for part_cd's forward searches
-        self.target_maps = None if self._poses is None else part_maps(self._poses, self._divisor, self._rotations)
+        self.target_maps = None
+        if self._poses is not None and self._divisor is not None and self._rotations is not None:
+            self.target_maps = part_maps(self._poses, self._divisor, self._rotations)
         self._parts_built = True
 
     def assembly_problem(
@@ -132,7 +136,7 @@ class TaskIndex:
         bwd = nearest_positions(tree_i, graph_i, y @ a[i].T + b[i])  # tree positions of part i = rows of x
         return mean_squared_norm(x - y[fwd]) + mean_squared_norm(y - x[bwd])
 
-    def part_leaves(self, divisor: float):
+    def part_leaves(self, divisor: float) -> tuple[LeafBoxes, LeafBoxes]:
         """``(target, baked)``: :class:`aw_eval.kernels.leafbox.LeafBoxes` of the joined target (one
         cloud) and of the parts' baked clouds over ``divisor`` (what a checkpoint moves rigidly into
         the normalized prediction), for the jax backend; built once per task (milliseconds)."""

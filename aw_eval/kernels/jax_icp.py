@@ -29,6 +29,7 @@ from __future__ import annotations
 from functools import cache, lru_cache
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from aw_eval.kernels.jaxcfg import jax_modules
 from aw_eval.kernels.leafbox import ABS as LEAF_ABS
@@ -374,9 +375,9 @@ def icp_batch(
     init, round_ = _compiled_round(
         int(max_iters), float(tol), int(CANDIDATES if candidates is None else candidates), has_pl
     )
-    dev = lambda a: jnp.asarray(a)  # noqa: E731
+    dev = jnp.asarray
     tl = tuple(dev(a) for a in target_leaves)
-    pl = tuple(dev(a) for a in pred_leaves) if has_pl else ()
+    pl = tuple(dev(a) for a in pred_leaves) if pred_leaves is not None else ()
     maps = dev(pred_maps if has_pl else np.zeros((c, 1, 3, 4)))
     pr, tgt = dev(np.asarray(preds, np.float64)), dev(target)
     lanes = c * s
@@ -409,7 +410,7 @@ def icp_batch(
                 t_all[ids],
             )
         )
-    ids, active, its, prev, fwd, bwd, best, br, bt = (np.concatenate(z) for z in zip(*live))
+    ids, active, its, prev, fwd, bwd, best, br, bt = (np.concatenate(z) for z in zip(*live, strict=True))
     active &= max_iters > 0
     while active.any():
         keep = np.flatnonzero(active)
@@ -438,7 +439,7 @@ def icp_batch(
             counters["queries"] += len(pad) * iters * per_lane
             counters["lane_iterations"] += int((new_its - its[part]).sum())
             counters["brute_queries"] += int(nflag)
-            for whole, got in zip((active, its, prev, fwd, bwd, best, br, bt), out):
+            for whole, got in zip((active, its, prev, fwd, bwd, best, br, bt), out, strict=True):
                 whole[part] = np.asarray(got)[:n]
         best_obj[ids], best_r[ids], best_t[ids] = best, br, bt
     if stats is not None:
@@ -467,7 +468,7 @@ def _compiled_part_cd(tile: int):
 
 
 def part_cd_batch(
-    moved_parts: np.ndarray, target_parts: np.ndarray, pairs: np.ndarray | None = None, tile: int = DEFAULT_TILE
+    moved_parts: np.ndarray, target_parts: np.ndarray, pairs: ArrayLike | None = None, tile: int = DEFAULT_TILE
 ) -> np.ndarray:
     """``C (C, P, P)``: ``C[c, i, j]`` = CD(registered pred part ``i`` of checkpoint ``c``, target
     part ``j``) for ``moved_parts (C, P, n, 3)`` and ``target_parts (P, n, 3)``, for the pairs

@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from types import ModuleType
 
 _READY = False
 
 
-def jax_modules():
+def jax_modules() -> tuple[ModuleType, ModuleType]:
     """``(jax, jax.numpy)`` with float64 enabled and the compilation cache configured once."""
     global _READY
     import jax

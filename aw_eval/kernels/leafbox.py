@@ -55,7 +55,7 @@ class LeafBoxes(NamedTuple):
 
     lo: np.ndarray
     hi: np.ndarray
-    index: np.ndarray
+    index: np.ndarray  # type: ignore[assignment]  # shadows tuple.index, which is never called on the boxes
 
 
 def _leaves(pts: np.ndarray, leaf: int) -> list[np.ndarray]:
@@ -97,7 +97,7 @@ def build_part_leaves(parts: np.ndarray, leaf: int = DEFAULT_LEAF) -> LeafBoxes:
     parts = np.asarray(parts, dtype=np.float64)
     n = parts.shape[1]
     each = [build_leaf_boxes(c, leaf, q * n) for q, c in enumerate(parts)]
-    return LeafBoxes(*(np.concatenate(z) for z in zip(*each)))
+    return LeafBoxes(*(np.concatenate(z) for z in zip(*each, strict=True)))
 
 
 def brute_first_min(x: np.ndarray, ref: np.ndarray) -> np.ndarray:

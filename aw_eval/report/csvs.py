@@ -8,6 +8,7 @@ import math
 from pathlib import Path
 from typing import Any
 
+from aw.formats.io import atomic_path
 from aw_eval.study.table import Study
 
 __all__ = ["TASK_COLUMNS", "CHECKPOINT_COLUMNS", "write_task_csv", "write_checkpoint_csv"]
@@ -54,7 +55,7 @@ def _num(x) -> str:
 
 
 def write_task_csv(study: Study, path: Path) -> int:
-    with open(path, "w", newline="") as fh:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(TASK_COLUMNS)
         n = 0
@@ -80,7 +81,8 @@ def write_task_csv(study: Study, path: Path) -> int:
                     "status": r.status,
                     "final_from": r.final_from,
                     "end_reason": r.end_reason,
-                    "ended": info.ended if info is not None else None,
+                    # a run still being recorded has no run.json yet: "running" says why
+                    "ended": "running" if rec.running is not None else (info.ended if info is not None else None),
                     "truncated": r.truncated,
                     "n_checkpoints": r.n_checkpoints,
                     "pa": float(r.pa),
@@ -101,7 +103,7 @@ def write_task_csv(study: Study, path: Path) -> int:
 
 
 def write_checkpoint_csv(study: Study, path: Path) -> int:
-    with open(path, "w", newline="") as fh:
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(CHECKPOINT_COLUMNS)
         n = 0

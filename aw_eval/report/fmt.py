@@ -44,23 +44,26 @@ def pval(p, floor: float = 0.001) -> str:
 
 
 def md_table(header: list[str], rows: list[list[str]], align: str | None = None) -> str:
-    """A GitHub Markdown table; ``align`` is one character per column (l or r), default l then r."""
+    """A GitHub Markdown table; ``align`` is one character per column (l or r), default l then r.
+    A ``|`` inside a cell (a system named after its run directory) is escaped as ``\\|``."""
     align = align or ("l" + "r" * (len(header) - 1))
     sep = ["---" if a == "l" else "---:" for a in align]
-    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(sep) + " |"]
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
+
+    def line(cells: list[str]) -> str:
+        return "| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |"
+
+    return "\n".join([line(header), "| " + " | ".join(sep) + " |", *(line(r) for r in rows)])
 
 
 def bold_best(cells: list[str], values: list, higher: bool = True, eligible: list[bool] | None = None) -> list[str]:
     """Bold the best numeric entries (ties included) among the ``eligible`` ones (default all),
     only when it is a real best: at least two eligible values, and not all equal."""
     ok = [not _missing(v) and (eligible is None or eligible[i]) for i, v in enumerate(values)]
-    vals = [float(v) for v, o in zip(values, ok) if o]
+    vals = [float(v) for v, o in zip(values, ok, strict=True) if o]
     if len(vals) < 2 or max(vals) - min(vals) < 1e-9:
         return cells
     best = max(vals) if higher else min(vals)
-    return [f"**{c}**" if o and abs(float(v) - best) < 1e-9 else c for c, v, o in zip(cells, values, ok)]
+    return [f"**{c}**" if o and abs(float(v) - best) < 1e-9 else c for c, v, o in zip(cells, values, ok, strict=True)]
 
 
 def threshold_label(t: float) -> str:

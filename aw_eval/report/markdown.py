@@ -10,8 +10,10 @@ from __future__ import annotations
 from typing import Any
 
 from aw.cli.common import plural
-from aw_eval.analyses.failures import CLASSES
+from aw_eval.analyses.failures import CLASSES, HIGH_PA
 from aw_eval.report.fmt import DASH, bold_best, ci, fixed, md_table, paper, pval, signed, threshold_label
+from aw_eval.report.heaps import far_from_assembled_note
+from aw_eval.report.refinement import REFINEMENT_TITLE, refinement_headline, render_refinement
 from aw_eval.report.results import protocol_of
 
 __all__ = ["render_markdown", "system_label", "SUMMARY_SECTIONS"]
@@ -21,7 +23,7 @@ TABLE1 = "Table 1: benchmark results"
 OVERVIEW = "Table A-3: benchmark quality with bootstrap intervals"
 PAIRS = "Table A-4: paired system differences"
 # The sections a reader needs first; report.html shows them open and folds the rest.
-SUMMARY_SECTIONS = (HOW_TO_READ, TABLE1, OVERVIEW, PAIRS)
+SUMMARY_SECTIONS = (REFINEMENT_TITLE, HOW_TO_READ, TABLE1, OVERVIEW, PAIRS)
 
 SOURCE_NAMES = {
     "partnet": "PartNet",
@@ -76,19 +78,24 @@ def _how_to_read(doc: dict[str, Any]) -> str:
     p = protocol_of(doc)
     over, q = doc["uncertainty"].get("overview") or {}, doc["quality"]["systems"]
     real = [s for s in _real(doc) if s in over]
+    # RUNS is a refinement study: its four-arm table is the headline, Table 1 a second protocol
+    study_headline = refinement_headline(doc["refinement"]) if doc.get("refinement") else ""
     if real:
         head = "; ".join(
             f"{s} {paper(over[s]['sr']['value'])}% (95% CI {ci(over[s]['sr']['ci'])}; PA "
             f"{paper(over[s]['pa']['value'])}%)"
             for s in real
         )
-        headline = f"- **Headline: Overall SR** (Table 1; sources weighted equally): {head}."
+        title = "Overall SR by the benchmark's protocol" if study_headline else "Headline: Overall SR"
+        headline = f"- **{title}** (Table 1; sources weighted equally): {head}."
     elif over:
         headline = (
             "- **Headline: none.** Every system is calibration or floor: the study measures the scorer, not an agent."
         )
     else:
         headline = f"- **Headline: none.** {NO_ORIGINALS}"
+    if study_headline:
+        headline = study_headline + ("\n" + headline if real else "")
     lines = [
         headline,
         f"- **PA** (part accuracy, %): parts whose Chamfer distance to their matched target part is at most "
@@ -126,6 +133,18 @@ def _how_to_read(doc: dict[str, Any]) -> str:
     if n_unscored:
         kinds = ", ".join(f"{len(v)} {k}" for k, v in sorted(doc["unscored_runs"].items()))
         warn.append(f"{plural(n_unscored, 'run')} not scored ({kinds}) count PA = SR = 0: see Runs.")
+    running = doc.get("running_runs") or []
+    if running:
+        scored = [r for r in running if r["scored"]]
+        warn.append(
+            f"{plural(len(running), 'run')} {'was' if len(running) == 1 else 'were'} still being recorded when "
+            "scored (a live lock): "
+            + (
+                "scored at their last state (--allow-running), not their end; marked running under Runs."
+                if scored
+                else "left out (status running, counted 0); score again when they end."
+            )
+        )
     if doc.get("unknown_runs"):
         n = len(doc["unknown_runs"])
         warn.append(f"{plural(n, 'run')} for tasks not in the suite {'was' if n == 1 else 'were'} ignored: see Runs.")
@@ -136,6 +155,12 @@ def _how_to_read(doc: dict[str, Any]) -> str:
                 f"{system_label(doc, s)}: SR^a {paper(o['sra'])}% but SR {paper(o['sr'])}% and PA {paper(o['pa'])}%: "
                 "its assemblies are close in shape, not part by part."
             )
+    far = [r for r in doc["runs"] if r.get("far_from_assembled")]
+    if far:
+        warn.append(
+            f"{plural(len(far), 'run')} {'scores' if len(far) == 1 else 'score'} PA of {100 * HIGH_PA:g}% or "
+            "more, or SR^a, on a state far from assembled (most parts displaced): see Runs for why."
+        )
     if doc["settings"].get("protocol_overrides"):
         warn.append("Scored with protocol overrides: not comparable with the paper's numbers.")
     lines += [f"- **Warning:** {w}" for w in warn]
@@ -157,6 +182,17 @@ def _resource_note(doc: dict[str, Any], systems: list[str]) -> str:
     out = ([f"Not recorded: {', '.join(none)}."] if none else []) + (
         [f"Means over fewer runs: {'; '.join(fewer)}."] if fewer else []
     )
+    composed = [s for s in systems if any(res[s][k].get("composed") for k in names)]
+    if composed:
+        out.append(
+            f"{', '.join(composed)} started from another system's final states: their resources add up both stages."
+        )
+    short = [s for s in systems if any(res[s][k].get("stages_left_out") for k in names)]
+    if short:
+        out.append(
+            f"{', '.join(short)}: resources leave out the stage that made their start states (a run outside this "
+            "study, or a poses file); never bolded."
+        )
     return " ".join(out)
 
 
@@ -181,7 +217,7 @@ def _table1(doc: dict[str, Any]) -> str:
     # Only real systems compete; lowest resource use is only "best" for a system that achieved
     # something (an idle system's few calls are not an achievement).
     real = [_role(doc, s) == "system" for s in systems]
-    achieved = [r and float(q["systems"][s]["overall"]["pa"] or 0) > 0 for r, s in zip(real, systems)]
+    achieved = [r and float(q["systems"][s]["overall"]["pa"] or 0) > 0 for r, s in zip(real, systems, strict=True)]
     text_cols = []
     for j, col in enumerate(cols):
         if j <= len(cells):
@@ -191,7 +227,9 @@ def _table1(doc: dict[str, Any]) -> str:
             k = res_keys[j - len(cells) - 1]
             digits = {"time_min": 2, "mcp_calls": 0, "tokens_m": 2, "cost_usd": 2}[k]
             txt = [fixed(v, digits) for v in col]
-            text_cols.append(bold_best(txt, col, higher=False, eligible=achieved))
+            # a cost that leaves out a stage is not a system's whole cost: never the best
+            whole = [a and not res[s][k].get("stages_left_out") for a, s in zip(achieved, systems, strict=True)]
+            text_cols.append(bold_best(txt, col, higher=False, eligible=whole))
     rows = [[system_label(doc, s)] + [tc[i] for tc in text_cols] for i, s in enumerate(systems)]
     note = (
         "SR (%) per source and condition (NR: no reference, IR: image, M: manual); Overall by eq. 3 (sources "
@@ -209,7 +247,7 @@ def _quality_full(doc: dict[str, Any]) -> str:
     for s in _order(doc):
         row = q["systems"][s]
         rows = []
-        for c, v in zip(q["cells"], row["cells"]):
+        for c, v in zip(q["cells"], row["cells"], strict=True):
             rows.append(
                 [
                     c["label"],
@@ -522,7 +560,7 @@ def _curves(doc: dict[str, Any]) -> str:
             continue
         rows.append(
             [system_label(doc, s)]
-            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["normalized"], v["sr"]["normalized"])]
+            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["normalized"], v["sr"]["normalized"], strict=True)]
         )
     t1 = md_table(["System"] + [f"PA/SR (%) at {p:g}" for p in pts], rows)
     rows = []
@@ -532,7 +570,7 @@ def _curves(doc: dict[str, Any]) -> str:
             continue
         rows.append(
             [system_label(doc, s)]
-            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["budget"], v["sr"]["budget"])]
+            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["budget"], v["sr"]["budget"], strict=True)]
             + [f"{paper(v['pa']['final'])}/{paper(v['sr']['final'])}", str(v["edits_after_last_budget"])]
         )
     t2 = md_table(
@@ -688,13 +726,26 @@ def _runs(doc: dict[str, Any]) -> str:
     if doc["unknown_runs"]:
         lines.append(f"- **runs for tasks not in the suite** ({len(doc['unknown_runs'])}), ignored:")
         lines += [f"  - {u['system']} / {u['task_id']}" for u in doc["unknown_runs"]]
-    notes = [r for r in doc["runs"] if r["status"] == "scored" and (r["problems"] or r["final_from"] != "final.json")]
+    far = [r for r in doc["runs"] if r.get("far_from_assembled")]
+    if far:
+        lines.append(f"- **high scores on states far from assembled** ({len(far)}):")
+        for r in far:
+            label = f"{r['system']} / {r['task_id']}"
+            lines.append(f"  - {far_from_assembled_note(label, r['far_from_assembled'])}")
+    notes = [
+        r
+        for r in doc["runs"]
+        if r["status"] == "scored" and (r["problems"] or r["final_from"] != "final.json" or r.get("running"))
+    ]
     if notes:
         lines.append(f"- **scored with notes** ({len(notes)}):")
         for r in notes:
             msg = "; ".join(r["problems"]) if r["problems"] else ""
             lines.append(
-                f"  - {r['system']} / {r['task_id']}: final state from {r['final_from']}" + (f"; {msg}" if msg else "")
+                f"  - {r['system']} / {r['task_id']}: "
+                + ("**running**, " if r.get("running") else "")
+                + f"final state from {r['final_from']}"
+                + (f"; {msg}" if msg else "")
             )
     return "\n".join(lines) if lines else "Every run was found and scored from its final.json."
 
@@ -720,6 +771,11 @@ def render_markdown(doc: dict[str, Any], plots: dict[str, str] | None = None) ->
                 "could not be scored (listed under Runs); the tables count them 0.**"
             ]
             if doc.get("partial")
+            else []
+        ),
+        *(
+            [render_refinement(doc["refinement"], plots.get("refinement_paired_cd")).rstrip("\n")]
+            if doc.get("refinement")
             else []
         ),
         f"## {HOW_TO_READ}",

@@ -14,6 +14,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from aw.formats.io import atomic_path  # noqa: E402
+
 __all__ = ["write_plots"]
 
 _DPI = 110
@@ -30,8 +32,11 @@ def _colors(n: int):
 
 
 def _save(fig, path: Path) -> str:
-    fig.savefig(path, dpi=_DPI, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=_DPI, bbox_inches="tight")
+    finally:
+        plt.close(fig)
     return path.name
 
 
@@ -41,11 +46,11 @@ def _quality_normalized(doc, path: Path) -> str | None:
         return None
     x = np.array(cv["points"])
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharex=True)
-    for s, c in zip(_systems(doc), _colors(len(doc["systems"]))):
+    for s, c in zip(_systems(doc), _colors(len(doc["systems"])), strict=True):
         v = cv["systems"][s]
         axes[0].plot(x, v["pa"]["normalized"], marker="o", ms=3, color=c, label=s)
         axes[1].plot(x, v["sr"]["normalized"], marker="o", ms=3, color=c, label=s)
-    for ax, name in zip(axes, ("PA (%)", "SR (%)")):
+    for ax, name in zip(axes, ("PA (%)", "SR (%)"), strict=True):
         ax.set_xlabel("normalized time (0 = first call, 1 = final state)")
         ax.set_ylabel(name)
         ax.set_ylim(-2, 102)
@@ -64,12 +69,12 @@ def _quality_budget(doc, path: Path) -> str | None:
     pos = np.arange(len(minutes))
     final_x = len(minutes) + 0.5
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-    for s, c in zip(_systems(doc), _colors(len(doc["systems"]))):
+    for s, c in zip(_systems(doc), _colors(len(doc["systems"])), strict=True):
         v = cv["systems"][s]
-        for ax, m in zip(axes, ("pa", "sr")):
+        for ax, m in zip(axes, ("pa", "sr"), strict=True):
             ax.plot(pos, v[m]["budget"], marker="o", ms=3, color=c, label=s)
             ax.plot([final_x], [v[m]["final"]], marker="D", ms=6, color=c, linestyle="none")
-    for ax, name in zip(axes, ("PA (%)", "SR (%)")):
+    for ax, name in zip(axes, ("PA (%)", "SR (%)"), strict=True):
         ax.axvspan(len(minutes) - 0.25, len(minutes) + 1.25, color="0.9", zorder=0)
         ax.set_xticks(list(pos) + [final_x], [f"{m:g}" for m in minutes] + ["Final"])
         ax.set_xlabel("time budget (minutes since start_episode)")
@@ -88,11 +93,11 @@ def _thresholds(doc, path: Path) -> str | None:
         return None
     x = np.array(th["thresholds"])
     fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharex=True)
-    for s, c in zip(_systems(doc), _colors(len(doc["systems"]))):
+    for s, c in zip(_systems(doc), _colors(len(doc["systems"])), strict=True):
         v = th["systems"][s]
         axes[0].plot(x, v["pa"], color=c, label=s)
         axes[1].plot(x, v["sr"], color=c, label=s)
-    for ax, name in zip(axes, ("PA (%)", "SR (%)")):
+    for ax, name in zip(axes, ("PA (%)", "SR (%)"), strict=True):
         ax.set_xscale("log")
         ax.axvline(0.01, color="k", ls="--", lw=0.8, label="protocol cutoff 0.01")
         ax.set_xlabel("part CD threshold (normalized units²)")
@@ -117,7 +122,7 @@ def _activity(doc, path: Path) -> str | None:
     rows = (n + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.0 * rows), squeeze=False, sharey=True)
     centers = (np.arange(dy["n_bins"]) + 0.5) / dy["n_bins"]
-    for ax, s in zip(axes.ravel(), systems):
+    for ax, s in zip(axes.ravel()[:n], systems, strict=True):  # the grid's spare cells are hidden below
         sh = np.array([[np.nan if x is None else x for x in row] for row in dy["systems"][s]["shares"]], dtype=float)
         for k, kind in enumerate(dy["kinds"]):
             ax.plot(centers, 100 * sh[:, k], marker="o", ms=3, color=_KIND_COLORS.get(kind), label=kind.capitalize())
@@ -150,7 +155,7 @@ def _magnitudes(doc, path: Path) -> str | None:
     centers = (np.arange(dy["n_bins"]) + 0.5) / dy["n_bins"]
     fig, ax = plt.subplots(figsize=(7, 4))
     ax2 = ax.twinx()
-    for s, c in zip(systems, _colors(len(doc["systems"]))):
+    for s, c in zip(systems, _colors(len(doc["systems"])), strict=True):
         mg = dy["systems"][s]["magnitudes"]
         t = np.array([np.nan if x is None else x for x in mg["translation"]], dtype=float)
         r = np.array([np.nan if x is None else x for x in mg["rotation_deg"]], dtype=float)
@@ -175,12 +180,12 @@ def _reference(doc, path: Path) -> str | None:
     fig, axes = plt.subplots(1, 2, figsize=(10, 0.55 * len(ref) + 1.8), sharey=True)
     labels = [f"{r['system']} ({r['source']})" if len({x["source"] for x in ref}) > 1 else r["system"] for r in ref]
     y = np.arange(len(ref))[::-1]
-    for ax, m, name in zip(axes, ("sr", "pa"), ("ΔSR (percentage points)", "ΔPA (percentage points)")):
+    for ax, m, name in zip(axes, ("sr", "pa"), ("ΔSR (percentage points)", "ΔPA (percentage points)"), strict=True):
         d = np.array([r[m]["diff"] for r in ref])
         lo = np.array([r[m]["ci"][0] for r in ref])
         hi = np.array([r[m]["ci"][1] for r in ref])
         ax.errorbar(d, y, xerr=[d - lo, hi - d], fmt="o", color="#4C72B0", ecolor="0.4", capsize=3)
-        for yi, di in zip(y, d):
+        for yi, di in zip(y, d, strict=True):
             ax.annotate(f"{di:+.1f}", (di, yi), textcoords="offset points", xytext=(0, 7), ha="center", fontsize=8)
         ax.axvline(0, color="k", lw=0.8)
         ax.set_xlabel(name)

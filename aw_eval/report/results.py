@@ -10,7 +10,13 @@ from typing import Any
 import numpy as np
 
 from aw_eval import analyses
-from aw_eval.analyses.failures import CLASSES, classify_parts
+from aw_eval.analyses.failures import (
+    CLASSES,
+    classify_parts,
+    far_from_assembled,
+    placed_as_recorded,
+    placed_parts,
+)
 from aw_eval.settings import ProtocolSettings
 from aw_eval.study.table import Study
 
@@ -35,7 +41,7 @@ def _f(x):
     return None if not np.isfinite(x) else x
 
 
-def _run_entry(study: Study, system: str, task_id: str) -> dict[str, Any]:
+def _run_entry(study: Study, system: str, task_id: str, protocol: ProtocolSettings, suite_dir: str) -> dict[str, Any]:
     rec = study.record(system, task_id)
     r = rec.score
     info = rec.info
@@ -43,6 +49,9 @@ def _run_entry(study: Study, system: str, task_id: str) -> dict[str, Any]:
         "system": system,
         "task_id": task_id,
         "status": r.status,
+        # still being recorded when scored (a live lock): left out (status "running"), or, with
+        # --allow-running, scored at its last state
+        "running": rec.running is not None,
         "problems": list(r.problems),
         "final_from": r.final_from,
         "end_reason": r.end_reason,
@@ -76,6 +85,19 @@ def _run_entry(study: Study, system: str, task_id: str) -> dict[str, Any]:
         entry["centred_cd"] = [_f(x) for x in r.centred_cd]
         entry["offset"] = [_f(x) for x in r.offset]
         entry["moved"] = [bool(x) for x in r.moved]
+        facts = study.facts.get(task_id)
+        ids = facts.part_ids if facts else []
+        heap = far_from_assembled(r, ids, threshold=protocol.threshold, sra_threshold=protocol.sra_threshold)
+        if heap is not None and suite_dir and rec.run_dir is not None and facts is not None:
+            # unless most parts sit in place as recorded and the registration was pulled off them
+            recorded = placed_as_recorded(suite_dir, str(rec.run_dir), r.final_from, task_id, ids, facts.divisor)
+            if recorded is not None:
+                placed = placed_parts(*recorded, facts.divisor, protocol.threshold)
+                heap = far_from_assembled(
+                    r, ids, threshold=protocol.threshold, sra_threshold=protocol.sra_threshold, placed=placed
+                )
+        if heap is not None:  # a high score on a state far from assembled: the report says why
+            entry["far_from_assembled"] = heap
     return entry
 
 
@@ -118,7 +140,8 @@ def build_results(
                 "part_size_ratio": _f(f.part_size_ratio) if f else None,
             }
         )
-    runs = [_run_entry(study, s, e.task_id) for s in study.systems for e in study.entries]
+    protocol = protocol_of({"settings": study.settings})
+    runs = [_run_entry(study, s, e.task_id, protocol, suite_dir) for s in study.systems for e in study.entries]
     by_status: dict[str, list[dict[str, str]]] = {}
     for r in runs:
         if r["status"] != "scored":
@@ -152,6 +175,11 @@ def build_results(
         # aggregates count them 0, so the study is incomplete, not a measurement of those runs.
         "partial": any(st in by_status for st in PARTIAL_STATUSES),
         "unknown_runs": study.unknown_runs,
+        "running_runs": [
+            {"system": s, "task_id": t, "recorded_by": rec.running, "scored": rec.score.scored}
+            for (s, t), rec in sorted(study.runs.items())
+            if rec.running is not None
+        ],
         "quality": analyses.quality(study),
         "resources": analyses.resources(study),
         "outcomes": analyses.outcomes(study),

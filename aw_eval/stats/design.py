@@ -143,7 +143,7 @@ class Design:
 
     def subset(self, mask: np.ndarray) -> Design:
         """The design of the tasks where ``mask: (T,)`` is true (weights recomputed)."""
-        return Design.from_tasks([t for t, m in zip(self.tasks, mask) if m])
+        return Design.from_tasks([t for t, m in zip(self.tasks, mask, strict=True) if m])
 
 
 def overall_weights(task_cell: np.ndarray, cell_source: np.ndarray, task_weight: np.ndarray) -> np.ndarray:

@@ -11,13 +11,14 @@ final.json); which one was used is reported.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from aw.formats import FormatError, read_final, read_trajectory
+from aw.formats.agreement import contradicting_parts
 from aw.pose import normalize_quaternion, quat_to_matrix
 
 __all__ = [
@@ -41,9 +42,6 @@ MANIPULATE_TOOLS = frozenset({"translate_objects", "rotate_objects", "set_object
 KIND_NAMES = ("inspect", "observe", "manipulate", "other")
 # Edits rotating every affected part by less than this count as translations (Appendix C.1).
 ROTATION_CUTOFF_DEG = 0.5
-# final.json and the trajectory's last state are written from one scene state: any difference
-# beyond float noise is a contradiction.
-FINAL_MATCH_TOL = 1e-6
 
 
 def call_kind(tool: str) -> int:
@@ -100,7 +98,7 @@ class EpisodeArrays:
     problems: list[str] = field(default_factory=list)
 
 
-def poses_array(poses: dict[str, Sequence[float]], part_ids: Sequence[str]) -> np.ndarray:
+def poses_array(poses: Mapping[str, Sequence[float]], part_ids: Sequence[str]) -> np.ndarray:
     """``(P, 7)`` poses in ``part_ids`` order with unit quaternions (w >= 0 not enforced)."""
     arr = np.array([poses[p] for p in part_ids], dtype=np.float64).reshape(len(part_ids), 7)
     arr[:, 3:] = normalize_quaternion(arr[:, 3:])
@@ -153,23 +151,6 @@ def _read_final_state(run_dir: Path, task_id: str, all_part_ids: Sequence[str], 
         problems.append(f"final.json names parts {unknown} that task {task_id!r} does not have; ignored")
         return None
     return final
-
-
-def contradicting_parts(
-    final: dict[str, Sequence[float]],
-    recorded: dict[str, Sequence[float]],
-    part_ids: Sequence[str],
-    tol: float = FINAL_MATCH_TOL,
-) -> list[str]:
-    """Parts whose ``final.json`` pose differs from the trajectory's last recorded pose (beyond
-    ``tol`` per component; ``q`` and ``-q`` are the same rotation)."""
-    out = []
-    for pid in part_ids:
-        a, b = np.asarray(final[pid], dtype=np.float64), np.asarray(recorded[pid], dtype=np.float64)
-        qa, qb = normalize_quaternion(a[3:]), normalize_quaternion(b[3:])
-        if np.abs(a[:3] - b[:3]).max() > tol or min(np.abs(qa - qb).max(), np.abs(qa + qb).max()) > tol:
-            out.append(pid)
-    return out
 
 
 def read_episode(
@@ -229,7 +210,7 @@ def read_episode(
         call_kind_arr = np.array([call_kind(c.tool) for c in calls], dtype=np.int8)
         call_ok = np.array([c.ok for c in calls], dtype=bool)
         end_reason = traj.end.reason if traj.end is not None else None
-        end_t = float(traj.end.t) if traj.end is not None else (float(call_t[-1]) if len(calls) else 0.0)
+        end_t = float(traj.end.t or 0.0) if traj.end is not None else (float(call_t[-1]) if len(calls) else 0.0)
         # pose-changing calls, in order, aligned with checkpoints 1..N-1
         changing = [i for i, c in enumerate(calls) if c.poses is not None]
         trans, rot = edit_magnitudes(all_poses[:-1], all_poses[1:], centroids, divisor)  # (N-1, A)

@@ -107,9 +107,7 @@ def prescore(geom, poses: list[np.ndarray], mode: str, backend: str) -> dict[byt
     return {allp[i].tobytes(): b.row(i) for i in range(len(allp))}
 
 
-def score_states(
-    geom, poses: np.ndarray, mode: str, backend: str = "auto", memo: dict | None = None
-) -> dict[str, np.ndarray]:
+def score_states(geom, poses: np.ndarray, mode: str, backend: str = "auto", memo: dict | None = None) -> dict[str, Any]:
     """Scores of ``poses: (N, P, 7)``: ``part_errors (N, P)``, ``assignment (N, P)``, ``pa``,
     ``sr``, ``sra``, ``scd`` ``(N,)`` and the raw batch result under ``"batch"``. ``backend``
     applies to ``exact`` (``fast`` always runs on the CPU kernels). ``memo``: states already

@@ -20,6 +20,8 @@ import trimesh
 from PIL import Image
 
 from aw.formats import (
+    Condition,
+    EndReason,
     FinalState,
     PartTarget,
     RunInfo,
@@ -32,6 +34,7 @@ from aw.formats import (
     TrajectoryEnd,
     TrajectoryHeader,
     TrajectoryWriter,
+    VariantKind,
     read_targets,
     read_task,
     write_final,
@@ -46,7 +49,7 @@ from aw.pose import compose_poses, invert_pose, poses_to_matrices, quat_from_axi
 
 __all__ = ["BLOCKS", "box_suite", "write_scripted_run", "ScriptedRun"]
 
-BLOCKS: tuple[tuple[str, tuple[str, ...]], ...] = (
+BLOCKS: tuple[tuple[str, tuple[Condition, ...]], ...] = (
     ("partnet", ("none", "image")),
     ("ikea_manual", ("manual",)),
     ("assemblybench", ("manual",)),
@@ -86,13 +89,13 @@ def _write_task(
     root: Path,
     tid: str,
     source: str,
-    cond: str,
+    cond: Condition,
     object_id: str,
     category: str,
     assembled: list[trimesh.Trimesh],
     layout: np.ndarray,
     *,
-    distractor: set[int] = frozenset(),
+    distractor: frozenset[int] = frozenset(),
     eval_divisor: float | None = None,
     variant: Variant | None = None,
 ) -> None:
@@ -136,7 +139,7 @@ def box_suite(
     *,
     objects_per_source: int = 1,
     n_parts: int | Sequence[int] = 3,
-    blocks=BLOCKS,
+    blocks: Sequence[tuple[str, Sequence[Condition]]] = BLOCKS,
     variants: bool = False,
     seed: int = 0,
     name: str = "box-suite",
@@ -163,15 +166,15 @@ def box_suite(
             layout = _layout(p, rng)
             object_id = f"box{o:03d}"
             category = ("chair", "table")[o % 2]
-            extra = []
+            extra: list[tuple[VariantKind, str, list[trimesh.Trimesh], np.ndarray, frozenset[int], float | None]] = []
             if variants and bi == 0 and o == 0:
                 spare = trimesh.creation.box(extents=[0.12, 0.12, 0.12])
                 spare.apply_translation([2.0, 2.0, 0.06])
                 baked = [m.copy().apply_transform(poses_to_matrices(layout[i])) for i, m in enumerate(assembled)]
                 extra = [
-                    ("layout", "-layout_a", assembled, _layout(p, rng), set(), None),
-                    ("distractor", "-distractor", assembled + [spare], _layout(p + 1, rng), {p}, None),
-                    ("missing", "-missing", assembled[:-1], layout[:-1], set(), _eval_divisor(baked)),
+                    ("layout", "-layout_a", assembled, _layout(p, rng), frozenset(), None),
+                    ("distractor", "-distractor", assembled + [spare], _layout(p + 1, rng), frozenset({p}), None),
+                    ("missing", "-missing", assembled[:-1], layout[:-1], frozenset(), _eval_divisor(baked)),
                 ]
             for cond in conditions:
                 base = f"{source}-{object_id}-{cond}"
@@ -230,7 +233,7 @@ def write_scripted_run(
     wrong_offset: float = 0.3,
     jitter_edits: int = 0,
     dt: float = 2.0,
-    end_reason: str | None = "finished",
+    end_reason: EndReason | None = "finished",
     write_final_json: bool = True,
     cut_last_line: bool = False,
     run_info: dict | None = None,

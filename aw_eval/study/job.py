@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from aw import interrupts
 from aw.formats import FormatError, read_targets, read_task
 from aw.meshes import load_task_meshes
 from aw.official.eval_points import suite_eval_inputs
@@ -209,7 +210,7 @@ def _load_native(job: TaskJob, t0: float):
     meshes = load_task_meshes(task)
     all_ids = task.part_ids
     scored = set(geom.part_ids)
-    ratio = part_size_ratio([m for pid, m in zip(all_ids, meshes) if pid in scored])
+    ratio = part_size_ratio([m for pid, m in zip(all_ids, meshes, strict=True) if pid in scored])
     facts = TaskFacts(
         job.task_id, int(geom.n_parts), float(ratio), float(geom.divisor), list(geom.part_ids), time.perf_counter() - t0
     )
@@ -252,7 +253,8 @@ def _prescore_runs(job: TaskJob, geom, all_ids: list[str], centroids: np.ndarray
                 final_only=st.final_only,
                 trust_final=st.trust_final,
             )
-        except Exception:  # noqa: BLE001 - unreadable here is reported by the run's own scoring
+        except Exception as exc:  # noqa: BLE001 - unreadable here is reported by the run's own scoring
+            interrupts.reraise_if_interrupted(exc)
             continue
         if st.checkpoint_mode == "exact" and len(ep.ck_poses):
             poses.append(ep.ck_poses)
@@ -260,18 +262,21 @@ def _prescore_runs(job: TaskJob, geom, all_ids: list[str], centroids: np.ndarray
             poses.append(ep.final_poses[None])
     try:
         return evaluator.prescore(geom, poses, "exact", st.backend)
-    except Exception:  # noqa: BLE001 - the per-run path reports the failure against its run
+    except Exception as exc:  # noqa: BLE001 - the per-run path reports the failure against its run
+        interrupts.reraise_if_interrupted(exc)
         return None
 
 
 def score_task(job: TaskJob) -> TaskOutput:
-    """Score every run of ``job``; never raises for a bad run or task (errors are in the output)."""
+    """Score every run of ``job``; never raises for a bad run or task (errors are in the output).
+    An interrupt raises :class:`aw.interrupts.Interrupted`, however a library wrapped it."""
     evaluator.prepare_thread()
     t0 = time.perf_counter()
     try:
         official = suite_eval_inputs(Path(job.targets_path).parent.parent, job.task_id)
         loaded = _load_official(job, official, t0) if official is not None else _load_native(job, t0)
     except (FormatError, ValueError, OSError) as exc:
+        interrupts.reraise_if_interrupted(exc)  # e.g. trimesh or Qhull wrapping a Ctrl-C
         if isinstance(exc, OSError) and exc.errno in _WRITE_FAULTS:
             raise  # the geometry cache cannot be written (a full disk): the tool fails, not the task
         msg = f"task geometry could not be loaded: {exc}"
@@ -287,7 +292,11 @@ def score_task(job: TaskJob) -> TaskOutput:
     for req in job.runs:
         try:
             out.results.append(_score_run(req, job.task_id, geom, all_ids, centroids, job.settings, memo))
+            interrupts.check()  # an interrupt a library swallowed: this score may not be the run's
         except Exception as exc:  # an evaluator failure on one run must not lose the others
+            # an interrupt inside a compiled kernel comes back as another exception (numba: a
+            # SystemError): it stops the study, it is not this run's failure
+            interrupts.reraise_if_interrupted(exc)
             if isinstance(exc, OSError) and exc.errno in _WRITE_FAULTS:
                 raise
             detail = "".join(traceback.format_exception_only(type(exc), exc)).strip()

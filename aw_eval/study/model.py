@@ -16,12 +16,23 @@ import numpy as np
 import orjson
 
 from aw.formats.io import write_bytes_atomic
+from aw.formats.strict_json import parse_json
 
-__all__ = ["RunScore", "TaskFacts", "save_npz", "load_npz", "STATUS_SCORED", "STATUS_MISSING", "STATUS_UNREADABLE"]
+__all__ = [
+    "RunScore",
+    "TaskFacts",
+    "save_npz",
+    "load_npz",
+    "STATUS_SCORED",
+    "STATUS_MISSING",
+    "STATUS_RUNNING",
+    "STATUS_UNREADABLE",
+]
 
 STATUS_SCORED = "scored"
 STATUS_MISSING = "missing"
 STATUS_UNREADABLE = "unreadable"
+STATUS_RUNNING = "running"  # still being recorded (a live lock), left out: aw-score --allow-running scores it
 
 
 @dataclass
@@ -133,7 +144,9 @@ def save_npz(path: str | Path, obj: RunScore | TaskFacts) -> None:
     meta, arrays = _split(obj)
     meta_bytes = orjson.dumps({"kind": type(obj).__name__, **meta}, option=orjson.OPT_SERIALIZE_NUMPY)
     buf = io.BytesIO()
-    np.savez_compressed(buf, __meta__=np.frombuffer(meta_bytes, dtype=np.uint8), **arrays)
+    # the members by name (Any: numpy's stubs would check each name against savez's own keywords)
+    members: dict[str, Any] = {"__meta__": np.frombuffer(meta_bytes, dtype=np.uint8), **arrays}
+    np.savez_compressed(buf, **members)
     write_bytes_atomic(path, buf.getvalue())  # a full disk leaves no partial entry and names this one
 
 
@@ -141,9 +154,9 @@ def load_npz(path: str | Path) -> RunScore | TaskFacts:
     """Read what :func:`save_npz` wrote; raises ``ValueError`` on a damaged file."""
     try:
         with np.load(path, allow_pickle=False) as z:
-            meta = orjson.loads(z["__meta__"].tobytes())
+            meta = parse_json(z["__meta__"].tobytes())
             arrays = {k: z[k] for k in z.files if k != "__meta__"}
-    except (OSError, KeyError, ValueError, orjson.JSONDecodeError) as exc:
+    except (OSError, KeyError, ValueError) as exc:  # JsonError is a ValueError
         raise ValueError(f"{path}: damaged cache entry ({exc})") from None
     kind = meta.pop("kind", None)
     cls = {"RunScore": RunScore, "TaskFacts": TaskFacts}.get(kind)

@@ -16,22 +16,34 @@ import warnings
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from aw import interrupts
 from aw.cli.common import plural
+from aw.cores import available_cores
 from aw.formats import FormatError, read_manifest, read_run_info
+from aw.formats.run import system_label_problem
 from aw.formats.suite import suite_paths
 from aw.progress import warnings_in_one_line
+from aw.runlock import run_in_progress
 from aw_eval.study import evaluator
 from aw_eval.study.cache import Cache, file_digest, geometry_key, run_key
 from aw_eval.study.job import STATUS_ERROR, RunRequest, ScoreSettings, TaskJob, TaskOutput, score_task
-from aw_eval.study.model import STATUS_MISSING, RunScore
+from aw_eval.study.model import STATUS_MISSING, STATUS_RUNNING, RunScore
 from aw_eval.study.table import RunRecord, Study
-from aw_eval.workers import stop_pool, watch_parent
+from aw_eval.workers import stop_pool, worker_init
 
-__all__ = ["StudyError", "ScoringFailed", "Coverage", "discover_runs", "score_study", "ScoreStats", "default_jobs"]
+__all__ = [
+    "StudyError",
+    "ScoringFailed",
+    "Coverage",
+    "discover_runs",
+    "running_line",
+    "score_study",
+    "ScoreStats",
+]
 
 
 class StudyError(Exception):
@@ -53,17 +65,13 @@ class ScoreStats:
     tasks_dispatched: int = 0
     missing: int = 0
     errors: int = 0
+    # runs still being recorded (a live lock): (system, task id) -> who records it
+    running: dict[tuple[str, str], str] = field(default_factory=dict)
     executor: str = "none"
     seconds_geometry: float = 0.0  # summed over the tasks dispatched now (worker wall time)
     seconds_checkpoints: float = 0.0
     seconds_final: float = 0.0
     coverage: Coverage | None = None  # how the runs found match the suite
-
-
-def default_jobs() -> int:
-    from aw.cli.common import default_jobs as cores
-
-    return cores()
 
 
 def shape_family(task_dir: Path) -> str:
@@ -77,7 +85,8 @@ def schedule_jobs(jobs: list[TaskJob], n_parts: dict[str, int]) -> list[TaskJob]
     shortens the tail on a pool), and a task whose meshes repeat an earlier task's after every
     first occurrence, so its geometry is a cache hit instead of being computed twice at once."""
     seen: set[str] = set()
-    first, repeats = [], []
+    first: list[TaskJob] = []
+    repeats: list[TaskJob] = []
     for job in sorted(jobs, key=lambda j: (-n_parts.get(j.task_id, 0), j.task_id)):
         fam = shape_family(Path(job.task_dir))
         (repeats if fam in seen and fam else first).append(job)
@@ -109,6 +118,13 @@ def discover_runs(
     if not runs_dir.is_dir():
         raise StudyError(f"{runs_dir}: runs directory not found")
     top = sorted(p.name for p in runs_dir.iterdir() if p.is_dir() and not p.name.startswith("."))
+    for name in top:  # a folder name becomes a row of every report: aw-run's rule, or nothing
+        problem = system_label_problem(name)
+        if problem:
+            raise StudyError(
+                f"{runs_dir}: a system folder's name {problem}; rename the folder (or move it out of RUNS: "
+                "every folder under RUNS is a system)"
+            )
     as_tasks = [s for s in top if s in task_ids and _is_run_dir(runs_dir / s)]
     if as_tasks:
         shown = ", ".join(as_tasks[:3]) + (", ..." if len(as_tasks) > 3 else "")
@@ -181,6 +197,22 @@ class Coverage:
         return out
 
 
+def running_line(running: dict[tuple[str, str], str], allowed: bool) -> str:
+    """One line on the runs still being recorded: how many, which, by whom, what was done."""
+    names = [f"{s}/{t}" for s, t in running]
+    shown = ", ".join(names[:3]) + (", ..." if len(names) > 3 else "")
+    what = (
+        "scored at their last state (--allow-running), marked running"
+        if allowed
+        else "left out (status running, counted 0); rerun when they end, or pass --allow-running"
+    )
+    n = len(running)
+    return (
+        f"{plural(n, 'run')} {'is' if n == 1 else 'are'} still being recorded ({shown}; "
+        f"{next(iter(running.values()))}{' and others' if len(set(running.values())) > 1 else ''}): {what}"
+    )
+
+
 def _progress(total: int, enabled: bool, desc: str):
     from aw.progress import progress
 
@@ -190,7 +222,7 @@ def _progress(total: int, enabled: bool, desc: str):
 def _worker_init(parent: int) -> None:
     # One XLA thread per worker process: the pool already spreads work over the cores.
     os.environ.setdefault("XLA_FLAGS", "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1")
-    watch_parent(parent)  # a killed aw-score takes its workers with it
+    worker_init(parent)  # Ctrl-C is the parent's to act on; a killed aw-score takes its workers with it
     warnings.showwarning = warnings_in_one_line("aw-score")  # e.g. a task that will take long
 
 
@@ -225,13 +257,14 @@ def _run_jobs(
         except (OSError, TimeoutError, ValueError) as exc:
             raise StudyError(f"cannot connect to the Dask scheduler at {scheduler}: {exc}") from None
         futures = client.map(score_task, jobs, pure=False)
-        job_of = {f.key: j for f, j in zip(futures, jobs)}
+        job_of = {f.key: j for f, j in zip(futures, jobs, strict=True)}
 
         def gen_dask() -> Iterator[TaskOutput]:
             for fut in dask_completed(futures):
                 try:
                     out = fut.result()
                 except Exception as exc:  # a worker died (KilledWorker) or could not run the job
+                    interrupts.reraise_if_interrupted(exc)
                     raise _failed(job_of[fut.key], exc, "a Dask worker") from None
                 yield out
 
@@ -243,6 +276,7 @@ def _run_jobs(
                 try:
                     out = score_task(j)
                 except Exception as exc:  # score_task reports bad runs itself: this is a bug or a crash
+                    interrupts.reraise_if_interrupted(exc)
                     raise _failed(j, exc, "the scoring code") from exc
                 yield out
 
@@ -253,13 +287,15 @@ def _run_jobs(
         initializer=_worker_init,
         initargs=(os.getpid(),),
     )
-    futs = {pool.submit(score_task, j): j for j in jobs}
+    with interrupts.blocked_for_children():  # workers are started by the submissions
+        futs = {pool.submit(score_task, j): j for j in jobs}
 
     def gen_pool() -> Iterator[TaskOutput]:
         for f in as_completed(futs):
             try:
                 out = f.result()
             except Exception as exc:  # e.g. BrokenProcessPool: a worker was killed
+                interrupts.reraise_if_interrupted(exc)  # Ctrl-C reaching a worker as it starts
                 raise _failed(futs[f], exc, "a scoring worker process") from None
             yield out
 
@@ -292,10 +328,14 @@ def score_study(
     progress: bool = True,
     log: Callable[[str], None] | None = None,
     geometry_cache: str | Path | None = None,
+    allow_running: bool = False,
 ) -> tuple[Study, ScoreStats]:
     """Score every run of every system on every suite task (resuming from ``out_dir/cache``).
 
     ``geometry_cache``: the evaluator's per-task geometry cache (default ``out_dir/cache/geometry``).
+    A run still being recorded (:func:`aw.runlock.run_in_progress`) is never scored as finished:
+    it is left out with status ``running`` (scored 0), or with ``allow_running`` scored at its
+    last state, never cached, its record marked ``running``; ``ScoreStats.running`` lists them.
     """
     suite_dir, runs_dir, out_dir = Path(suite_dir), Path(runs_dir), Path(out_dir)
     try:
@@ -348,6 +388,19 @@ def score_study(
                 scores[(s, e.task_id)] = RunScore.unscored(s, e.task_id, STATUS_MISSING, [f"no run at {where}"])
                 stats.missing += 1
                 continue
+            holder = run_in_progress(run_dir)
+            if holder is not None:  # its files still change: never from (or into) the cache
+                stats.running[(s, e.task_id)] = holder
+                if allow_running:
+                    todo.append(RunRequest(s, str(run_dir)))
+                else:
+                    scores[(s, e.task_id)] = RunScore.unscored(
+                        s,
+                        e.task_id,
+                        STATUS_RUNNING,
+                        [f"still being recorded by {holder}: left out (counts 0); --allow-running scores it"],
+                    )
+                continue
             key = run_key(gkey, run_dir, settings.key(), ev_version)
             keys[(s, e.task_id)] = key
             hit = cache.get_run(s, e.task_id, key)
@@ -367,9 +420,11 @@ def score_study(
                     str(geometry_cache or cache.geometry_dir),
                 )
             )
+    if log and stats.running:
+        log(f"WARNING: {running_line(stats.running, allow_running)}")
     jobs = schedule_jobs(jobs, {e.task_id: e.n_parts for e in entries})
     stats.tasks_dispatched = len(jobs)
-    outputs, stats.executor, close = _run_jobs(jobs, scheduler=scheduler, n_jobs=n_jobs or default_jobs())
+    outputs, stats.executor, close = _run_jobs(jobs, scheduler=scheduler, n_jobs=n_jobs or available_cores())
     if log and jobs:
         log(
             f"scoring {plural(sum(len(j.runs) for j in jobs), 'run')} of {plural(len(jobs), 'task')} ({stats.executor}); "
@@ -379,6 +434,7 @@ def score_study(
     try:
         with _progress(len(jobs), progress and len(jobs) > 0, "scoring") as bar:
             for out in outputs:
+                interrupts.check()  # nothing is cached once an interrupt is recorded
                 if out.facts is not None:
                     facts[out.task_id] = out.facts
                     stats.seconds_geometry += out.facts.seconds_geometry
@@ -390,6 +446,10 @@ def score_study(
                     stats.seconds_final += r.seconds_final
                     if r.status == STATUS_ERROR or out.error:
                         stats.errors += 1
+                    elif (r.system, r.task_id) in stats.running:
+                        r.problems.append(
+                            f"still being recorded by {stats.running[(r.system, r.task_id)]}: scored at its last state"
+                        )
                     else:
                         cache.put_run(r, keys[(r.system, r.task_id)])
                 bar.update(1)
@@ -400,7 +460,7 @@ def score_study(
     for (s, t), sc in scores.items():
         run_dir = found.get((s, t))
         info, problem = _read_info(run_dir)
-        runs[(s, t)] = RunRecord(sc, info, problem, run_dir)
+        runs[(s, t)] = RunRecord(sc, info, problem, run_dir, stats.running.get((s, t)))
     study = Study(
         manifest.name,
         entries,

@@ -24,12 +24,14 @@ METRICS = ("pa", "sr", "sra", "scd")
 
 @dataclass
 class RunRecord:
-    """A run's scores plus its ``run.json`` (``info``; None when absent or unreadable)."""
+    """A run's scores plus its ``run.json`` (``info``; None when absent or unreadable).
+    ``running``: who was still recording the run when it was scored (``aw.runlock``), else None."""
 
     score: RunScore
     info: RunInfo | None = None
     info_problem: str | None = None
     run_dir: Path | None = None
+    running: str | None = None
 
 
 def task_meta(e: SuiteEntry) -> TaskMeta:

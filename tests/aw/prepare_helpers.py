@@ -38,7 +38,7 @@ def stool(object_id: str = "stool", source: str = "custom") -> AssembledObject:
 def reassembled(targets, part_ids, meshes) -> dict[str, np.ndarray]:
     """Baked meshes moved by their target poses, keyed by source part name."""
     out = {}
-    for pid, mesh in zip(part_ids, meshes):
+    for pid, mesh in zip(part_ids, meshes, strict=True):
         t = targets.parts[pid]
         out[t.source_name] = apply_pose(np.asarray(t.pose), np.asarray(mesh.vertices))
     return out

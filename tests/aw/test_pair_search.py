@@ -35,22 +35,26 @@ def _all_pairs(n, edge):
 def test_components_equal_every_pair_and_skip_connected_pairs():
     rng = np.random.default_rng(0)
     for trial in range(30):
-        n = int(rng.integers(1, 25))
-        edges = {(i, j) for i, j in itertools.combinations(range(n), 2) if rng.random() < 0.15}
-        lower = rng.random((n, n)) * 2e-4
-        lower = np.minimum(lower, lower.T)
-        for i, j in edges:  # a true edge always has a bound under the threshold
-            lower[i, j] = lower[j, i] = min(lower[i, j], 1e-4)
-        asked = []
+        _check_serial_search(rng, trial)
 
-        def edge(i, j):
-            asked.append((i, j))
-            return (i, j) in edges
 
-        got = components(n, candidate_pairs(lower, 1e-4), edge, what="test", show_progress=False)
-        assert got == _all_pairs(n, lambda i, j: (i, j) in edges), trial
-        assert len(asked) == len(set(asked)) and all(i < j and lower[i, j] <= 1e-4 for i, j in asked)
-        assert len(asked) <= len(candidate_pairs(lower, 1e-4))
+def _check_serial_search(rng: np.random.Generator, trial: int) -> None:
+    n = int(rng.integers(1, 25))
+    edges = {(i, j) for i, j in itertools.combinations(range(n), 2) if rng.random() < 0.15}
+    lower = rng.random((n, n)) * 2e-4
+    lower = np.minimum(lower, lower.T)
+    for i, j in edges:  # a true edge always has a bound under the threshold
+        lower[i, j] = lower[j, i] = min(lower[i, j], 1e-4)
+    asked = []
+
+    def edge(i, j):
+        asked.append((i, j))
+        return (i, j) in edges
+
+    got = components(n, candidate_pairs(lower, 1e-4), edge, what="test", show_progress=False)
+    assert got == _all_pairs(n, lambda i, j: (i, j) in edges), trial
+    assert len(asked) == len(set(asked)) and all(i < j and lower[i, j] <= 1e-4 for i, j in asked)
+    assert len(asked) <= len(candidate_pairs(lower, 1e-4))
 
 
 def test_threads_register_pairs_at_once_with_the_same_components():
@@ -58,26 +62,29 @@ def test_threads_register_pairs_at_once_with_the_same_components():
     barrier, which a serial search would never pass), and the components are every pair's."""
     rng = np.random.default_rng(1)
     for trial in range(20):
-        n = int(rng.integers(2, 25))
-        edges = {(i, j) for i, j in itertools.combinations(range(n), 2) if rng.random() < 0.15}
-        lower = np.zeros((n, n))
-        met = threading.Barrier(2, timeout=10)
-        asked, threads = [], set()
+        _check_threaded_search(rng, trial)
 
-        def edge(i, j):
-            if not asked or len(asked) == 1:  # the first two registrations meet
-                asked.append((i, j))
-                met.wait()
-            else:
-                asked.append((i, j))
-            threads.add(threading.current_thread().name)
-            return (i, j) in edges
 
-        if n == 2:  # one candidate: nothing to run beside it
-            met = threading.Barrier(1)
-        got = components(n, candidate_pairs(lower, 1e-4), edge, what="test", show_progress=False, workers=2)
-        assert got == _all_pairs(n, lambda i, j: (i, j) in edges), trial
-        assert len(asked) == len(set(asked)) and all(t.startswith("aw-pairs") for t in threads)
+def _check_threaded_search(rng: np.random.Generator, trial: int) -> None:
+    n = int(rng.integers(2, 25))
+    edges = {(i, j) for i, j in itertools.combinations(range(n), 2) if rng.random() < 0.15}
+    lower = np.zeros((n, n))
+    # one candidate (n == 2): nothing to run beside it
+    met = threading.Barrier(2 if n > 2 else 1, timeout=10)
+    asked, threads = [], set()
+
+    def edge(i, j):
+        if not asked or len(asked) == 1:  # the first two registrations meet
+            asked.append((i, j))
+            met.wait()
+        else:
+            asked.append((i, j))
+        threads.add(threading.current_thread().name)
+        return (i, j) in edges
+
+    got = components(n, candidate_pairs(lower, 1e-4), edge, what="test", show_progress=False, workers=2)
+    assert got == _all_pairs(n, lambda i, j: (i, j) in edges), trial
+    assert len(asked) == len(set(asked)) and all(t.startswith("aw-pairs") for t in threads)
 
 
 def test_local_workers_are_the_cores_here_and_one_in_a_worker_process():

@@ -42,7 +42,7 @@ def test_free_spot_is_clear_of_every_box():
     for seed in range(12):
         new = rng.uniform(0.05, 0.8, size=2)
         c = free_spot(corners, corners + sizes, new, np.random.default_rng(seed), gap=0.02)
-        for lo, size in zip(corners, sizes):
+        for lo, size in zip(corners, sizes, strict=True):
             assert box_gap(c, c + new, lo, lo + size) >= 0.02 - 1e-12
 
 

@@ -276,10 +276,12 @@ def test_prepare_official_equals_the_procedure_bit_for_bit(seed):
     assert np.array_equal(got.points, points)
     assert np.array_equal(got.targets, targets)
     assert got.divisor == divisor
-    for mine, theirs in zip(got.vertices, baked):
+    for mine, theirs in zip(got.vertices, baked, strict=True):
         assert np.array_equal(mine, theirs)
     # the targets put the baked parts back together: the assembled object, Z up, grounded
-    assembled = np.concatenate([v @ quat_matrix(t[3:]).T + t[:3] for v, t in zip(got.vertices, got.targets)])
+    assembled = np.concatenate(
+        [v @ quat_matrix(t[3:]).T + t[:3] for v, t in zip(got.vertices, got.targets, strict=True)]
+    )
     assert assembled[:, 2].min() == pytest.approx(0, abs=1e-12)
 
 
@@ -429,7 +431,7 @@ def test_batched_farthest_point_samples_pick_the_single_version_indices(monkeypa
     first_single = single
     many = rng.uniform(-1, 1, size=(40, 4096, 3)) * rng.uniform(0.01, 10, size=(40, 1, 3))
     starts = rng.integers(4096, size=40)
-    single = [farthest_point_sample(c, 1000, _Fixed(s)) for c, s in zip(many, starts)]
+    single = [farthest_point_sample(c, 1000, _Fixed(s)) for c, s in zip(many, starts, strict=True)]
     assert np.array_equal(farthest_point_samples(many, 1000, starts), np.stack(single))
     # the batched einsum, where NumPy rounds its sum in another order, picks them too
     monkeypatch.setattr(official_protocol, "_einsum_sums_x_z_then_y", lambda: False)

@@ -72,7 +72,7 @@ def test_a_nearly_cancelling_projection_still_gives_a_rigid_frame(offset):
 
 def test_the_evaluator_starts_from_the_same_frame():
     for pts in _point_sets():
-        assert all(np.array_equal(a, b) for a, b in zip(start_frame(pts), pca_frame(pts)))
+        assert all(np.array_equal(a, b) for a, b in zip(start_frame(pts), pca_frame(pts), strict=True))
 
 
 def test_degenerate_points_have_no_official_frame():
@@ -81,4 +81,4 @@ def test_degenerate_points_have_no_official_frame():
     rod = np.array([[0, 0, 0], [1, 1, 1], [3, 3, 3.0]])
     with pytest.raises(DegenerateFrameError, match="degenerate part"):
         pca_frame(rod)
-    assert all(np.array_equal(a, b) for a, b in zip(start_frame(rod), project_frame(rod)))
+    assert all(np.array_equal(a, b) for a, b in zip(start_frame(rod), project_frame(rod), strict=True))

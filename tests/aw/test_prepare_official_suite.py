@@ -52,7 +52,7 @@ def test_official_suite_holds_the_official_numbers_of_the_published_row(row_file
     assert [p.id for p in task.parts] == ["0", "1"]
     targets = read_targets(tmp_path / "suite" / "targets" / f"{tid}.json")
     assert targets.eval_divisor == expected.divisor
-    for pid, pose in zip(expected.part_ids, expected.targets):
+    for pid, pose in zip(expected.part_ids, expected.targets, strict=True):
         assert targets.parts[pid].pose == [float(x) for x in pose]
 
 

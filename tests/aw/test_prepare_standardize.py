@@ -45,7 +45,7 @@ def written(objects, tmp_path_factory):
 
 def test_each_baked_part_lies_in_its_right_handed_pca_frame_yawed_about_z(written):
     for obj, task, meshes, _ in written:
-        for pid, mesh in zip(task.part_ids, meshes):
+        for pid, mesh in zip(task.part_ids, meshes, strict=True):
             v = unique_vertices(mesh)
             _, axes = pca_frame(v)
             assert np.linalg.det(axes) == pytest.approx(1.0, abs=1e-9)
@@ -59,7 +59,7 @@ def test_each_baked_part_lies_in_its_right_handed_pca_frame_yawed_about_z(writte
 
 
 def test_bounding_boxes_are_separated_by_the_minimum_gap_and_parts_rest_on_the_ground(written):
-    for obj, task, meshes, _ in written:
+    for _obj, _task, meshes, _ in written:
         boxes = [(m.vertices.min(axis=0), m.vertices.max(axis=0)) for m in meshes]
         for (a_lo, a_hi), (b_lo, b_hi) in itertools.combinations(boxes, 2):
             assert box_gap(a_lo, a_hi, b_lo, b_hi) >= MIN_GAP

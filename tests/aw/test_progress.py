@@ -58,7 +58,9 @@ def test_warnings_read_as_one_line_of_the_command(capsys):
     with warnings.catch_warnings():
         warnings.simplefilter("always")
         warnings.showwarning = warnings_in_one_line("aw-score")
-        warnings.warn("scoring 9 states of a 300-part task (exact, numba): 8 left, about 40 min", LongWorkWarning)
+        warnings.warn(
+            "scoring 9 states of a 300-part task (exact, numba): 8 left, about 40 min", LongWorkWarning, stacklevel=1
+        )
     assert (
         capsys.readouterr().err
         == "aw-score: warning: scoring 9 states of a 300-part task (exact, numba): 8 left, about 40 min\n"

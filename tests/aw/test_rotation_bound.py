@@ -116,9 +116,10 @@ def test_the_search_reads_the_grid_as_the_cubes_centres_give_it(monkeypatch):
     pairs = [(0, 1), (0, 2), (3, 0), (5, 9), (7, 8), (6, 3)]
     shape = (rb._MAX_DEPTH + 2, 3)
     found = {}
+    cells = _fixed()[1]
     for name, grid in (("grid", None), ("centres", np.zeros((0, 6), np.int32))):
         if grid is not None:
-            monkeypatch.setattr(rb, "_fixed", lambda grid=grid, cells=_fixed()[1]: (grid, cells))
+            monkeypatch.setattr(rb, "_fixed", lambda grid=grid: (grid, cells))
         found[name] = []
         for i, j in pairs:
             for limits in _limits()[1::2]:  # the cubes searched, by the tables and directly

@@ -89,6 +89,20 @@ def test_lock_is_exclusive_within_a_process_too(tmp_path):
         pass
 
 
+def test_a_hostile_lock_file_is_described_as_another_process(tmp_path):
+    import fcntl
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / LOCK_FILE).write_text("[" * 3000 + "]" * 3000)
+    fd = os.open(run / LOCK_FILE, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        assert holder_of(run) == "another process"
+    finally:
+        os.close(fd)
+
+
 def test_the_lock_file_names_its_holder_during_and_after(tmp_path):
     """docs/harnesses.md: ``.aw-lock`` names pid, host and command (it used to be emptied on release)."""
     import json
@@ -102,3 +116,22 @@ def test_the_lock_file_names_its_holder_during_and_after(tmp_path):
         during == after == {"pid": os.getpid(), "host": socket.gethostname(), "command": "aw-score suite runs --out x"}
     )
     assert holder_of(tmp_path / "run") is None  # the record of an ended holder holds nothing
+
+
+def test_run_in_progress_tells_a_live_lock_from_a_stale_one_without_taking_it(holder):
+    """Unlike holder_of, run_in_progress never takes the lock (a watcher must never make a starting
+    recorder refuse its directory): while it looks, the holder still holds the lock exclusively,
+    and a new recorder can take it the moment the holder dies."""
+    from aw.runlock import kernel_flocks, run_in_progress
+
+    run, proc = holder
+    assert f"pid {proc.pid}" in run_in_progress(run)
+    assert f"pid {proc.pid}" in run_in_progress(run, flocks=None)  # no kernel list: the recorded pid is alive
+    listed = kernel_flocks()
+    assert listed is not None and f"pid {proc.pid}" in run_in_progress(run, listed)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert run_in_progress(run) is None and run_in_progress(run, flocks=None) is None
+    with RunDirLock(run):
+        assert f"pid {os.getpid()}" in run_in_progress(run)
+    assert run_in_progress(tmp_path_missing := run / "nowhere") is None and not tmp_path_missing.exists()

@@ -105,7 +105,9 @@ def test_chamfer_hand_values_and_batching():
     got = aw_eval.chamfer(xs, y)
     assert got.shape == (2,) and got[1] == pytest.approx(0.0 + (0.0 + 5.0) / 2)
     many = np.random.default_rng(0).normal(size=(19, 30, 3))  # more than one chunk
-    assert np.allclose(aw_eval.chamfer(many, many[::-1]), [aw_eval.chamfer(a, b) for a, b in zip(many, many[::-1])])
+    assert np.allclose(
+        aw_eval.chamfer(many, many[::-1]), [aw_eval.chamfer(a, b) for a, b in zip(many, many[::-1], strict=True)]
+    )
     with pytest.raises(ValueError):
         aw_eval.chamfer(np.zeros((0, 3)), y)
     with pytest.raises(ValueError):

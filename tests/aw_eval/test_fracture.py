@@ -183,7 +183,9 @@ def _by_hand(meshes, ids, pred, target, dataset, sample_id, divisor):
     counts = [20 + int(share * a / sum(areas)) for a in areas]
     counts[int(np.argmax(counts))] += 5000 - sum(counts)
     pts, pp, tp = [], [], []
-    for (v, f), pid, n, (xmat, xpos), qt in zip(meshes, ids, counts, zip(*_restored(pred)), target):
+    for (v, f), pid, n, (xmat, xpos), qt in zip(
+        meshes, ids, counts, zip(*_restored(pred), strict=True), target, strict=True
+    ):
         rng = _stream(42, dataset, sample_id, pid, "garf-evaluation")
         xyz = v[np.array(f)]
         area = np.linalg.norm(np.cross(xyz[:, 1] - xyz[:, 0], xyz[:, 2] - xyz[:, 0]), axis=1)
@@ -200,11 +202,11 @@ def _by_hand(meshes, ids, pred, target, dataset, sample_id, divisor):
     g = tp[k][0] @ pp[k][0].T
     h = tp[k][1] - g @ pp[k][1]
     al = [(g @ r, g @ t + h) for r, t in pp]
-    P = [x @ r.T + t for x, (r, t) in zip(pts, al)]
-    T = [x @ r.T + t for x, (r, t) in zip(pts, tp)]
+    P = [x @ r.T + t for x, (r, t) in zip(pts, al, strict=True)]
+    T = [x @ r.T + t for x, (r, t) in zip(pts, tp, strict=True)]
     allp, allt = np.concatenate(P), np.concatenate(T)
     rows = []
-    for x, y, (ra, ta), (rt, tt) in zip(P, T, al, tp):
+    for x, y, (ra, ta), (rt, tt) in zip(P, T, al, tp, strict=True):
         d = np.abs(
             Rotation.from_matrix(ra).as_euler("XYZ", degrees=True)
             - Rotation.from_matrix(rt).as_euler("XYZ", degrees=True)

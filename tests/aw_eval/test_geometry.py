@@ -22,7 +22,7 @@ def _write_task(root, n_parts=4, distractor=None, eval_divisor=None, seed=0, tas
     task_dir = root / "tasks" / task_id
     (task_dir / "parts").mkdir(parents=True, exist_ok=True)
     parts = []
-    for pid, mesh in zip(obj.part_ids, obj.meshes):
+    for pid, mesh in zip(obj.part_ids, obj.meshes, strict=True):
         mesh.export(task_dir / "parts" / f"{pid}.obj")
         parts.append(TaskPart(id=pid, mesh=f"parts/{pid}.obj"))
     write_task(
@@ -32,7 +32,7 @@ def _write_task(root, n_parts=4, distractor=None, eval_divisor=None, seed=0, tas
         task_id=task_id,
         parts={
             pid: PartTarget(pose=list(map(float, t)), distractor=(pid == distractor))
-            for pid, t in zip(obj.part_ids, obj.target_poses)
+            for pid, t in zip(obj.part_ids, obj.target_poses, strict=True)
         },
         scale=1.0,
         eval_divisor=eval_divisor,

@@ -82,7 +82,7 @@ def test_mirrored_prediction_is_not_rescued(task):
     geom, obj = task
     # Mirror the assembled layout through the plane x = 0: every part keeps its target
     # orientation but sits at its mirrored position. A proper rotation cannot undo it.
-    cent = np.stack([apply_pose(t, c).mean(0) for t, c in zip(obj.target_poses, geom.clouds)])
+    cent = np.stack([apply_pose(t, c).mean(0) for t, c in zip(obj.target_poses, geom.clouds, strict=True)])
     poses = obj.target_poses.copy()
     mirrored = cent * np.array([-1.0, 1.0, 1.0])
     poses[:, :3] += mirrored - cent

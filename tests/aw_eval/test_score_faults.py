@@ -1,7 +1,7 @@
 """aw-score under faults, with real processes and real files: a second aw-score on a busy --out
 is refused, a write that fails (file size limit, as a full disk) is one line and leaves no
 temporary file, stale ones of a killed run are removed, and the scoring workers end with their
-parent (SIGKILL, SIGTERM, SIGINT), the last two as an interrupt (exit 130)."""
+parent (SIGKILL, SIGTERM, SIGINT), the last two as an interrupt (exit 128 + the signal)."""
 
 from __future__ import annotations
 
@@ -102,6 +102,43 @@ def test_a_failed_write_is_one_line_and_leaves_no_temporary_file(study, tmp_path
     assert [p for p in out.rglob("*") if ".tmp" in p.name] == []
 
 
+def _outputs(out) -> dict[str, bytes]:
+    """Every output file's bytes (the cache and the lock file are not outputs)."""
+    return {
+        str(p.relative_to(out)): p.read_bytes()
+        for p in sorted(out.rglob("*"))
+        if p.is_file() and p.relative_to(out).parts[0] not in ("cache", ".aw-lock")
+    }
+
+
+def test_a_failed_report_write_names_its_file_keeps_the_report_and_clears_temporaries(study, tmp_path):
+    """report.html's plotly bundle (about 5 MB) past a 1 MB limit: the error names it, the report
+    before it stays byte for byte, no temporary file is left, and the next call removes those an
+    older call left (as report_files/plotly-*.min.js.tmp<pid> after a full disk)."""
+    out = tmp_path / "out"
+    with_html = [a for a in FAST if a != "--no-html"]
+    first = _aw_score(study, out, "--jobs", "1", "--final-only", *FAST)
+    assert first.wait(timeout=600) == 0, first.stderr.read()
+    first.stderr.close()
+    before = _outputs(out)
+    stale = [out / "report_files" / "plotly-0.0.min.js.tmp999999999", out / "report.html.tmp999999999"]
+    stale[0].parent.mkdir()
+    for p in stale:
+        p.write_bytes(b"half")
+    proc = _aw_score(study, out, "--jobs", "1", "--final-only", *with_html, preexec=_limit_file_size(1_000_000))
+    _, err = proc.communicate(timeout=600)
+    assert proc.returncode == 1 and "Traceback" not in err, err
+    (line,) = [x for x in err.splitlines() if "error:" in x]
+    assert line.startswith(f"aw-score: error: {out / 'report_files' / 'plotly-'}") and "File too large" in line
+    assert {k: v for k, v in _outputs(out).items() if ".tmp" not in k} == before  # nothing replaced
+    assert sorted(p.name for p in out.rglob("*") if ".tmp" in p.name) == sorted(p.name for p in stale)
+    assert not [p for p in out.iterdir() if p.name.startswith(".report-")]  # no staging folder left
+    again = _aw_score(study, out, "--jobs", "1", "--final-only", *with_html)
+    assert again.wait(timeout=900) == 0, again.stderr.read()
+    again.stderr.close()
+    assert [p for p in out.rglob("*") if ".tmp" in p.name] == [] and (out / "report.html").is_file()
+
+
 def _workers(proc: psutil.Process) -> list[psutil.Process]:
     return [c for c in proc.children(recursive=True) if "spawn_main" in " ".join(c.cmdline())]
 
@@ -121,9 +158,10 @@ def test_workers_end_with_their_parent(study, tmp_path, sig):
         code = proc.wait(timeout=60)
         _, alive = psutil.wait_procs(workers, timeout=60)  # before: they scored on for minutes
         assert alive == []
-        assert code == (-signal.SIGKILL if sig == signal.SIGKILL else 130)
+        assert code == (-signal.SIGKILL if sig == signal.SIGKILL else 128 + sig)  # 143 for SIGTERM, 130 for SIGINT
         if sig != signal.SIGKILL:
-            assert "aw-score: interrupted" in proc.stderr.read()
+            err = proc.stderr.read()
+            assert "aw-score: interrupted" in err and "leaked semaphore" not in err
     finally:
         for w in workers:
             if w.is_running():

@@ -47,7 +47,7 @@ def test_cube_rotations_run_in_the_official_order():
     from aw_eval.starts import CUBE
 
     want = _official_cube_order()
-    assert len(CUBE) == 24 and all(np.array_equal(a, b) for a, b in zip(CUBE, want))
+    assert len(CUBE) == 24 and all(np.array_equal(a, b) for a, b in zip(CUBE, want, strict=True))
 
 
 def _symmetric_box() -> np.ndarray:

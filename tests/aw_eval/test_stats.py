@@ -89,13 +89,13 @@ def test_draw_weights_match_explicit_resampling():
     fast = draw_weights(d, counts) @ values
     for b in range(40):
         source_means = []
-        for k, source in enumerate(d.sources):
+        for source in d.sources:
             cond_means = []
-            for ci, (s, cond) in enumerate(d.cells):
+            for ci, (s, _cond) in enumerate(d.cells):
                 if s != source:
                     continue
                 resampled = []
-                for t, task in enumerate(d.tasks):
+                for t in range(len(d.tasks)):
                     if d.task_cell[t] == ci:
                         resampled += [values[t]] * int(counts[b, d.task_object[t]])
                 cond_means.append(np.mean(resampled))

@@ -8,6 +8,7 @@ import os
 import subprocess
 import sys
 import textwrap
+from pathlib import Path
 
 import pytest
 from score_helpers import make_study, paper_entries, run_from_errors
@@ -19,6 +20,7 @@ from aw_eval.report.markdown import render_markdown
 from aw_eval.report.results import build_results
 from aw_eval.study import ScoreSettings, StudyError, score_study
 from aw_eval.study.fixtures import box_suite, write_scripted_run
+from tests.aw.formats.hostile_json import DEEP, DUPLICATE, HUGE, inject, inject_line
 
 PROTO = ["--protocol", "n_surface=256", "--protocol", "n_fps=64", "--final", "fast"]
 FAST = ["--bootstrap", "50", "--permutations", "50", "--no-progress", "--no-plots", "--no-html", "--jobs", "1"]
@@ -46,7 +48,9 @@ def test_one_systems_folder_is_refused_with_a_hint(small, tmp_path, capsys):
         score_study(suite, runs / "alpha", tmp_path / "o", ScoreSettings())
     assert main([str(suite), str(runs / "alpha"), "--out", str(tmp_path / "o"), *FAST]) == 2
     err = capsys.readouterr().err
-    assert "looks like one system's folder" in err and str(runs) in err and tasks[0] in err
+    # aw-score says it first, with the command to type (aw.cli.paths)
+    assert f"{runs / 'alpha'} is one system's runs folder; RUNS is the folder above it" in err
+    assert f": aw-score {suite} {runs} --out" in err
     assert not (tmp_path / "o" / "scores.json").exists()
 
 
@@ -73,6 +77,61 @@ def test_contradicting_final_json_is_named_and_the_trajectory_wins(small, tmp_pa
     doc = json.loads((trusted / "scores.json").read_text())
     run = next(r for r in doc["runs"] if r["task_id"] == tasks[0])
     assert run["final_from"] == "final.json" and run["sr"] == 0.0 and doc["settings"]["trust_final"] is True
+
+
+def test_hostile_run_files_are_that_runs_named_problem_never_the_commands_death(small, tmp_path):
+    """The real command on runs whose files hold what no writer makes: each bad file is named in
+    that run's row of scores.json (scored from the other record where one is readable, else an
+    unreadable row), the rest is scored, and no traceback is printed."""
+    import shutil
+
+    root, suite, runs, tasks = small
+    runs_dir, (t0, t1) = tmp_path / "runs", tasks
+    for system in ("deep", "numbers", "both"):
+        shutil.copytree(runs / "alpha", runs_dir / system)
+    (runs_dir / "deep" / t0 / "run.json").write_text(inject({"format": "assemblyworld.run"}, ("format",), DEEP))
+    inject_line(runs_dir / "deep" / t1 / "trajectory.jsonl", 3, DEEP)
+    final = json.loads((runs_dir / "numbers" / t0 / "final.json").read_text())
+    pid = sorted(final["poses"])[0]
+    (runs_dir / "numbers" / t0 / "final.json").write_text(inject(final, ("poses", pid, 0), HUGE))
+    final["poses"][pid][0] = 1e300
+    (runs_dir / "numbers" / t1 / "final.json").write_text(json.dumps(final))
+    (runs_dir / "both" / t0 / "final.json").write_text(inject({}, ("poses",), DEEP))
+    inject_line(runs_dir / "both" / t0 / "trajectory.jsonl", 1, DEEP)
+    (runs_dir / "both" / t1 / "run.json").write_text(inject({"format": "assemblyworld.run"}, ("format",), DUPLICATE))
+
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        [str(Path(sys.executable).with_name("aw-score")), str(suite), str(runs_dir), "--out", str(out)]
+        + [*PROTO, *FAST],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+    assert "3 systems x 2 tasks: 0 runs from the cache, 6 scored now, unscored: 1 unreadable" in proc.stderr
+    rows = {(r["system"], r["task_id"]): r for r in json.loads((out / "scores.json").read_text())["runs"]}
+
+    def said(system, task):
+        r = rows[(system, task)]
+        return r["status"], r["problems"], r["run_json_problem"]
+
+    traj = f"trajectory unreadable: {runs_dir}/{{}}/{{}}/trajectory.jsonl: line {{}}: {DEEP.message}"
+    assert said("deep", t0) == ("scored", [], f"run.json unreadable: {DEEP.message}")
+    assert said("deep", t1) == ("scored", [traj.format("deep", t1, 3)], None)
+    status, (problem,), _ = said("numbers", t0)
+    assert status == "scored" and problem.startswith(f"final.json unreadable ({HUGE.message}")
+    assert said("numbers", t1) == (
+        "scored",
+        [f"final.json unreadable (poses.{pid}: Value error, pose position beyond +-1e+06 scene units)"],
+        None,
+    )
+    assert said("both", t0) == (
+        "unreadable",
+        [f"{traj.format('both', t0, 1)}; final.json unreadable ({DEEP.message})"],
+        None,
+    )
+    assert said("both", t1) == ("scored", [], f"run.json unreadable: {DUPLICATE.message}")
 
 
 SCRIPT = textwrap.dedent("""

@@ -199,8 +199,9 @@ async def test_bad_input_and_no_leaks(box_task, tmp_path):
     # Every rejected call is in the trajectory with the message the agent got.
     traj = read_trajectory(run / "trajectory.jsonl")
     errors = [c for c in traj.calls if not c.ok]
-    assert len(errors) == len(BAD_CALLS) + 1
-    for rec, msg, (tool, _, _) in zip(errors, messages, BAD_CALLS):
+    assert len(errors) == len(BAD_CALLS) + 1  # the bad calls, then the edit beyond the range
+    assert errors[-1].tool == "translate_objects" and "beyond" in (errors[-1].error or "")
+    for rec, msg, (tool, _, _) in zip(errors[:-1], messages, BAD_CALLS, strict=True):
         assert rec.tool == tool and msg.endswith(rec.error) and rec.poses is None and rec.changed == []
     # Arguments are recorded as sent (NaN from the Python client arrives as null).
     nan_rec = errors[[i for i, b in enumerate(BAD_CALLS) if b[1].get("delta") == ["NaN", 0, 0]][0]]

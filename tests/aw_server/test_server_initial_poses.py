@@ -12,6 +12,7 @@ from aw_server_helpers import server_command, server_params
 from mcp import Client
 
 from aw.formats import read_final, read_trajectory
+from tests.aw.formats.hostile_json import FRAGMENTS, inject
 
 pytestmark = pytest.mark.anyio
 
@@ -25,6 +26,15 @@ START = {
 def _poses_file(path, task_id="box3_none", poses=START, fmt="assemblyworld.poses"):
     path.write_text(json.dumps({"format": fmt, "format_version": 1, "task_id": task_id, "poses": poses}))
     return path
+
+
+FAR = "poses.p01: Value error, pose position beyond +-1e+06 scene units"  # refused where it is read
+
+
+def _hostile(fragment):
+    """A poses file whose p01 pose is the hostile fragment."""
+    doc = {"format": "assemblyworld.poses", "format_version": 1, "task_id": "box3_none", "poses": START}
+    return lambda p: p.write_text(inject(doc, ("poses", "p01"), fragment))
 
 
 async def test_episode_starts_from_the_given_poses(box_task, tmp_path):
@@ -67,13 +77,15 @@ def _refused(task_dir, run, start) -> subprocess.CompletedProcess:
 @pytest.mark.parametrize(
     "write, message",
     [
-        (lambda p: p.write_text("{not json"), "not JSON"),
+        (lambda p: p.write_text("{not json"), "not valid JSON"),
         (lambda p: _poses_file(p, task_id="other"), "poses are for task 'other', not 'box3_none'"),
         (lambda p: _poses_file(p, poses={k: v for k, v in START.items() if k != "p03"}), "missing ['p03']"),
         (lambda p: _poses_file(p, poses={**START, "p09": START["p01"]}), "unknown ['p09']"),
         (lambda p: _poses_file(p, poses={**START, "p01": [0, 0, 0, 0, 0, 0, 0]}), "zero length"),
         (lambda p: _poses_file(p, fmt="assemblyworld.task"), "expected an assemblyworld.poses file or a final.json"),
         (lambda p: None, "initial-poses file not found"),
+        (lambda p: _poses_file(p, poses={**START, "p01": [1e300, 0, 0, 1, 0, 0, 0]}), FAR),
+        *((_hostile(f), f.message) for f in FRAGMENTS),
     ],
 )
 def test_bad_poses_file_is_one_line_naming_it(box_task, tmp_path, write, message):

@@ -121,7 +121,7 @@ async def test_tools_prompt_and_resources(manual_task, tmp_path):
         assert all(r.mime_type == "image/png" for r in resources[1:])
         text = (await c.read_resource("aw://task/prompt")).contents[0].text
         assert text == task.prompt
-        for r, path in zip(resources[1:], task.reference_paths()):
+        for r, path in zip(resources[1:], task.reference_paths(), strict=True):
             blob = (await c.read_resource(r.uri)).contents[0].blob
             assert base64.b64decode(blob) == path.read_bytes()
 

@@ -109,6 +109,6 @@ def test_valid_translations_move_exactly_the_selection(live, ids, delta):
     # "changed" lists the parts whose pose changed (a delta below float resolution changes none)
     assert sorted(result.structured_content["changed"]) == sorted(p for p in ids if after[p] != before[p])
     for pid in IDS:
-        moved = [b + (d if pid in ids else 0.0) for b, d in zip(before[pid]["position"], delta)]
-        assert all(math.isclose(a, m, abs_tol=1e-9) for a, m in zip(after[pid]["position"], moved)), pid
+        moved = [b + (d if pid in ids else 0.0) for b, d in zip(before[pid]["position"], delta, strict=True)]
+        assert all(math.isclose(a, m, abs_tol=1e-9) for a, m in zip(after[pid]["position"], moved, strict=True)), pid
         assert after[pid]["quaternion"] == before[pid]["quaternion"]

@@ -37,9 +37,9 @@ def _nested(depth: int) -> str:
 
 # (tool, input text, words the one-line reply must contain)
 HOSTILE_INPUT = [
-    ("translate_objects", '{"ids": ["part-0001"], "delta": %s}' % _nested(300), "nested"),
-    ("translate_objects", '{"ids": ["part-0001"], "delta": %s}' % _nested(5000), "nested"),
-    ("list_objects", '{"x": %s}' % _nested(253), "nested"),
+    ("translate_objects", '{"ids": ["part-0001"], "delta": ' + _nested(300) + "}", "nested"),
+    ("translate_objects", '{"ids": ["part-0001"], "delta": ' + _nested(5000) + "}", "nested"),
+    ("list_objects", '{"x": ' + _nested(253) + "}", "nested"),
     ("group_objects", '{"ids": ["part-0001", "part-0002"], "name": "a\\ud800b"}', "surrogate"),
     ("list_objects", '{"\\udc00": 1}', "surrogate"),
     ("translate_objects", '{"ids": ["part-0001"], "delta": [%s, 0, 0]}' % ("9" * 400), "finite"),

@@ -113,24 +113,30 @@ def server_env(env: dict[str, str], marker: str) -> dict[str, str]:
 def read_json_events(transcript: Path) -> tuple[list[dict], int]:
     """The JSON-object lines of a harness transcript (JSONL) and the count of unparsable lines.
 
-    A missing or unreadable transcript gives no events; blank lines and non-object values are skipped.
+    A missing, unreadable or oversized transcript gives no events; blank lines and non-object
+    values are skipped. Lines are read one at a time, each within the JSON reader's limits.
     """
-    import json
+    from aw.formats import FormatError
+    from aw.formats.strict_json import LIMITS, JsonError, iter_lines, open_bounded, parse_json
 
     try:
-        lines = transcript.read_text(errors="replace").splitlines()
-    except OSError:
+        fh = open_bounded(transcript, LIMITS.max_file_bytes)
+    except FormatError:
         return [], 0
     events, n_bad = [], 0
-    for line in lines:
-        line = line.strip()
-        if not line:
-            continue
-        try:
-            ev = json.loads(line)
-        except ValueError:
-            n_bad += 1
-            continue
-        if isinstance(ev, dict):
-            events.append(ev)
+    with fh:
+        for _, line in iter_lines(fh, LIMITS.max_document_bytes):
+            if line is None:
+                n_bad += 1
+                continue
+            line = line.strip()
+            if not line:
+                continue
+            try:
+                ev = parse_json(line)
+            except JsonError:
+                n_bad += 1
+                continue
+            if isinstance(ev, dict):
+                events.append(ev)
     return events, n_bad

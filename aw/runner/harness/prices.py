@@ -8,8 +8,10 @@ computed from this table is marked ``cost_estimated`` in ``run.json``.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
+
+from aw.formats import FormatError
+from aw.formats.strict_json import read_json_object
 
 PRICES_USD_PER_MTOK: dict[str, tuple[float, float, float]] = {
     "gpt-5": (1.25, 0.125, 10.0),
@@ -30,9 +32,13 @@ def load_price_table(path: Path | None) -> tuple[dict[str, tuple[float, float, f
     if path is None:
         return dict(PRICES_USD_PER_MTOK), PRICE_SOURCE
     try:
-        raw = json.loads(Path(path).read_text())
+        raw = read_json_object(path)
         table = {str(k): (float(v[0]), float(v[1]), float(v[2])) for k, v in raw.items()}
-    except (OSError, ValueError, TypeError, IndexError, AttributeError) as exc:
+    except FormatError as exc:
+        raise ValueError(
+            f"{path}: not a price table {{model: [input, cached_input, output]}} ({exc.problem})"
+        ) from None
+    except (ValueError, TypeError, IndexError, KeyError) as exc:
         raise ValueError(f"{path}: not a price table {{model: [input, cached_input, output]}} ({exc})") from None
     return table, str(path)
 

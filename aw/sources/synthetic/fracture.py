@@ -42,7 +42,13 @@ def _radius_fn(category: str, rng: np.random.Generator):
         amps = rng.uniform(0.04, 0.12, size=3)
         phases = rng.uniform(0, 2 * np.pi, size=3)
         return (
-            lambda a: r * (1 + sum(amp * np.cos((k + 2) * a + ph) for k, (amp, ph) in enumerate(zip(amps, phases))))
+            lambda a: (
+                r
+                * (
+                    1
+                    + sum(amp * np.cos((k + 2) * a + ph) for k, (amp, ph) in enumerate(zip(amps, phases, strict=True)))
+                )
+            )
         ), rng.uniform(0.05, 0.1)
     if category == "tile":
         hx, hy = rng.uniform(0.04, 0.07), rng.uniform(0.006, 0.01)

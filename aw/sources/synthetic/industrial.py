@@ -192,7 +192,7 @@ def _core_gear_train(b: Builder, rng: np.random.Generator, core: int) -> Callabl
     dpt = max(0.1, 2 * max(radii) + 0.05)
     b.add("plate", box((w, dpt, t), (0, 0, t / 2)), step="plate")
     gear_t = rng.uniform(0.01, 0.016)
-    for i, (x, z, r) in enumerate(zip(centres, teeth, radii)):
+    for i, (x, z, r) in enumerate(zip(centres, teeth, radii, strict=True)):
         shaft_len = rng.uniform(0.06, 0.09) + 0.02 * i
         b.add(
             f"shaft_{'ab'[i]}",

@@ -40,18 +40,20 @@ def _inline(text: str) -> str:
 
 
 def _cells(line: str) -> list[str]:
-    return [c.strip() for c in line.strip().strip("|").split("|")]
+    """The cells of a table row; ``\\|`` is a ``|`` inside a cell (:func:`aw_eval.report.fmt.md_table`)."""
+    inner = line.strip().removeprefix("|").removesuffix("|")
+    return [c.strip().replace("\\|", "|") for c in re.split(r"(?<!\\)\|", inner)]
 
 
 def _table(lines: list[str]) -> str:
     header, align = _cells(lines[0]), _cells(lines[1])
     right = [a.endswith(":") for a in align]
-    th = "".join(f'<th class="{"r" if r else "l"}">{_inline(h)}</th>' for h, r in zip(header, right))
+    th = "".join(f'<th class="{"r" if r else "l"}">{_inline(h)}</th>' for h, r in zip(header, right, strict=True))
     rows = []
     for line in lines[2:]:
         tds = "".join(
             f'<td class="r" data-v="{sort_value(c)}">{_inline(c)}</td>' if r else f'<td class="l">{_inline(c)}</td>'
-            for c, r in zip(_cells(line), right)
+            for c, r in zip(_cells(line), right, strict=True)
         )
         rows.append(f"<tr>{tds}</tr>")
     return scroll_box(f'<table class="sortable"><thead><tr>{th}</tr></thead><tbody>{"".join(rows)}</tbody></table>')

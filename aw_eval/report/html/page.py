@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import hashlib
 import html
-import os
 import re
 import time
 from collections.abc import Callable
@@ -23,10 +22,20 @@ from typing import Any
 
 import orjson
 
+from aw import interrupts
 from aw.formats import FormatError
+from aw.formats.io import write_bytes_atomic, write_text_atomic
 from aw.render_platform import RenderError
 from aw_eval.report.fmt import fixed
-from aw_eval.report.html.cards import Picture, TaskRuns, load_run_view, system_colors, task_card, viewer_data
+from aw_eval.report.html.cards import (
+    NO_MESHES,
+    Picture,
+    TaskRuns,
+    load_run_view,
+    system_colors,
+    task_card,
+    viewer_data,
+)
 from aw_eval.report.html.markup import markdown_to_html, scroll_box, slug
 from aw_eval.report.html.scenes import TaskScene
 from aw_eval.report.markdown import SUMMARY_SECTIONS, TABLE1, system_label
@@ -60,9 +69,7 @@ def _plotly_bundle(folder: Path) -> str:
     name = f"plotly-{plotly.__version__}.min.js"
     path = folder / name
     if not path.is_file():
-        tmp = path.with_name(name + f".tmp{os.getpid()}")
-        tmp.write_text(get_plotlyjs(), encoding="utf-8")
-        tmp.replace(path)
+        write_text_atomic(path, get_plotlyjs())
     for old in folder.glob("plotly-*.min.js"):
         if old.name != name:
             old.unlink()
@@ -75,7 +82,7 @@ def _copy_static(folder: Path) -> None:
         data = (pkg / name).read_bytes()
         path = folder / name
         if not path.is_file() or path.read_bytes() != data:
-            path.write_bytes(data)
+            write_bytes_atomic(path, data)
 
 
 def _overview(doc: dict[str, Any], study: Study) -> str:
@@ -95,7 +102,8 @@ def _overview(doc: dict[str, Any], study: Study) -> str:
         for s in study.systems:
             r = runs[(s, tid)]
             if r["status"] == "scored":
-                tds += f'<td class="r" data-v="{r["pa"]:.6g}">{fixed(r["pa"])}</td><td class="r" data-v="{r["sr"]:g}">{int(r["sr"])}</td>'
+                mark = " (running)" if r.get("running") else ""
+                tds += f'<td class="r" data-v="{r["pa"]:.6g}">{fixed(r["pa"])}{mark}</td><td class="r" data-v="{r["sr"]:g}">{int(r["sr"])}</td>'
             else:
                 tds += f'<td class="r" data-v="">{html.escape(r["status"])}</td><td class="r" data-v=""></td>'
         rows.append(f"<tr>{tds}</tr>")
@@ -181,6 +189,7 @@ class CardJob:
     files: str
     colors: dict[str, str]
     threshold: float  # the protocol's part-correct threshold
+    viewer_url: str | None = None  # an aw-view of the same runs: each run links to its episode page
 
 
 @dataclass
@@ -214,7 +223,7 @@ def build_card(job: CardJob) -> CardResult:
                 viewer_file = f"{slug(tid)[:60]}-{hashlib.sha1(vd).hexdigest()[:12]}.js"
                 path = files / "viewer" / viewer_file
                 if not path.is_file():
-                    path.write_bytes(b"AWViewer.register(" + orjson.dumps(tid) + b"," + vd + b");\n")
+                    write_bytes_atomic(path, b"AWViewer.register(" + orjson.dumps(tid) + b"," + vd + b");\n")
                 viewer_src = f"{ASSETS_DIR}/viewer/{viewer_file}"
         card = None
         if scene is not None:
@@ -230,6 +239,7 @@ def build_card(job: CardJob) -> CardResult:
                     viewer_src,
                     job.colors,
                     threshold=job.threshold,
+                    viewer_url=job.viewer_url,
                 )
             except RenderError as exc:
                 no_render = f"No pictures: offscreen rendering is unavailable ({exc})."
@@ -244,7 +254,9 @@ def build_card(job: CardJob) -> CardResult:
                 rel,
                 viewer_src,
                 job.colors,
-                **({"no_pictures": no_render} if no_render else {}),
+                no_pictures=no_render or NO_MESHES,
+                threshold=job.threshold,
+                viewer_url=job.viewer_url,
             )
     finally:
         if scene is not None:
@@ -261,10 +273,25 @@ def _cards(jobs: list[CardJob], n_jobs: int):
         yield from map(build_card, jobs)
         return
     import multiprocessing
+    import os
     from concurrent.futures import ProcessPoolExecutor
 
-    with ProcessPoolExecutor(max_workers=min(n_jobs, len(jobs)), mp_context=multiprocessing.get_context("spawn")) as ex:
-        yield from ex.map(build_card, jobs)
+    from aw_eval.workers import stop_pool, worker_init
+
+    pool = ProcessPoolExecutor(
+        max_workers=min(n_jobs, len(jobs)),
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=worker_init,
+        initargs=(os.getpid(),),
+    )
+    try:
+        with interrupts.blocked_for_children():  # the workers are started by the submissions
+            cards = pool.map(build_card, jobs)
+        yield from cards
+    except BaseException:  # an interrupt or a failure: end the workers now, not after their cards
+        stop_pool(pool)
+        raise
+    pool.shutdown()
 
 
 def write_html(
@@ -275,10 +302,12 @@ def write_html(
     suite_dir: str | Path | None,
     log: Callable[[str], None] | None = None,
     jobs: int = 1,
+    viewer_url: str | None = None,
 ) -> HtmlStats:
     """Write ``out_dir/report.html`` and ``out_dir/report_files/``; ``markdown`` is report.md's text
     (its image links are relative to ``out_dir``). Cards are built in ``jobs`` processes. Tasks
-    whose meshes cannot be read (no ``suite_dir``, official packages) get cards without pictures."""
+    whose meshes cannot be read (no ``suite_dir``, official packages) get cards without pictures.
+    ``viewer_url``: an ``aw-view`` of the same runs folder; each run links to its episode page."""
     t0 = time.perf_counter()
     out = Path(out_dir)
     files = out / ASSETS_DIR
@@ -299,6 +328,7 @@ def write_html(
             str(files),
             colors,
             protocol_of(doc).threshold,
+            viewer_url,
         )
         for t in doc["tasks"]
     ]
@@ -306,7 +336,7 @@ def write_html(
     used_viewer: set[str] = set()
     cards, pictures, no_render = [], {}, None
     # spawned workers take seconds to start: not worth it for a handful of cards
-    for job, res in zip(card_jobs, _cards(card_jobs, jobs if len(card_jobs) >= MIN_POOL_TASKS else 1)):
+    for job, res in zip(card_jobs, _cards(card_jobs, jobs if len(card_jobs) >= MIN_POOL_TASKS else 1), strict=True):
         cards.append(res.html)
         pictures[job.task["task_id"]] = res.pictures
         used_renders.update(res.render_files)
@@ -336,9 +366,7 @@ def write_html(
         f'<script src="{ASSETS_DIR}/viewer.js" data-plotly="{ASSETS_DIR}/{plotly_name}"></script></body></html>\n'
     )
     path = out / "report.html"
-    tmp = path.with_name(f"report.html.tmp{os.getpid()}")
-    tmp.write_text(page, encoding="utf-8")
-    tmp.replace(path)
+    write_text_atomic(path, page)
     files_bytes = sum(p.stat().st_size for p in files.rglob("*") if p.is_file())
     new = len(used_renders - before)
     stats = HtmlStats(path, path.stat().st_size, files_bytes, len(used_renders), new, time.perf_counter() - t0)

@@ -14,15 +14,19 @@ and identical states (consecutive filmstrip frames, systems that ended alike) re
 from __future__ import annotations
 
 import hashlib
-import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from PIL import Image
 
 from aw.camera import Camera
+from aw.formats.io import atomic_path
 from aw.pose import matrices_to_poses, poses_to_matrices
+
+if TYPE_CHECKING:  # imported where it is opened: GL set-up only when a picture is asked for
+    from aw.render import OffscreenRenderer
 
 __all__ = ["TaskScene", "aligned_poses", "RENDER_FORMAT"]
 
@@ -65,7 +69,7 @@ class TaskScene:
             h.update(np.ascontiguousarray(m.vertices, dtype=np.float64).tobytes())
             h.update(np.ascontiguousarray(m.faces, dtype=np.int64).tobytes())
         self.digest = h.hexdigest()
-        self._renderer = None  # opened on the first picture, at its size
+        self._renderer: OffscreenRenderer | None = None  # opened on the first picture, at its size
 
     @classmethod
     def load(cls, suite_dir: Path, task_id: str, part_ids: list[str], divisor: float) -> TaskScene:
@@ -78,7 +82,7 @@ class TaskScene:
         task_dir, targets_path = suite_paths(suite_dir, task_id)
         task = read_task(task_dir)
         targets = read_targets(targets_path)
-        by_id = dict(zip(task.part_ids, load_task_meshes(task)))
+        by_id = dict(zip(task.part_ids, load_task_meshes(task), strict=True))
         meshes = [by_id[p] for p in part_ids]
         target = np.array([targets.parts[p].pose for p in part_ids], dtype=np.float64).reshape(-1, 7)
         return cls(task_id, list(part_ids), meshes, target, part_colors(len(part_ids)), float(divisor))
@@ -86,24 +90,15 @@ class TaskScene:
     def bounds(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """World bounds ``(lo (3,), hi (3,))`` of the parts at ``poses (P, 7)``."""
         mats = poses_to_matrices(poses)
-        pts = np.concatenate([m.vertices @ t[:3, :3].T + t[:3, 3] for m, t in zip(self.meshes, mats)])
+        pts = np.concatenate([m.vertices @ t[:3, :3].T + t[:3, 3] for m, t in zip(self.meshes, mats, strict=True)])
         return pts.min(axis=0), pts.max(axis=0)
 
     def placed(self, poses: np.ndarray, threshold: float) -> np.ndarray:
         """``(P,)`` bool: the parts that lie at their targets as placed in ``poses (P, 7)``, before
-        any registration: each part's Chamfer distance to its own target part (normalized units)
-        is at most ``threshold``. Decided by a bound that needs no samples: a surface point moves
-        by at most its triangle's largest vertex displacement ``m`` between the two poses (the
-        displacement is affine in the point), so both Chamfer terms are at most ``(m / d) ** 2``."""
-        now, target = poses_to_matrices(poses), poses_to_matrices(self.target_poses)
-        out = np.zeros(len(self.meshes), dtype=bool)
-        for i, m in enumerate(self.meshes):
-            v = np.asarray(m.vertices, dtype=np.float64)
-            a = v @ now[i, :3, :3].T + now[i, :3, 3]
-            b = v @ target[i, :3, :3].T + target[i, :3, 3]
-            worst = float(np.sqrt(((a - b) ** 2).sum(axis=1)).max()) / self.divisor
-            out[i] = 2.0 * worst**2 <= threshold
-        return out
+        any registration (:func:`aw_eval.analyses.failures.placed_parts`)."""
+        from aw_eval.analyses.failures import placed_parts
+
+        return placed_parts(self.meshes, poses, self.target_poses, self.divisor, threshold)
 
     def camera(self, states: list[np.ndarray]) -> Camera:
         """One camera for the target and every ``states`` entry ``(P, 7)``: frames their union,
@@ -134,10 +129,9 @@ class TaskScene:
                 self._renderer = OffscreenRenderer(self.meshes, colors=self.colors, width=w, height=h)
             im = self._renderer.render(poses, camera)
             if im.size != (w, h):  # smaller pictures (filmstrip frames) are scaled down
-                im = im.resize((w, h), Image.LANCZOS)
-            tmp = path.with_name(f"{path.name}.tmp{os.getpid()}.jpg")  # workers may render the same picture
-            im.save(tmp, quality=_QUALITY, optimize=True)
-            tmp.replace(path)
+                im = im.resize((w, h), Image.Resampling.LANCZOS)
+            with atomic_path(path) as tmp:  # workers may render the same picture
+                im.save(tmp, quality=_QUALITY, optimize=True)
         return name
 
     def close(self) -> None:

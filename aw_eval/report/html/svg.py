@@ -64,7 +64,7 @@ def step_chart(
     )
     for s in series:
         pts, last = [], None
-        for x, y in zip(s.xs, s.ys):
+        for x, y in zip(s.xs, s.ys, strict=True):
             if y is None or not math.isfinite(y):
                 continue
             if last is not None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import trimesh
@@ -13,6 +14,7 @@ from aw.cli.prepare import main
 from aw.formats import read_manifest, read_targets, read_task
 from aw.formats.suite import suite_paths
 from aw.meshes import load_task_meshes
+from tests.aw.formats.hostile_json import DEEP, inject
 
 
 def _tree(root) -> dict[str, bytes]:
@@ -99,7 +101,7 @@ def test_parallel_build_is_byte_identical(small_suite, tmp_path):
     tasks = read_manifest(out).tasks
     assert [t for t in read_manifest(small_suite).tasks if t.source in ("partnet", "fantastic_breaks")] == tasks
     for t in tasks:
-        for a, b in zip(suite_paths(out, t.task_id), suite_paths(small_suite, t.task_id)):
+        for a, b in zip(suite_paths(out, t.task_id), suite_paths(small_suite, t.task_id), strict=True):
             assert (_tree(a) if a.is_dir() else a.read_bytes()) == (_tree(b) if b.is_dir() else b.read_bytes())
 
 
@@ -225,6 +227,30 @@ def test_folder_refuses_an_unusable_source_and_objects_that_cannot_be_assessed(t
     assert not (tmp_path / "o").exists()  # refused before any work
 
 
+def test_folder_refuses_parts_saved_at_their_own_origins_unless_allowed(tmp_path, capsys):
+    """A stool whose seat and legs were each exported centred at the origin: refused by name,
+    before any work; --allow-overlap keeps it with a warning."""
+    src = _folder(tmp_path / "src")
+    (src / "stool").mkdir()
+    for name, size in (("seat", (0.4, 0.3, 0.04)), ("leg_a", (0.04, 0.04, 0.4)), ("leg_b", (0.04, 0.04, 0.4))):
+        trimesh.creation.box(extents=size).export(src / "stool" / f"{name}.obj")
+    argv = ["folder", str(src), "--out", str(tmp_path / "o"), "--jobs", "1", "--no-progress"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == (
+        f"aw-prepare: error: {src / 'stool'}: the bounding boxes of its parts mostly overlap (3 of 3 part pairs "
+        "share most of the smaller part's box): each part was likely exported centred at its own origin, not where "
+        "it sits in the assembled object, so the target would be a pile on one point; export the parts in the "
+        "assembled frame, or pass --allow-overlap if they truly nest"
+    )
+    assert not (tmp_path / "o").exists()
+    assert main(argv + ["--allow-overlap"]) == 0
+    err = capsys.readouterr().err
+    assert f"aw-prepare: warning: {src / 'stool'}: the bounding boxes of its parts mostly overlap" in err
+    assert "; kept (--allow-overlap)" in err
+    assert (tmp_path / "o" / "tasks" / "custom-stool-none").is_dir()
+
+
 def test_folder_summary_names_an_empty_category_and_counts_in_the_right_number(tmp_path, capsys):
     src = _folder(tmp_path / "src")
     for extra in ("desk", "lamp"):
@@ -235,6 +261,36 @@ def test_folder_summary_names_an_empty_category_and_counts_in_the_right_number(t
     assert main(["folder", str(src), "--out", str(tmp_path / "o"), "--jobs", "1", "--no-progress"]) == 0
     out = capsys.readouterr().out
     assert "categories (no category) 1;" in out and "wrote 1 task of 1 object to" in out
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        (inject({"source": "partnet"}, ("source",), DEEP), DEEP.message),
+        ('{"source": "partnet", "source": "ikea_manual"}', "duplicate key 'source'"),
+        (json.dumps({"category": "x" * 101}), "category: String should have at most 100 characters"),
+        (
+            json.dumps({"category": "x" * (20 << 20)}),
+            "'category': a string of 20971520 characters, over the limit of 16777216",
+        ),
+    ],
+    ids=["deep", "duplicate-key", "category-101-chars", "category-20-MiB"],
+)
+def test_a_hostile_meta_json_is_one_line_and_nothing_is_echoed_whole(tmp_path, text, message):
+    """The real command: a hostile meta.json is refused by name before anything is built; a long
+    category never reaches the summary or any message."""
+    src = _folder(tmp_path / "src")
+    (src / "lamp" / "meta.json").write_text(text)
+    proc = subprocess.run(
+        [str(Path(sys.executable).with_name("aw-prepare")), "folder", str(src), "--out", str(tmp_path / "o")]
+        + ["--jobs", "1", "--no-progress"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 2 and proc.stdout == "", proc.stdout[:300]
+    assert proc.stderr.splitlines() == [f"aw-prepare: error: {src / 'lamp' / 'meta.json'}: {message}"]
+    assert not (tmp_path / "o").exists()
 
 
 def test_folder_warns_of_unknown_meta_keys_in_one_line(tmp_path, capsys):

@@ -219,7 +219,7 @@ def _write_and_read(run: Path, steps, end) -> None:
     # times are real: increasing with the server clock, negative exactly before the clock start
     ts = [c.t for c in traj.calls]
     assert ts == sorted(ts)
-    for c, rec in zip(traj.calls, written):
+    for c, rec in zip(traj.calls, written, strict=True):
         if rec.t is None:
             assert c.t <= 0 and c.t == round(c.server_t - (started if started is not None else server_t), 6)
         else:

@@ -225,7 +225,7 @@ def test_structure_errors(traj_path):
     expect(traj_path, "line 2: not a trajectory record")
     # A duplicate key inside a record.
     traj_path.write_bytes(b"\n".join([lines[0], lines[1].replace(b'"seq":1', b'"seq":1,"seq":9')] + lines[2:]))
-    expect(traj_path, "line 2: not valid JSON (duplicate key 'seq')")
+    expect(traj_path, "line 2: duplicate key 'seq'")
 
 
 def test_blank_lines_are_ignored(traj_path):

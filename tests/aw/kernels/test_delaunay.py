@@ -103,7 +103,10 @@ def test_one_qhull_run_serves_the_cloud_in_every_frame_and_order(cloud):
     shared = tuple(graph_for(tree, pts))
     if cloud == "gaussian":  # in general position the triangulation is unique: the same rows
         own = graph_for(tree)
-        rows = lambda g: [set(g[1][g[0][i] : g[0][i + 1]].tolist()) - {i} for i in range(len(copy))]  # noqa: E731
+
+        def rows(g):
+            return [set(g[1][g[0][i] : g[0][i + 1]].tolist()) - {i} for i in range(len(copy))]
+
         assert rows(shared) == rows(own)
     x = np.concatenate(
         [

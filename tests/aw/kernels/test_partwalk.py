@@ -121,6 +121,6 @@ def test_exact_scores_do_not_depend_on_the_search():
     walked = [aw_eval.score(geom, c, mode="exact") for c in cks]
     geom.index().part_clouds = None  # as if a part could not be triangulated
     plain = [aw_eval.score(geom, c, mode="exact") for c in cks]
-    for w, p in zip(walked, plain):
+    for w, p in zip(walked, plain, strict=True):
         assert (w.pa, w.sr, w.start_index) == (p.pa, p.sr, p.start_index)
         assert abs(w.scd - p.scd) <= 1e-12 * p.scd

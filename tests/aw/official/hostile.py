@@ -199,6 +199,12 @@ VARIANTS = [
         True,
     ),
     Variant(
+        "arguments-duplicate-key",
+        _edit_row("calls.jsonl", 0, _set(arguments="@DUP@"), {"@DUP@": '{"x": 1, "x": 2}'}),
+        "calls.jsonl: line 1: duplicate key 'x'",
+        True,
+    ),
+    Variant(
         "arguments-5MB-array",
         _edit_row("calls.jsonl", 0, _set(arguments={"x": "@BIG@"}), {"@BIG@": "[" + "0.0," * 1_300_000 + "0.0]"}),
         "over the limit of 4194304 per row",
@@ -210,23 +216,26 @@ VARIANTS = [
     Variant(
         "run-json-100000-deep",
         _json_file("run.json", _set(versions="@DEEP@"), {"@DEEP@": _deep(100_000)}, False),
-        "run.json: not valid JSON",
+        "run.json: JSON nested deeper than 64 levels",
         False,
     ),
     Variant(
         "result-json-100000-deep",
         _json_file("result.json", _set(extra="@DEEP@"), {"@DEEP@": _deep(100_000)}),
-        "result.json: not valid JSON",
+        "result.json: JSON nested deeper than 64 levels",
         False,
     ),
     Variant(
         "input-json-100000-deep",
         _json_file("input.json", _set(extra="@DEEP@"), {"@DEEP@": _deep(100_000)}),
-        "input.json: not valid JSON",
+        "input.json: JSON nested deeper than 64 levels",
         False,
     ),
     Variant(
-        "conversation-100000-deep", _conversation(_deep(100_000)), "conversation.jsonl: line 1: not valid JSON", False
+        "conversation-100000-deep",
+        _conversation(_deep(100_000)),
+        "conversation.jsonl: line 1: JSON nested deeper than 64 levels",
+        False,
     ),
     Variant(
         "conversation-not-objects", _conversation("[1, 2]"), "conversation.jsonl: line 1: expected a JSON object", False
@@ -241,6 +250,18 @@ VARIANTS = [
         "result-infinity",
         _json_file("result.json", _set_in("execution", cost_usd="@INF@"), {"@INF@": "Infinity"}),
         "NaN and Infinity are not JSON numbers",
+        False,
+    ),
+    Variant(
+        "run-json-duplicate-key",
+        _json_file("run.json", _set(versions="@DUP@"), {"@DUP@": '{"k": 1, "k": 2}'}, False),
+        "run.json: duplicate key 'k'",
+        False,
+    ),
+    Variant(
+        "result-integer-401-digits",
+        _json_file("result.json", _set(duration_seconds="@BIG@"), {"@BIG@": "1" + "0" * 400}),
+        "result.json: not valid JSON: a number beyond the range of a double (+-1.8e308)",
         False,
     ),
     Variant(

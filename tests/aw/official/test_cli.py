@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
+import pytest
 import trimesh
 
 from aw.cli.prepare import main
@@ -11,6 +17,7 @@ from aw.formats import Task, TaskPart, read_final, read_trajectory, write_task
 from aw.official.archive import read_archive
 from aw.official.episode import read_part_episode
 from aw.prompt import task_prompt
+from tests.aw.formats.hostile_json import DEEP, DUPLICATE, HUGE, inject, inject_line
 from tests.aw.official.builders import FINAL, write_package, write_run_log
 
 
@@ -53,22 +60,28 @@ def test_convert_then_export(tmp_path, capsys):
     )
 
 
-def test_export_a_native_run(tmp_path, capsys):
-    ids = ["p01", "p02"]
+def _native_task(suite: Path) -> tuple[Task, list[trimesh.Trimesh]]:
+    """A two-part task of this project's own (no official archive) in ``suite``."""
     task = Task(
         task_id="native",
         source="custom",
         dataset="test",
         object_id="native",
         prompt=task_prompt("none"),
-        parts=[TaskPart(id=i, mesh=f"parts/{i}.obj") for i in ids],
+        parts=[TaskPart(id=i, mesh=f"parts/{i}.obj") for i in ("p01", "p02")],
     )
     meshes = [trimesh.creation.box([0.4, 0.2, 0.1]), trimesh.creation.box([0.1, 0.1, 0.3])]
-    task_dir = tmp_path / "suite" / "tasks" / "native"
+    task_dir = suite / "tasks" / "native"
     (task_dir / "parts").mkdir(parents=True)
-    for i, m in zip(ids, meshes):
+    for i, m in zip(task.part_ids, meshes, strict=True):
         m.export(task_dir / "parts" / f"{i}.obj")
     write_task(task_dir, task)
+    return task, meshes
+
+
+def test_export_a_native_run(tmp_path, capsys):
+    task, meshes = _native_task(tmp_path / "suite")
+    ids = task.part_ids
     ep = Episode(task, meshes, tmp_path / "run", system="unit", budget_minutes=5.0)
     ep.call("start_episode", {})
     ep.call("set_object_pose", {"id": "p02", "position": [0.1, 0.2, 0.3], "quaternion": [0, 0, 1, 0]})
@@ -124,6 +137,41 @@ def test_export_a_native_run(tmp_path, capsys):
     )
     header = read_trajectory(tmp_path / "run" / "trajectory.jsonl").header
     np.testing.assert_allclose(restored.poses[0], [header.initial_poses[p] for p in ids], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "damage, message",
+    [
+        (lambda run: inject_line(run / "trajectory.jsonl", 2, DEEP), f"trajectory.jsonl: line 2: {DEEP.message}"),
+        (lambda run: inject_line(run / "trajectory.jsonl", 1, DUPLICATE), "trajectory.jsonl: line 1: duplicate key"),
+        (lambda run: _hostile_pose(run / "final.json", HUGE), f"final.json: {HUGE.message}"),
+        (lambda run: _hostile_pose(run / "final.json", DEEP), f"final.json: {DEEP.message}"),
+    ],
+    ids=["trajectory-deep", "trajectory-duplicate-key", "final-integer-401-digits", "final-deep"],
+)
+def test_export_of_a_hostile_run_is_one_line(tmp_path, damage, message):
+    """The real command on a run whose trajectory or final.json holds what no writer makes."""
+    task, meshes = _native_task(tmp_path / "suite")
+    ep = Episode(task, meshes, tmp_path / "run", system="unit", budget_minutes=5.0)
+    ep.call("translate_objects", {"ids": ["p01"], "delta": [0, 0, 0.25]})
+    ep.close("finished")
+    damage(tmp_path / "run")
+    out = tmp_path / "native.episode.zip"
+    proc = subprocess.run(
+        [str(Path(sys.executable).with_name("aw-prepare")), "official-export", str(tmp_path / "run")]
+        + ["--suite", str(tmp_path / "suite"), "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr, proc.stderr
+    (line,) = proc.stderr.splitlines()
+    assert line.startswith(f"aw-prepare: error: {tmp_path / 'run'}/{message}") and not out.exists()
+
+
+def _hostile_pose(path: Path, fragment) -> None:
+    final = json.loads(path.read_text())
+    path.write_text(inject(final, ("poses", "p01", 0), fragment))
 
 
 def test_one_line_errors(tmp_path, capsys):
@@ -219,3 +267,44 @@ def test_what_the_runs_need_and_the_package_lacks_is_named(tmp_path, capsys):
     for path in (sample.evaluation_path, gone.initial_path, gone.evaluation_path):
         assert str(path.relative_to(pkg_root)) in err
     assert "ikea-manualbook/ikea-manual/prep-v1-s0-i0-fixture/config.json" in err
+
+
+def test_a_run_whose_end_contradicts_its_calls_is_refused_or_exported_as_said(tmp_path, capsys):
+    """final.json moved after the calls (as aw-score flags it): refused in one line; with
+    --trust-final exported with its closing state as one more state, and said."""
+    import json
+
+    ids = ["p01", "p02"]
+    task = Task(
+        task_id="native",
+        source="custom",
+        dataset="test",
+        object_id="native",
+        prompt=task_prompt("none"),
+        parts=[TaskPart(id=i, mesh=f"parts/{i}.obj") for i in ids],
+    )
+    task_dir = tmp_path / "suite" / "tasks" / "native"
+    (task_dir / "parts").mkdir(parents=True)
+    meshes = [trimesh.creation.box([0.4, 0.2, 0.1]), trimesh.creation.box([0.1, 0.1, 0.3])]
+    for i, m in zip(ids, meshes, strict=True):
+        m.export(task_dir / "parts" / f"{i}.obj")
+    write_task(task_dir, task)
+    ep = Episode(task, meshes, tmp_path / "run", system="unit", budget_minutes=5.0)
+    ep.call("start_episode", {})
+    ep.call("translate_objects", {"ids": ["p01"], "delta": [0, 0, 0.25]})
+    ep.close("finished")
+    final = json.loads((tmp_path / "run" / "final.json").read_text())
+    final["poses"]["p02"][0] += 0.5  # an edit that no call records
+    (tmp_path / "run" / "final.json").write_text(json.dumps(final))
+    argv = ["official-export", str(tmp_path / "run"), "--suite", str(tmp_path / "suite")]
+    capsys.readouterr()
+    assert main([*argv, "--out", str(tmp_path / "a.episode.zip")]) == 1
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "contradicts the state its calls leave (parts ['p02'])" in err
+    assert "--trust-final" in err and not (tmp_path / "a.episode.zip").exists()
+    assert main([*argv, "--out", str(tmp_path / "b.episode.zip"), "--trust-final"]) == 0
+    said = capsys.readouterr()
+    assert "the closing state contradicts the calls (parts ['p02']); exported as recorded" in said.err
+    arc = read_archive(tmp_path / "b.episode.zip")
+    assert arc.calls[-1]["state_index"] == 1 and arc.final_state().index == 2  # one more state than the calls'
+    assert "final state 2" in said.out

@@ -106,7 +106,7 @@ def test_round_trip_keeps_states(converted, tmp_path):
         root / "runs" / system / "ikea-manualbook--Chair--reidar", initial, tmp_path / "again.episode.zip"
     )
     assert [f.index for f in again.states] == [f.index for f in original.states] == [1, 2, 3]
-    for a, b in zip([again.initial, *again.states], [original.initial, *original.states]):
+    for a, b in zip([again.initial, *again.states], [original.initial, *original.states], strict=True):
         assert np.array_equal(a.integration, b.integration)
     assert [(c["name"], c["before_index"], c["state_index"], c["status"], c["timestamp"]) for c in again.calls] == [
         (c["name"], c["before_index"], c["state_index"], c["status"], c["timestamp"]) for c in original.calls

@@ -167,9 +167,15 @@ def test_bad_evaluation_files_get_named_errors(tmp_path):
     bad.write_text("[1]\n")
     with pytest.raises(FormatError, match="line 1: expected a JSON object"):
         read_metrics(bad)
+    bad.write_text("\n" + "[" * 3000 + "]" * 3000 + "\n")
+    with pytest.raises(FormatError, match="metrics.jsonl: line 2: JSON nested deeper than 64 levels"):
+        read_metrics(bad)
     summary = tmp_path / "summary.json"
     summary.write_text('{"protocol": "v0"}')
     with pytest.raises(FormatError, match="summary.json: not an official summary"):
+        read_summary(summary)
+    summary.write_text('{"protocol": "v0", "protocol": "v1"}')
+    with pytest.raises(FormatError, match="summary.json: duplicate key 'protocol'"):
         read_summary(summary)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from aw.refine.base import RefineRequest, RefinerError, anchor_index, check_poses, identity_poses
+from aw.refine.base import RefineRequest, RefinerError, anchor_index, check_poses, identity_poses, returned_start
 
 
 def _request(n_points=(30, 50), initial=None) -> RefineRequest:
@@ -33,7 +33,7 @@ def test_a_good_answer_comes_back_normalised():
 @pytest.mark.parametrize(
     "poses, message",
     [
-        (identity_poses(1), "refiner r: returned 1 poses for 2 parts"),
+        (identity_poses(1), "refiner r: returned 1 pose for 2 parts"),
         (identity_poses(3), "refiner r: returned 3 poses for 2 parts"),
         (np.zeros((2, 6)), "each pose needs 7 numbers"),
         ([[np.nan, 0, 0, 1, 0, 0, 0], [0, 0, 0, 1, 0, 0, 0]], "non-finite pose for p0"),
@@ -59,3 +59,18 @@ def test_the_anchor_keeps_a_given_initial_pose_up_to_sign_and_rounding():
     answer[0] = [1, 2, 3, 1, 0, 0, 0]
     out = check_poses("r", req, answer)
     assert np.allclose(out[0, :3], [1, 2, 3])
+
+
+def test_returned_start_within_1e_9_and_up_to_quaternion_sign():
+    start = identity_poses(2)
+    start[1] = [0.5, -0.25, 1.0, 0.0, 0.0, 0.0, 1.0]
+    same = start.copy()
+    same[1, 3:] *= -1  # the same rotation
+    same[0, 0] += 5e-10
+    assert returned_start(start, same)
+    moved = start.copy()
+    moved[1, 2] += 2e-9
+    turned = start.copy()
+    turned[0, 3:] = [np.cos(1e-8), np.sin(1e-8), 0, 0]
+    assert not returned_start(start, moved) and not returned_start(start, turned)
+    assert not returned_start(start, start[:1])

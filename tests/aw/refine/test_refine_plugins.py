@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import os
 import shlex
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +15,7 @@ import pytest
 
 from aw.formats import read_task
 from aw.refine.base import RefinerError
-from aw.refine.plugins import RefinerSpec, available, resolve, run_refiner
+from aw.refine.plugins import RefinerSpec, available, command_label, resolve, run_refiner
 from aw.refine.runs import build_request
 
 SCRIPT = Path(__file__).with_name("scripted_refiner.py")
@@ -49,27 +51,113 @@ def test_command_without_placeholders_gets_both_files_appended(request_, tmp_pat
     assert run_refiner(spec, _with(request_, behaviour="shift"), tmp_path, 60).shape == (2, 7)
 
 
+R = "refiner scripted_refiner: "
+RESULT = R + "result file refine-result.json: "
+
+
 @pytest.mark.parametrize(
-    "behaviour, message",
+    "behaviour, start, end",
     [
-        ("short", "refiner scripted_refiner.py: returned 1 poses for 2 parts (missing fragment_"),
-        ("nan", "refiner scripted_refiner.py: non-finite pose for fragment_"),
-        ("move_anchor", "refiner scripted_refiner.py: moved the anchor fragment_"),
-        ("fail", "refiner scripted_refiner.py: exited with code 3: scripted refiner: model weights not found"),
-        ("silent", "refiner scripted_refiner.py: wrote no result file refine-result.json"),
+        ("short", R + "returned 1 pose for 2 parts (missing fragment_", ")"),
+        ("nan", RESULT + "not valid JSON: NaN at char ", " (NaN and Infinity are not JSON numbers)"),
+        ("far", R + "pose of fragment_", ": pose position beyond +-1e+06 scene units"),
+        ("huge", RESULT + "not valid JSON: a number beyond the range of a double (+-1.8e308) at char ", ""),
+        ("deep", RESULT + "JSON nested deeper than 64 levels", ""),
+        ("big", RESULT + "314572800 bytes, over the limit of 16777216 for a JSON file", ""),
+        ("loud", R + "exited with code 3: scripted refiner: out of patience", ""),
+        ("move_anchor", R + "moved the anchor fragment_", "it must keep its initial pose)"),
+        ("fail", R + "exited with code 3: scripted refiner: model weights not found", ""),
+        ("silent", R + "wrote no result file refine-result.json", ""),
     ],
 )
-def test_bad_external_answers_are_named(request_, tmp_path, behaviour, message):
+def test_bad_external_answers_are_named(request_, tmp_path, behaviour, start, end):
     spec = RefinerSpec("scripted_refiner.py", (sys.executable, str(SCRIPT), "{request}", "{result}"))
     with pytest.raises(RefinerError) as err:
         run_refiner(spec, _with(request_, behaviour=behaviour), tmp_path, 60)
-    assert str(err.value).startswith(message)
+    assert str(err.value).startswith(start) and str(err.value).endswith(end), str(err.value)
+
+
+PEAK = """
+import resource, sys
+from pathlib import Path
+from aw.formats import read_task
+from aw.refine.base import RefinerError
+from aw.refine.plugins import RefinerSpec, run_refiner
+from aw.refine.runs import build_request
+suite, script, work = map(Path, sys.argv[1:4])
+request = build_request(read_task(suite / "tasks" / "frac_cylinder_1"), suite, None)
+spec = RefinerSpec("scripted", (sys.executable, str(script), "{request}", "{result}"))
+for behaviour in ("big", "loud"):
+    request.options = {"behaviour": behaviour}
+    try:
+        run_refiner(spec, request, work / behaviour, 300)  # a loaded machine: time is not the point
+    except RefinerError as exc:
+        print(exc)
+print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024)
+"""
+
+
+def test_a_300_mib_answer_or_log_is_never_read_whole(fracture_suite, tmp_path):
+    """The result file is refused by its size and only the log's tail is read: the parent's peak
+    memory stays far below the 300 MiB either file holds (reading either whole takes over 300 MB)."""
+    proc = subprocess.run(
+        [sys.executable, "-c", PEAK, str(fracture_suite), str(SCRIPT), str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert proc.returncode == 0, proc.stderr
+    big, loud, peak_mb = proc.stdout.strip().splitlines()
+    assert big.endswith("314572800 bytes, over the limit of 16777216 for a JSON file"), big
+    assert loud == "refiner scripted: exited with code 3: scripted refiner: out of patience", loud
+    assert int(peak_mb) < 250, f"peak {peak_mb} MB"
 
 
 def test_a_refiner_past_its_time_limit_is_killed_and_named(request_, tmp_path):
     spec = RefinerSpec("slow", (sys.executable, str(SCRIPT), "{request}", "{result}"))
     with pytest.raises(RefinerError, match=r"refiner slow: timed out after 1.5 s \(killed\)"):
         run_refiner(spec, _with(request_, behaviour="sleep"), tmp_path, 1.5)
+
+
+def _running(pid: int) -> bool:
+    import psutil
+
+    try:
+        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
+
+
+@pytest.mark.parametrize("behaviour", ["setsid", "setsid_answer"], ids=["timed-out", "answered"])
+def test_nothing_a_refiner_started_outlives_it(request_, tmp_path, behaviour):
+    """A process the refiner started in a session of its own (``os.setsid()``), orphaned out of its
+    tree, ends at the refiner's time-out, or right after the refiner answered."""
+    pid_file = tmp_path / "grandchild.pid"
+    spec = RefinerSpec("slow", (sys.executable, str(SCRIPT), "{request}", "{result}"))
+    request = _with(request_, behaviour=behaviour, pid_file=str(pid_file))
+    try:
+        if behaviour == "setsid":
+            with pytest.raises(RefinerError, match=r"refiner slow: timed out after 10 s \(killed\)"):
+                run_refiner(spec, request, tmp_path, 10)
+        else:
+            assert run_refiner(spec, request, tmp_path, 60).shape == (2, 7)
+        pid = int(pid_file.read_text())
+        for _ in range(100):  # killed by then; give the kernel a moment to tear it down
+            if not _running(pid):
+                break
+            time.sleep(0.1)
+        assert not _running(pid)
+    finally:
+        if pid_file.exists() and _running(int(pid_file.read_text())):
+            os.kill(int(pid_file.read_text()), 9)
+
+
+def test_a_command_is_labelled_by_its_program_without_a_script_extension():
+    assert resolve(None, _command()).name == "scripted_refiner"  # python SCRIPT: the script
+    assert resolve(None, "./refine.sh {request} {result}").name == "refine"
+    assert resolve(None, "/opt/garf/bin/garf-infer").name == "garf-infer"
+    assert resolve("mine", "./refine.py").name == "mine"  # --refiner NAME wins
+    assert command_label("model.v2") == "model.v2" and command_label("R.EXE") == "R"
 
 
 def test_unknown_refiner_and_bad_command_are_refused():
@@ -105,5 +193,5 @@ def test_entry_point_plug_in_is_found_and_run_in_a_child_process(request_, tmp_p
     spec = resolve("shifty")
     poses = run_refiner(spec, _with(request_), tmp_path / "ok", 120)
     assert np.isclose(poses[1 - request_.anchor, 2], 0.125)
-    with pytest.raises(RefinerError, match="refiner shifty: returned 1 poses for 2 parts"):
+    with pytest.raises(RefinerError, match="refiner shifty: returned 1 pose for 2 parts"):
         run_refiner(spec, _with(request_, count=1), tmp_path / "short", 120)

@@ -4,6 +4,7 @@ that answers wrongly or hangs fails its arms by name and the agent's arm is kept
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shlex
 import sys
@@ -53,11 +54,42 @@ def _study(suite: Path, out: Path, behaviour: str, *extra: str) -> int:
     )
 
 
+SAME = TASKS[0]  # the refiner returns its start unchanged on this task
+
+
 @pytest.fixture(scope="module")
-def good(fracture_suite, tmp_path_factory):
+def good_run(fracture_suite, tmp_path_factory):
+    """The study's runs and what aw-run printed (stdout)."""
     out = tmp_path_factory.mktemp("study") / "runs"
-    assert _study(fracture_suite, out, "shift") == 0
-    return out
+    capture = tmp_path_factory.mktemp("stdout") / "stdout.txt"
+    with open(capture, "w") as fh, contextlib.redirect_stdout(fh):
+        assert _study(fracture_suite, out, "shift", "--refiner-option", f"same_task={SAME}") == 0
+    return out, capture.read_text()
+
+
+@pytest.fixture(scope="module")
+def good(good_run):
+    return good_run[0]
+
+
+def test_refiner_outputs_equal_to_their_start_are_counted(good_run, fracture_suite):
+    """In the summary line, refinement_study.json, run.json and the report's table."""
+    out, printed = good_run
+    lines = printed.splitlines()
+    assert "refiner: scripted ok; returned its start unchanged on 1 of 2 tasks" in lines
+    assert "agent_refiner: idle-then-scripted ok; returned its start unchanged on 1 of 2 tasks" in lines
+    assert "agent: idle ok" in lines and "refiner_agent: scripted-then-idle ok" in lines
+    arms = {a["arm"]: a for a in json.loads((out / "refinement_study.json").read_text())["arms"]}
+    for arm in ("refiner", "agent_refiner"):
+        assert arms[arm]["returned_start"] == {"count": 1, "refined": 2, "tasks": [SAME]}
+    assert "returned_start" not in arms["agent"] and "returned_start" not in arms["refiner_agent"]
+    assert read_run_info(out / "scripted" / SAME / "run.json").extra["returned_start"] is True
+    assert read_run_info(out / "scripted" / TASKS[1] / "run.json").extra["returned_start"] is False
+    section = refinement_study(fracture_suite, out)
+    assert section["table"]["refiner"]["returned_start"] == section["table"]["agent_refiner"]["returned_start"] == 1
+    text = render_refinement(section)
+    assert "| Refiner | `scripted` |" in text and "| 1 of 2 | 0 |" in text.split("| Refiner | `scripted` |")[1]
+    assert text.split("| Agent | `idle` |")[1].split("\n")[0].endswith("| - | 0 |")
 
 
 def test_four_systems_and_the_study_file(good, capsys):
@@ -85,7 +117,7 @@ def test_composed_arms_start_from_the_first_arms_final_states(good):
         assert after.extra["initial_poses"] == str((good / "idle" / tid / "final.json").resolve())
         moved = read_final(good / "idle-then-scripted" / tid / "final.json").poses
         shifts = sorted(round(moved[p][0], 9) for p in moved)
-        assert shifts == [0.0, 0.125]
+        assert shifts == ([0.0, 0.0] if tid == SAME else [0.0, 0.125])
 
 
 def test_score_section_table_pairs_and_plot(good, fracture_suite, tmp_path):
@@ -119,43 +151,59 @@ def test_wrong_answers_fail_the_refiner_arms_and_keep_the_agent(fracture_suite, 
     arms = {a["arm"]: a for a in json.loads((out / "refinement_study.json").read_text())["arms"]}
     assert arms["agent"]["status"] == "ok"
     assert arms["refiner"]["status"] == arms["agent_refiner"]["status"] == "failed"
-    assert arms["refiner"]["failed_tasks"][TASKS[0]].startswith("refiner scripted: non-finite pose for fragment_")
+    assert arms["refiner"]["failed_tasks"][TASKS[0]].startswith(
+        "refiner scripted: result file refine-result.json: not valid JSON: NaN at char "
+    )
     assert arms["refiner_agent"]["failed_tasks"] == {
         t: "no start state: arm refiner failed on this task" for t in TASKS
     }
     assert not (out / "scripted-then-idle").exists()  # the agent never ran from a failed refinement
     info = read_run_info(out / "scripted" / TASKS[0] / "run.json")
-    assert info.ended == "error" and "non-finite pose" in info.error
+    assert info.ended == "error" and "(NaN and Infinity are not JSON numbers)" in info.error
     # the failed refinement leaves its start state, recorded as an error
     traj = read_trajectory(out / "scripted" / TASKS[0] / "trajectory.jsonl")
     assert traj.end.reason == "error" and traj.final_poses() == traj.header.initial_poses
     section = refinement_study(fracture_suite, out)
     assert section["matched"] == [] and len(section["failures"]["refiner"]) == 2
+    study = out / "refinement_study.json"
+    study.write_text(study.read_text()[:-2] + ', "notes": ' + "[" * 3000 + "]" * 3000 + "}")
+    assert refinement_study(fracture_suite, out) == {
+        "error": f"{study}: unreadable (JSON nested deeper than 64 levels)"
+    }
     assert "Failed runs (left out of the table)" in render_refinement(section)
 
 
-def test_refiner_alone_past_its_time_limit(fracture_suite, tmp_path, capsys):
+def test_refiner_alone_past_its_time_limit_then_retried(fracture_suite, tmp_path, capsys):
     command = f"{shlex.quote(sys.executable)} {shlex.quote(str(SCRIPT))}"
-    code = aw_run(
-        [
-            str(fracture_suite),
-            "--refiner-command",
-            command,
-            "--refiner-option",
-            "behaviour=sleep",
-            "--refiner-timeout",
-            "1",
-            "--tasks",
-            TASKS[0],
-            "--out",
-            str(tmp_path / "runs"),
-            "--no-progress",
-        ]
-    )
+
+    def refine(behaviour: str) -> int:
+        return aw_run(
+            [
+                str(fracture_suite),
+                "--refiner-command",
+                command,
+                "--refiner-option",
+                f"behaviour={behaviour}",
+                "--refiner-timeout",
+                "1",
+                "--tasks",
+                TASKS[0],
+                "--out",
+                str(tmp_path / "runs"),
+                "--no-progress",
+            ]
+        )
+
+    code = refine("sleep")
     captured = capsys.readouterr()
     assert code == 1
-    assert f"{TASKS[0]}: refiner scripted_refiner.py: timed out after 1 s (killed)" in captured.out
+    assert captured.out.splitlines()[0] == "scripted_refiner: 0 of 1 task refined, 1 failed"
+    assert f"{TASKS[0]}: refiner scripted_refiner: timed out after 1 s (killed)" in captured.out
     assert captured.err.strip().startswith("aw-run: error: the refiner failed on every task")
+    assert refine("shift") == 0  # the failed run is retried by the same command, which says so
+    captured = capsys.readouterr()
+    assert f"aw-run: retrying 1 run that failed: {TASKS[0]} (error: refiner " in captured.err
+    assert "timed out after 1 s (killed))" in captured.err
 
 
 @pytest.mark.parametrize(
@@ -177,7 +225,7 @@ def test_usage_errors(fracture_suite, argv, message, capsys):
 
 
 def test_refiner_options_keep_words_that_read_as_non_finite_numbers():
-    from aw.refine.cli import _option
+    from aw.runner.refiner_cli import _option
 
     assert _option("behaviour=nan") == ("behaviour", "nan")
     assert _option("mode=inf") == ("mode", "inf")
@@ -203,12 +251,21 @@ def test_aw_score_outputs_carry_the_section(good, fracture_suite, tmp_path):
     )
     md = (tmp_path / "out" / "report.md").read_text()
     assert "## Bidirectional refinement" in md and "| Agent -> Refiner | `idle-then-scripted` |" in md
+    # the study's table is the report's first section and its headline; Table 1 says what differs
+    assert md.index("## Bidirectional refinement") < md.index("## How to read this") < md.index("## Table 1")
+    headline = next(line for line in md.splitlines() if "Headline" in line)
+    assert headline.startswith("- **Headline: the four-arm table** (Bidirectional refinement, the first section")
+    assert "Agent -> Refiner `idle-then-scripted` PA " in headline
+    assert "- **Overall SR by the benchmark's protocol** (Table 1;" in md
+    assert "**Why Table 1's PA differs from this table's.**" in md and "equivalence groups" in md
     assert (
         "(plots/refinement_paired_cd.png)" in md and (tmp_path / "out" / "plots" / "refinement_paired_cd.png").is_file()
     )
     assert res["doc"]["refinement"]["matched"] == TASKS
     page = (tmp_path / "out" / "report.html").read_text()
     assert "Bidirectional refinement" in page and 'src="plots/refinement_paired_cd.png"' in page
+    assert '<h2 id="bidirectional-refinement">' in page
+    assert '<summary><h2 id="bidirectional-refinement">' not in page  # open, not folded
     plain = tmp_path / "plain"
     write_outputs(
         table1_study(),

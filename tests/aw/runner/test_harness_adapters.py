@@ -18,7 +18,7 @@ from aw.formats import read_final, read_run_info, read_trajectory
 from aw.runner.batch import BatchConfig, run_batch
 from aw.runner.harness import HARNESSES, HarnessOptions
 from aw.runner.harness.codex import _toml
-from aw.runner.harness.prices import PRICES_USD_PER_MTOK, estimate_cost
+from aw.runner.harness.prices import PRICES_USD_PER_MTOK, estimate_cost, load_price_table
 
 FAKE = Path(__file__).with_name("fake_harness.py")
 
@@ -170,12 +170,13 @@ def test_claude_transcript_without_result_sums_messages_once(tmp_path):
         "usage": {"input_tokens": 10, "cache_read_input_tokens": 90, "output_tokens": 5},
         "content": [{"type": "tool_use", "name": "mcp__assemblyworld__capture_scene"}],
     }
-    t.write_text("\n".join(json.dumps({"type": "assistant", "message": msg}) for _ in range(2)) + "\nnot json\n")
+    lines = [json.dumps({"type": "assistant", "message": msg})] * 2 + ["not json", "[" * 3000 + "]" * 3000]
+    t.write_text("\n".join(lines) + "\n")
     usage = HARNESSES["claude-code"].parse(t, HarnessOptions())
     assert usage.tokens.input == 100 and usage.tokens.output == 5
     assert usage.cost_usd is None and usage.extra["usage_partial"] is True
     assert usage.extra["harness_tool_uses"] == {"mcp__assemblyworld__capture_scene": 2}
-    assert usage.extra["transcript_unparsed_lines"] == 1
+    assert usage.extra["transcript_unparsed_lines"] == 2  # the 3,000-deep line too, by the one JSON reader
 
 
 def test_codex_cost_is_none_for_an_unpriced_model_and_uses_a_given_table(tmp_path):
@@ -197,6 +198,23 @@ def test_codex_cost_is_none_for_an_unpriced_model_and_uses_a_given_table(tmp_pat
     assert usage.cost_usd == pytest.approx((600 * 2.0 + 400 * 1.0 + 100 * 10.0) / 1e6)
     assert usage.extra["price_source"] == str(table)
     assert estimate_cost("gpt-5", 10, 0, 0, {}) is None
+
+
+@pytest.mark.parametrize(
+    "text, problem",
+    [
+        ("[" * 3000 + "]" * 3000, "JSON nested deeper than 64 levels"),
+        ('{"m": [1, 2, 3], "m": [1, 2, 3]}', "duplicate key 'm'"),
+        ('{"m": [1, 2]}', "list index out of range"),
+        ("[]", "expected a JSON object, got an array"),
+    ],
+)
+def test_a_bad_price_table_is_named(tmp_path, text, problem):
+    table = tmp_path / "prices.json"
+    table.write_text(text)
+    with pytest.raises(ValueError) as info:
+        load_price_table(table)
+    assert str(info.value) == f"{table}: not a price table {{model: [input, cached_input, output]}} ({problem})"
 
 
 def test_toml_values_round_trip():

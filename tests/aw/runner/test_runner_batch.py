@@ -21,7 +21,7 @@ def vertex_errors(suite, task_id: str, poses: dict[str, list[float]]) -> dict[st
     task = read_task(task_dir)
     targets = read_targets(targets_path)
     out = {}
-    for part, mesh in zip(task.parts, load_task_meshes(task)):
+    for part, mesh in zip(task.parts, load_task_meshes(task), strict=True):
         got = apply_pose(np.asarray(poses[part.id]), mesh.vertices)
         want = apply_pose(np.asarray(targets.parts[part.id].pose), mesh.vertices)
         out[part.id] = float(np.abs(got - want).max())

@@ -5,12 +5,17 @@ before anything runs."""
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
+import pytest
 
 from aw.formats import read_run_info, read_task, read_trajectory
 from aw.formats.suite import suite_paths
 from aw.runner.cli import main as aw_run
+from tests.aw.formats.hostile_json import DEEP, inject
 
 TASK = "tiny_shelf_none"
 
@@ -74,4 +79,39 @@ def test_a_task_without_a_start_state_is_refused_up_front(tiny_suite, tmp_path, 
         f"aw-run: error: --initial-poses {tmp_path / 'empty'}: no start state for {TASK} "
         f"({TASK}/final.json or {TASK}.json)"
     )
+    assert not (tmp_path / "runs" / "idle" / TASK).exists()
+
+
+FAR = "poses.part_00: Value error, pose position beyond +-1e+06 scene units"
+
+
+@pytest.mark.parametrize(
+    "fragment, message",
+    [(DEEP, DEEP.message), ("far", FAR)],
+    ids=["deep", "far"],
+)
+def test_a_bad_start_state_is_named_before_anything_runs(tiny_suite, tmp_path, fragment, message):
+    """The real command: the start state is read by the one JSON reader (and the recording's pose
+    rule) before any episode starts, so a hostile file is one line, never an episode that fails
+    as "MCP connection failed" with a traceback in server.log."""
+    ids = read_task(suite_paths(tiny_suite, TASK)[0]).part_ids
+    doc = {"format": "assemblyworld.poses", "format_version": 1, "task_id": TASK}
+    doc["poses"] = {pid: [0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0] for pid in ids}
+    start = tmp_path / "starts" / f"{TASK}.json"
+    start.parent.mkdir()
+    if fragment == "far":
+        doc["poses"][ids[0]] = [1e300, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
+        start.write_text(json.dumps(doc))
+    else:
+        start.write_text(inject(doc, ("poses", ids[0]), fragment))
+    proc = subprocess.run(
+        [str(Path(sys.executable).with_name("aw-run")), str(tiny_suite), "--agent", "idle", "--tasks", TASK]
+        + ["--initial-poses", str(start.parent), "--out", str(tmp_path / "runs"), "--no-progress"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    (line,) = proc.stderr.splitlines()
+    assert line.startswith(f"aw-run: error: {start.resolve()}: {message.replace('part_00', ids[0])}")
     assert not (tmp_path / "runs" / "idle" / TASK).exists()

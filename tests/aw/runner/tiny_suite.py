@@ -99,7 +99,7 @@ def make_tiny_suite(root: Path, with_image: bool = True) -> Path:
         (task_dir / "parts").mkdir(parents=True)
         baked, targets = _bake(parts, rng)
         ids = [f"p{i + 1:02d}" for i in range(len(parts))]
-        for pid, m in zip(ids, baked):
+        for pid, m in zip(ids, baked, strict=True):
             m.export(task_dir / "parts" / f"{pid}.obj")
         refs = []
         if condition == "image":
@@ -122,7 +122,9 @@ def make_tiny_suite(root: Path, with_image: bool = True) -> Path:
         )
         write_targets(
             root / "targets" / f"{task_id}.json",
-            Targets(task_id=task_id, parts={pid: PartTarget(pose=p) for pid, p in zip(ids, targets)}, scale=1.0),
+            Targets(
+                task_id=task_id, parts={pid: PartTarget(pose=p) for pid, p in zip(ids, targets, strict=True)}, scale=1.0
+            ),
         )
         entries.append(
             SuiteEntry(

@@ -6,6 +6,7 @@ Every writer builds real files under a given folder; nothing here is a mock of a
 from __future__ import annotations
 
 import io
+import itertools
 import json
 from pathlib import Path
 
@@ -107,7 +108,7 @@ def partnet_dataset(root: Path, shapes: dict[str, list[tuple[str, int]]], split:
     root.mkdir(parents=True, exist_ok=True)
     for cat, items in shapes.items():
         np.save(root / f"{cat}.{split}.npy", np.array([int(i) for i, _ in items]))
-        for i, (sid, n) in enumerate(items):
+        for sid, n in items:
             partnet_shape(root, sid, n, seed=int(sid) % 97, n_points=60, **kw)
     return root
 
@@ -152,7 +153,7 @@ def fractured_box(n_pieces: int, seed: int = 0) -> list[trimesh.Trimesh]:
     xs = np.linspace(-0.5, 0.5, n_pieces + 1)
     rng = np.random.default_rng(seed)
     out = []
-    for a, b in zip(xs[:-1], xs[1:]):
+    for a, b in itertools.pairwise(xs):
         m = box((b - a, 0.6 + 0.1 * rng.random(), 0.4), ((a + b) / 2, 0, 0))
         out.append(m)
     return out

@@ -27,7 +27,7 @@ def oracle_roundtrip(obj: AssembledObject, suite: Path, conditions=("none",)) ->
         meshes = load_task_meshes(task)
         all_v = np.concatenate([np.asarray(p.mesh.vertices) for p in obj.parts])
         centre = 0.5 * (all_v.min(axis=0) + all_v.max(axis=0))
-        for pid, mesh in zip(task.part_ids, meshes):
+        for pid, mesh in zip(task.part_ids, meshes, strict=True):
             t = targets.parts[pid]
             placed = apply_pose(np.asarray(t.pose), np.asarray(mesh.vertices))
             src = by_name[t.source_name].mesh

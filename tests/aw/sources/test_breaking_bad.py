@@ -34,7 +34,7 @@ def test_folder_object_and_catalog(root):
     obj = breaking_bad.load_object(*cat[1].args)
     assert obj.source == "breaking_bad" and obj.meta["subset"] == "everyday"
     assert [p.name for p in obj.parts] == ["piece_0", "piece_1", "piece_2"]
-    for part, piece in zip(obj.parts, fractured_box(3)):
+    for part, piece in zip(obj.parts, fractured_box(3), strict=True):
         assert np.abs(part.mesh.bounds - piece.bounds).max() < 1e-7
 
 
@@ -49,7 +49,7 @@ def test_hdf5_variant(tmp_path):
     ]
     obj = breaking_bad.load_hdf5_object(*cat[1].args)
     assert [p.name for p in obj.parts] == ["piece_0", "piece_1", "piece_2"]
-    for part, piece in zip(obj.parts, fractured_box(3)):
+    for part, piece in zip(obj.parts, fractured_box(3), strict=True):
         assert np.array_equal(part.mesh.vertices, piece.vertices) and np.array_equal(part.mesh.faces, piece.faces)
 
 

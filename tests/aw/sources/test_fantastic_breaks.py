@@ -26,7 +26,7 @@ def test_load_and_catalog(root):
     obj = fantastic_breaks.load_object(*cat[0].args)
     assert (obj.source, obj.category) == ("fantastic_breaks", "mug") and not obj.references
     assert [p.name for p in obj.parts] == ["broken", "restoration"]
-    for part, piece in zip(obj.parts, fractured_box(2)):
+    for part, piece in zip(obj.parts, fractured_box(2), strict=True):
         assert np.abs(part.mesh.bounds - piece.bounds).max() < 1e-6
     assert obj.meta["npz"]["break_axis"] == [1.0, 0.0, 0.0]
     assert obj.meta["npz"]["points"] == {"shape": [500, 3], "dtype": "float64"}

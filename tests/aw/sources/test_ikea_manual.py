@@ -28,7 +28,7 @@ def test_load_object(root):
     )
     assert [p.name for p in obj.parts] == ["0", "1", "2", "3", "4"]
     # Y-up files came out Z-up: each part sits where the Z-up chair has it
-    for part, (size, centre) in zip(obj.parts, chair_boxes(3)):
+    for part, (size, centre) in zip(obj.parts, chair_boxes(3), strict=True):
         assert np.abs(part.mesh.bounds - box(size, centre).bounds).max() < 1e-7  # OBJ keeps 8 decimals
     assert obj.equivalence == [["2", "3", "4"]]
     # steps name parts as ints, strings and comma-joined sub-assemblies; each step keeps what it adds
@@ -79,6 +79,8 @@ def _edit(root, fn):
         ),
         (lambda d: d[0]["steps"].append({"parts": ["12"]}), r"\[0\].steps\[2\].parts: unknown part ids \['12'\]"),
         (lambda d: d[0].pop("name"), r"\[0\].name: missing"),
+        (lambda d: d[0].update(name=float("nan")), r"main_data.json: not valid JSON: NaN at char \d+"),
+        (lambda d: d[0].update(notes=json.loads("[" * 70 + "]" * 70)), r"main_data.json: JSON nested deeper than 64"),
     ],
 )
 def test_malformed_main_data(root, edit, message):

@@ -24,7 +24,7 @@ def test_points_only_shape_is_hulled_z_up(tmp_path):
     assert [p.name for p in obj.parts] == [f"part_0{i}" for i in range(6)]
     assert obj.meta["geometry"] == "convex_hull"
     # the hull of points that include the box corners is the box, in the Z-up assembled frame
-    for part, box in zip(obj.parts, made["assembled"]):
+    for part, box in zip(obj.parts, made["assembled"], strict=True):
         assert _close(part.mesh.bounds, box.bounds)
         assert part.mesh.is_watertight
     # the seat is the flat part at z = 0.45: Y-up data came out Z-up
@@ -39,7 +39,7 @@ def test_part_meshes_in_either_frame(tmp_path, frame):
     made = partnet_shape(tmp_path, "7", 4, meshes=frame)
     obj = partnet.load_object(tmp_path, "7")
     assert obj.meta["geometry"] == "meshes" and obj.meta["mesh_frames"] == [frame] * 4
-    for part, box in zip(obj.parts, made["assembled"]):
+    for part, box in zip(obj.parts, made["assembled"], strict=True):
         assert _close(part.mesh.vertices, box.vertices)
 
 

@@ -47,7 +47,7 @@ def test_catalog_and_rows(download):
     assert chair.source == "partnet" and chair.dataset == "rehosted:partnet"
     assert chair.equivalence == [["2", "3", "4", "5"]]
     # quads were triangulated: 6 quads -> 12 triangles, a closed box
-    for part, (size, centre) in zip(chair.parts, chair_boxes(4)):
+    for part, (size, centre) in zip(chair.parts, chair_boxes(4), strict=True):
         assert part.mesh.faces.shape == (12, 3) and part.mesh.is_watertight and part.mesh.volume > 0
         assert np.abs(part.mesh.bounds - box(size, centre).bounds).max() < 1e-12
     assert len(chair.references["manual"]) == 3 and chair.references["image"][0] is chair.references["manual"][-1]
@@ -167,7 +167,7 @@ def _official_assemblybench_row():
 def test_official_rows_source_from_path_poses_and_diagrams(tmp_path):
     from aw.prepare.official_task import official_sample
 
-    path = write_rehosted(
+    write_rehosted(
         tmp_path / "datasets--AssemblyWorld--assemblybench" / "data" / "test.parquet", [_official_assemblybench_row()]
     )
     (entry,) = rehosted.catalog(tmp_path / "datasets--AssemblyWorld--assemblybench")

@@ -108,13 +108,13 @@ def test_manual_steps_cover_every_part_once(blocks):
 def test_generation_is_deterministic_by_seed():
     a, b = generate_object("assemblybench", 4), generate_object("assemblybench", 4)
     assert [p.name for p in a.parts] == [p.name for p in b.parts]
-    for pa, pb in zip(a.parts, b.parts):
+    for pa, pb in zip(a.parts, b.parts, strict=True):
         np.testing.assert_array_equal(pa.mesh.vertices, pb.mesh.vertices)
         np.testing.assert_array_equal(pa.mesh.faces, pb.mesh.faces)
     c = generate_object("assemblybench", 4, seed=1)
     assert a.n_parts != c.n_parts or any(
         pa.mesh.vertices.shape != pc.mesh.vertices.shape or not np.allclose(pa.mesh.vertices, pc.mesh.vertices)
-        for pa, pc in zip(a.parts, c.parts)
+        for pa, pc in zip(a.parts, c.parts, strict=True)
     )
 
 

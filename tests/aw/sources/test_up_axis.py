@@ -137,7 +137,7 @@ def test_aw_prepare_folder_stands_y_up_furniture_and_says_so(tmp_path, capsys):
         v = np.concatenate(
             [
                 apply_pose(np.asarray(targets.parts[p.id].pose), m.vertices)
-                for p, m in zip(task.parts, load_task_meshes(task))
+                for p, m in zip(task.parts, load_task_meshes(task), strict=True)
             ]
         )
         ext = np.ptp(v, axis=0)

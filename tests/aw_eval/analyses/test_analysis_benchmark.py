@@ -116,3 +116,41 @@ def test_bold_marks_only_a_real_best_among_systems_that_achieved_something():
     ]
     assert paper(85.35) == "85.35" and paper(0) == "0.00" and paper(80) == "80.00"
     assert threshold_label(0.00316228) == "0.0032" and threshold_label(0.01) == "0.01"
+
+
+def test_composed_runs_add_up_both_stages_and_a_missing_stage_is_never_bold(tmp_path):
+    """A run started from another system's final state (run.json extra.initial_poses, as the
+    refinement study's composed arms record it) counts that system's time, calls and cost too; a
+    run started from a run outside the study or a poses file leaves a stage out: said, never bold."""
+    entries = paper_entries(n_objects=1)
+    systems = ("agent", "refiner", "agent-then-refiner", "elsewhere-then-refiner")
+    runs = {(s, e.task_id): run_from_errors(s, e.task_id, [0.0, 0.0, 0.0, 0.0]) for s in systems for e in entries}
+
+    def info(s: str, tid: str, seconds: float, calls: int, start: str | None) -> RunInfo:
+        extra = {"initial_poses": str(tmp_path / "runs" / start / tid / "final.json")} if start else {}
+        return RunInfo(system=s, task_id=tid, wall_seconds=seconds, mcp_calls=calls, cost_usd=1.0, extra=extra)
+
+    infos = {}
+    for e in entries:
+        t = e.task_id
+        infos[("agent", t)] = info("agent", t, 600.0, 40, None)
+        infos[("refiner", t)] = info("refiner", t, 6.0, 0, None)
+        infos[("agent-then-refiner", t)] = info("agent-then-refiner", t, 6.0, 0, "agent")
+        infos[("elsewhere-then-refiner", t)] = info("elsewhere-then-refiner", t, 3.0, 0, "not-in-this-study")
+    study = make_study(entries, runs, infos)
+    res = resources(study)
+    both = res["agent-then-refiner"]
+    assert both["time_min"]["mean"] == pytest.approx(10.1) and both["mcp_calls"]["mean"] == 40
+    assert both["cost_usd"]["mean"] == 2.0 and both["time_min"]["composed"] == 5
+    assert "stages_left_out" not in both["time_min"]
+    short = res["elsewhere-then-refiner"]
+    assert short["time_min"]["mean"] == pytest.approx(0.05) and short["time_min"]["stages_left_out"] == 5
+    assert res["agent"]["time_min"] == {"mean": 10.0, "n": 5, "from_trajectory": 0}  # no new keys
+    md = render_markdown(build_results(study, AnalysisSettings(n_draws=20, n_permutations=20)))
+    table = md.split("## Table 1")[1].split("##")[0]
+    rows = {line.split("|")[1].strip(): line.split("|")[-5:-1] for line in table.splitlines() if line.count("|") > 8}
+    assert [c.strip() for c in rows["elsewhere-then-refiner"][:2]] == ["0.05", "0"]  # cheapest, yet not bold
+    assert [c.strip() for c in rows["refiner"][:2]] == ["**0.10**", "**0**"]
+    assert [c.strip() for c in rows["agent-then-refiner"][:2]] == ["10.10", "40"]
+    assert "agent-then-refiner started from another system's final states: their resources add up both stages" in md
+    assert "elsewhere-then-refiner: resources leave out the stage that made their start states" in md

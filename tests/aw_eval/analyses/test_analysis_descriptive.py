@@ -81,7 +81,9 @@ def test_completion_reports():
     runs = {}
     infos = {}
     flags = [True, True, False, None, True]
-    for e, flag, errs in zip(entries, flags, ([0, 0, 0, 0], [0, 0, 1, 1], [0, 0, 0, 0], [1, 1, 1, 1], [0, 1, 1, 1])):
+    for e, flag, errs in zip(
+        entries, flags, ([0, 0, 0, 0], [0, 0, 1, 1], [0, 0, 0, 0], [1, 1, 1, 1], [0, 1, 1, 1]), strict=True
+    ):
         runs[("A", e.task_id)] = run_from_errors("A", e.task_id, errs)
         infos[("A", e.task_id)] = RunInfo(system="A", task_id=e.task_id, declared_complete=flag)
     c = completion_reports(make_study(entries, runs, infos))["A"]

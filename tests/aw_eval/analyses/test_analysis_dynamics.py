@@ -8,13 +8,15 @@ import pytest
 from aw_eval.analyses.dynamics import EvalCalls, activity_shares, call_positions, magnitude_summary, stage_summary
 from aw_eval.study.episode import call_kind
 
-I, O, M, X = 0, 1, 2, 3
+INSPECT, OBSERVE, MANIPULATE, OTHER = 0, 1, 2, 3  # the indices of KIND_NAMES
 
 
 def _evals():
     a = EvalCalls(
         call_t=np.arange(10.0),
-        call_kind=np.array([I, I, O, M, M, O, X, M, O, O], np.int8),
+        call_kind=np.array(
+            [INSPECT, INSPECT, OBSERVE, MANIPULATE, MANIPULATE, OBSERVE, OTHER, MANIPULATE, OBSERVE, OBSERVE], np.int8
+        ),
         edit_call=np.array([3, 4, 7]),
         edit_translation=np.array([0.2, 0.05, 0.4]),
         edit_rotation_deg=np.array([0.1, 30.0, 0.0]),
@@ -23,7 +25,7 @@ def _evals():
     )
     b = EvalCalls(
         call_t=np.array([0.0, 0.5, 10.0]),
-        call_kind=np.array([I, M, O], np.int8),
+        call_kind=np.array([INSPECT, MANIPULATE, OBSERVE], np.int8),
         edit_call=np.array([1]),
         edit_translation=np.array([0.6]),
         edit_rotation_deg=np.array([0.0]),
@@ -34,10 +36,10 @@ def _evals():
 
 
 def test_call_kinds():
-    assert [call_kind(t) for t in ("list_objects", "get_object", "get_scene", "get_state")] == [I] * 4
-    assert [call_kind(t) for t in ("capture_scene", "move_camera")] == [O] * 2
-    assert [call_kind(t) for t in ("translate_objects", "rotate_objects", "set_object_pose")] == [M] * 3
-    assert [call_kind(t) for t in ("group_objects", "ungroup_objects", "start_episode", "bogus")] == [X] * 4
+    assert [call_kind(t) for t in ("list_objects", "get_object", "get_scene", "get_state")] == [INSPECT] * 4
+    assert [call_kind(t) for t in ("capture_scene", "move_camera")] == [OBSERVE] * 2
+    assert [call_kind(t) for t in ("translate_objects", "rotate_objects", "set_object_pose")] == [MANIPULATE] * 3
+    assert [call_kind(t) for t in ("group_objects", "ungroup_objects", "start_episode", "bogus")] == [OTHER] * 4
 
 
 def test_positions_and_degenerate_interval():
@@ -59,7 +61,7 @@ def test_activity_shares_weighted_within_active_bins():
 def test_empty_bins_are_omitted():
     ev = EvalCalls(
         np.array([0.0, 10.0]),
-        np.array([I, O], np.int8),
+        np.array([INSPECT, OBSERVE], np.int8),
         np.zeros(0, int),
         np.zeros(0),
         np.zeros(0),

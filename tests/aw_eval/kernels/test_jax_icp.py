@@ -119,7 +119,7 @@ def test_lanes_past_the_budget_run_in_several_calls_with_the_same_results(monkey
     monkeypatch.setattr(jax_icp, "_pad", lambda ids: sizes.append(len(real_pad(ids))) or real_pad(ids))
     split = icp_batch(preds, target, r0, t0, max_iters=30, tol=1e-9)
     assert max(sizes) == 8 and len(sizes) > 6  # 6 calls for the starts alone
-    for a, b in zip(whole, split):
+    for a, b in zip(whole, split, strict=True):
         assert np.allclose(a, b, rtol=1e-12, atol=1e-15)  # (other shapes compile to other roundings)
 
 
@@ -149,7 +149,7 @@ def test_a_call_holds_memory_in_proportion_to_its_lanes_points(monkeypatch):
     target_leaves, part_leaves = index.part_leaves(geom.divisor)
     target = index.target
     init, round_ = jax_icp._compiled_round.__wrapped__(100, 1e-9, 8, True)
-    dev = lambda a: jnp.asarray(a)  # noqa: E731
+    dev = jnp.asarray
     common = (
         dev(target[None]),
         dev(target),

@@ -7,10 +7,11 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from aw.meshes import simplify_for_display
 from aw.pose import apply_pose, matrix_to_quat
 from aw_eval.analyses.curves import normalized_states, normalized_values
 from aw_eval.report.fmt import md_table
-from aw_eval.report.html.cards import RunView, _cluster, registration_hint
+from aw_eval.report.html.cards import RunView, registration_hint
 from aw_eval.report.html.markup import markdown_to_html, sort_value
 from aw_eval.report.html.scenes import TaskScene, aligned_poses
 from aw_eval.study.model import RunScore
@@ -33,6 +34,9 @@ def test_markdown_tables_become_sortable_with_the_same_cells():
     names = markdown_to_html(md_table(["System", "SR"], [["oracle-noise0.5", "1"], ["heuristic", "2"]]))
     assert '<td class="l">oracle-noise0.5</td>' in names and '<td class="l">heuristic</td>' in names
     assert '<div class="tablewrap"><table class="sortable">' in names  # wide tables scroll inside their box
+    # a system named after a run directory may hold a "|": it stays one cell, the row keeps its width
+    piped = markdown_to_html(md_table(["System", "SR"], [["a|b", "1"]]))
+    assert '<td class="l">a|b</td><td class="r" data-v="1">1</td></tr>' in piped
     assert "<ul><li><strong>missing</strong> (1):<ul><li>a / t1: no run</li></ul></li><li>next</li></ul>" in out
     assert '<img src="plots/q.png" alt="quality" loading="lazy">' in out
     assert markdown_to_html("a <b> & c") == "<p>a &lt;b&gt; &amp; c</p>"
@@ -114,10 +118,10 @@ def test_renders_are_named_by_content_and_reused(tmp_path):
 
 def test_viewer_meshes_are_decimated_below_the_cap():
     m = trimesh.creation.icosphere(subdivisions=5)  # 20,480 faces
-    v, f = _cluster(np.asarray(m.vertices), np.asarray(m.faces), 1500)
+    v, f = simplify_for_display(np.asarray(m.vertices), np.asarray(m.faces), 1500)
     assert 100 < len(f) <= 1500 and f.max() < len(v)
     small = trimesh.creation.box()
-    v2, f2 = _cluster(np.asarray(small.vertices), np.asarray(small.faces), 1500)
+    v2, f2 = simplify_for_display(np.asarray(small.vertices), np.asarray(small.faces), 1500)
     assert len(f2) == len(small.faces)
 
 

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 from aw.cli.common import CliError, UsageError, plural, positive_float, positive_int
+from aw.formats.run import system_label_problem
 
 __all__ = ["add_refiner_arguments", "run_refiner_command"]
 
@@ -116,6 +117,7 @@ def run_refiner_command(args: argparse.Namespace, agent_config) -> int:
         steps=args.refiner_steps,
         options=dict(args.refiner_option),
         overwrite=args.overwrite,
+        keep_failed=args.keep_failed,
         jobs=args.jobs,
         progress=not args.no_progress,
     )
@@ -124,18 +126,22 @@ def run_refiner_command(args: argparse.Namespace, agent_config) -> int:
             raise UsageError("--refinement-study needs --agent NAME (or --harness) and --refiner/--refiner-command")
         if args.initial_poses is not None:
             raise UsageError("--refinement-study starts from the tasks' layouts; drop --initial-poses")
-        from aw.refine.study import run_study
+        from aw.runner.refinement_study import run_study
 
         agent_cfg = agent_config()  # --system labels the agent's arm; the refiner's is its name
         cfg.system = spec.name
+        problem = system_label_problem(spec.name)
+        if problem:
+            raise UsageError(f"the refiner's name labels its arms, but {problem}: give --refiner NAME with the command")
         arms = run_study(agent_cfg, cfg, ids, log=lambda m: print(f"aw-run: {m}", file=sys.stderr, flush=True))
         for a in arms:
             note = (
-                f" ({len(a.failed)} of {a.tasks} tasks failed, first: {next(iter(a.failed.values()))})"
+                f" ({len(a.failed)} of {plural(a.tasks, 'task')} failed, first: {next(iter(a.failed.values()))})"
                 if a.failed
                 else ""
             )
-            print(f"{a.arm}: {a.system} {a.status}{note}")
+            unchanged = a.unchanged_note()
+            print(f"{a.arm}: {a.system} {a.status}{note}" + (f"; {unchanged}" if unchanged else ""))
         print(f"runs: {args.out}; study: {os.path.join(str(args.out), 'refinement_study.json')}")
         bad = [a.arm for a in arms if a.status != "ok"]
         if bad:
@@ -147,19 +153,27 @@ def run_refiner_command(args: argparse.Namespace, agent_config) -> int:
             "(or run the agent with --initial-poses RUNS/<refiner>)"
         )
     cfg.system = args.system or spec.name
+    problem = system_label_problem(cfg.system)
+    if problem:
+        raise UsageError(f"--system {problem} (the refiner's name is the default label: give --system)")
     cfg.start_from = Path(args.initial_poses) if args.initial_poses is not None else None
     try:
-        infos, skipped = refine_suite(cfg)
+        infos, existing = refine_suite(cfg, log=lambda m: print(f"aw-run: {m}", file=sys.stderr, flush=True))
     except RefinerError as exc:
         raise UsageError(str(exc)) from None
     failed = [i for i in infos if i.ended != "finished"]
+    n_unchanged = sum(1 for i in infos if i.extra.get("returned_start"))
     print(
-        f"{cfg.system}: {plural(len(infos), 'task')} refined, {len(failed)} failed"
-        + (f"; skipped {len(skipped)} with an existing run.json" if skipped else "")
+        f"{cfg.system}: {len(infos) - len(failed)} of {plural(len(infos), 'task')} refined"
+        + (f" ({n_unchanged} returned {'its' if n_unchanged == 1 else 'their'} start unchanged)" if n_unchanged else "")
+        + f", {len(failed)} failed"
+        + (f"; {existing.kept_line()}" if existing.kept else "")
     )
     print(f"runs: {os.path.join(str(args.out), cfg.system)}")
     for i in failed:
         print(f"  {i.task_id}: {(i.error or '').splitlines()[0] if i.error else i.ended}")
+    for tid, why in existing.kept_failed.items():
+        print(f"  {tid}: kept (--keep-failed); it failed: {why}")
     if infos and len(failed) == len(infos):
         raise CliError(f"the refiner failed on every task (first: {failed[0].error})")
     return 0

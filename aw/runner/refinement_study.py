@@ -20,17 +20,20 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from aw.cli.common import plural
 from aw.formats.io import write_json_atomic
+from aw.formats.run import RunInfo
 
 if TYPE_CHECKING:  # the runner is imported when a study runs, not when aw-score reads one
     from aw.refine.runs import RefineConfig
     from aw.runner.batch import BatchConfig
 
-__all__ = ["ARMS", "STUDY_FILE", "StudyArm", "arm_systems", "run_study"]
+__all__ = ["ARMS", "REFINER_ARMS", "STUDY_FILE", "StudyArm", "arm_systems", "run_study"]
 
 STUDY_FILE = "refinement_study.json"
 STUDY_FORMAT = "assemblyworld.refinement-study"
 ARMS = ("agent", "refiner", "agent_refiner", "refiner_agent")
+REFINER_ARMS = ("refiner", "agent_refiner")  # the arms whose last stage is the refiner
 
 
 def arm_systems(agent_label: str, refiner_label: str) -> dict[str, str]:
@@ -49,6 +52,8 @@ class StudyArm:
     system: str
     tasks: int = 0
     failed: dict[str, str] = field(default_factory=dict)  # task id -> one-line reason
+    refined: list[str] = field(default_factory=list)  # refiner arms: tasks the refiner answered
+    returned_start: list[str] = field(default_factory=list)  # ... with its start unchanged
 
     @property
     def status(self) -> str:
@@ -56,14 +61,34 @@ class StudyArm:
             return "ok"
         return "failed" if len(self.failed) >= self.tasks else "partial"
 
+    def note_refined(self, info: RunInfo) -> None:
+        """Count a finished refiner run, and whether it returned its start (run.json
+        ``extra.returned_start``)."""
+        self.refined.append(info.task_id)
+        if info.extra.get("returned_start"):
+            self.returned_start.append(info.task_id)
+
+    def unchanged_note(self) -> str:
+        """``"returned its start unchanged on 7 of 20 tasks"`` (refiner arms), else ``""``."""
+        if self.arm not in REFINER_ARMS or not self.refined:
+            return ""
+        return f"returned its start unchanged on {len(self.returned_start)} of {plural(len(self.refined), 'task')}"
+
     def doc(self) -> dict[str, Any]:
-        return {
+        out: dict[str, Any] = {
             "arm": self.arm,
             "system": self.system,
             "status": self.status,
             "tasks": self.tasks,
             "failed_tasks": dict(sorted(self.failed.items())),
         }
+        if self.arm in REFINER_ARMS:
+            out["returned_start"] = {
+                "count": len(self.returned_start),
+                "refined": len(self.refined),
+                "tasks": sorted(self.returned_start),
+            }
+        return out
 
 
 def _first_line(text: str | None) -> str:
@@ -87,7 +112,7 @@ def run_study(
             return
         cfg = dataclasses.replace(agent_cfg, system=arm.system, tasks=tasks, initial_poses=start_from)
         log(f"arm {arm.arm}: {cfg.agent or cfg.harness} on {len(tasks)} tasks -> {out / arm.system}")
-        result = run_batch(cfg)
+        result = run_batch(cfg, log=lambda m: log(f"arm {arm.arm}: {m}"))
         for info in result.runs:
             if info.ended != "finished":
                 arm.failed[info.task_id] = f"{info.ended}: {_first_line(info.error)}"
@@ -98,23 +123,26 @@ def run_study(
             return
         cfg = dataclasses.replace(refine_cfg, system=arm.system, tasks=tasks, start_from=start_from)
         log(f"arm {arm.arm}: refiner {cfg.spec.name} on {len(tasks)} tasks -> {out / arm.system}")
-        infos, skipped = refine_suite(cfg)
+        infos, existing = refine_suite(cfg, log=lambda m: log(f"arm {arm.arm}: {m}"))
         for info in infos:
             if info.ended != "finished":
                 arm.failed[info.task_id] = _first_line(info.error)
-        _note_skipped(arm, out, skipped)
+            else:
+                arm.note_refined(info)
+        _note_skipped(arm, out, existing.kept)
 
     agent_arm(arms["agent"], task_ids, None)
     refiner_arm(arms["refiner"], task_ids, None)
-    # a composed arm runs where its first stage produced a state; elsewhere it fails, by name
-    for first, arm, run in (("agent", "agent_refiner", refiner_arm), ("refiner", "refiner_agent", agent_arm)):
-        # an agent run that ended early still has a final state; a failed refiner run has none of its own
-        def has_start(t: str) -> bool:
-            if first == "refiner":
-                return t not in arms[first].failed
-            return (out / systems[first] / t / "final.json").is_file()
 
-        ok = [t for t in task_ids if has_start(t)]
+    # a composed arm runs where its first stage produced a state; elsewhere it fails, by name
+    def has_start(first: str, t: str) -> bool:
+        # an agent run that ended early still has a final state; a failed refiner run has none of its own
+        if first == "refiner":
+            return t not in arms[first].failed
+        return (out / systems[first] / t / "final.json").is_file()
+
+    for first, arm, run in (("agent", "agent_refiner", refiner_arm), ("refiner", "refiner_agent", agent_arm)):
+        ok = [t for t in task_ids if has_start(first, t)]
         for t in task_ids:
             if t not in ok:
                 arms[arm].failed[t] = f"no start state: arm {first} failed on this task"
@@ -135,6 +163,8 @@ def _note_skipped(arm: StudyArm, out: Path, skipped: list[str]) -> None:
             continue
         if info.ended != "finished":
             arm.failed[tid] = f"{info.ended}: {_first_line(info.error)}"
+        elif arm.arm in REFINER_ARMS:
+            arm.note_refined(info)
 
 
 def write_study(

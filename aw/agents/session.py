@@ -20,6 +20,8 @@ from typing import Any
 from mcp import Client
 from mcp.shared.exceptions import MCPError
 
+from aw.formats.strict_json import parse_json
+
 REQUEST_TIMEOUT_CODE = -32001
 
 
@@ -110,7 +112,7 @@ class ToolSession:
         data = res.structured_content
         if data is None and text:
             try:
-                data = json.loads(text)
+                data = parse_json(text)
             except ValueError:
                 data = None
         # MCPServer wraps non-object return values as {"result": value}.
