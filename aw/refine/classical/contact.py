@@ -70,7 +70,8 @@ def relative(to: Pose, frm: Pose) -> Pose:
 def _touching(src: Cloud, dst: Cloud, tol: Tolerance, move: Pose) -> np.ndarray:
     """Mask ``(n,)`` of ``src``'s samples (moved into ``dst``'s frame by ``move``) in contact with ``dst``."""
     points, normals = src.points @ move[0].T + move[1], src.normals @ move[0].T
-    d, j = dst.tree.query(points, distance_upper_bound=tol.eps)
+    d, found = dst.tree.query(points, distance_upper_bound=tol.eps)
+    j = np.asarray(found)  # (n,) rows; a miss is len(dst.points), where d is inf
     hit = np.isfinite(d)
     k = j[hit]
     near = dst.points[k]

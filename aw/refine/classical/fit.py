@@ -73,7 +73,8 @@ def contact_icp(
     for _ in range(iterations):
         p = src.points @ rot.T + shift
         n = src.normals @ rot.T
-        d, j = dst.tree.query(p, distance_upper_bound=radius)
+        d, found = dst.tree.query(p, distance_upper_bound=radius)
+        j = np.asarray(found)  # (k,) rows; a miss is len(dst.points), where d is inf
         ok = np.isfinite(d)
         ok[ok] &= np.einsum("ij,ij->i", n[ok], dst.normals[j[ok]]) < OPPOSED
         if ok.sum() < 12:
@@ -161,7 +162,8 @@ def _icp_2d(src: np.ndarray, dst: np.ndarray, angle: float, shift: np.ndarray, r
     tree = cKDTree(dst)
     for _ in range(ICP_ITERATIONS):
         moved = src @ _rot2(angle) + shift
-        d, j = tree.query(moved, distance_upper_bound=radius)
+        d, found = tree.query(moved, distance_upper_bound=radius)
+        j = np.asarray(found)
         ok = np.isfinite(d)
         if ok.sum() < 6:
             break

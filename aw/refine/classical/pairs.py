@@ -116,7 +116,8 @@ def _outline_fit(ra: Region, rb: Region, rot: np.ndarray, shift: np.ndarray, tol
     small, small_walls, big, big_walls = (ra.outline, ra.rim_normals, moved, rb.rim_normals @ rot.T)
     if rb.area < ra.area:
         small, small_walls, big, big_walls = big, big_walls, small, small_walls
-    d, j = cKDTree(big).query(small)
+    dist, found = cKDTree(big).query(small)
+    d, j = np.asarray(dist), np.asarray(found)
     on = d < OUTLINE_SHARE * tol.eps * 2
     if not on.any():
         return 0.0
@@ -157,7 +158,8 @@ def register_pair(a: Fragment, b: Fragment, partial: bool = False) -> list[Fit]:
     tol = tolerance(a, b)
     size = max(a.size, b.size)
     found: list[tuple[float, int, int, int, np.ndarray, np.ndarray]] = []
-    planar, rough = [], []
+    planar: list[tuple[float, int, int]] = []  # (mismatch, region of a, region of b)
+    rough: list[tuple[float, int, int]] = []
     for ia, ra in enumerate(a.regions):
         for ib, rb in enumerate(b.regions):
             mismatch = _mismatch(ra, rb, size, partial)

@@ -224,7 +224,7 @@ def _planar_parts(mesh: trimesh.Trimesh, normals: np.ndarray, faces: np.ndarray,
 
 def _noise(body: Cloud, k: int = 12) -> float:
     """Median distance of a sample from the plane through its ``k`` nearest neighbours."""
-    _, idx = body.tree.query(body.points, k=k + 1)
+    idx = np.asarray(body.tree.query(body.points, k=k + 1)[1])  # (n, k + 1)
     nb = body.points[idx[:, 1:]]
     centred = nb - nb.mean(axis=1, keepdims=True)
     normal = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))[1][:, :, 0]
@@ -244,7 +244,7 @@ def fragment(vertices: np.ndarray, faces: np.ndarray, size: float, rng: np.rando
             break
         parts += [f, *_planar_parts(mesh, normals, f, PLANAR_RMS * size + 3.0 * noise)]
     parts.sort(key=lambda f: -mesh.area_faces[f].sum())
-    regions = []
+    regions: list[Region] = []
     for f in parts:
         area = float(mesh.area_faces[f].sum())
         if area < MIN_REGION_SHARE * mesh.area or len(regions) == MAX_REGIONS:

@@ -91,7 +91,9 @@ def solid(shape: str, rng: np.random.Generator, dense: bool) -> trimesh.Trimesh:
         rings = 12 if dense else 2
         z = np.linspace(-size / 2, size / 2, rings)
         taper = np.linspace(1.0, rng.uniform(0.5, 0.7), rings)
-        mesh = trimesh.Trimesh(np.vstack([np.column_stack([ring * s, np.full(sides, h)]) for s, h in zip(taper, z, strict=True)]))
+        mesh = trimesh.Trimesh(
+            np.vstack([np.column_stack([ring * s, np.full(sides, h)]) for s, h in zip(taper, z, strict=True)])
+        )
         mesh = mesh.convex_hull
     else:
         raise ValueError(f"unknown solid {shape!r}; choose from {', '.join(CUT_SHAPES)}")
@@ -238,7 +240,7 @@ def shared_faces(meshes: list[trimesh.Trimesh]) -> list[Piece]:
     out = []
     for i, mesh in enumerate(meshes):
         others = np.vstack([m.vertices for j, m in enumerate(meshes) if j != i])
-        shared = cKDTree(others).query(mesh.vertices)[0] < 1e-9 * size
+        shared = np.asarray(cKDTree(others).query(mesh.vertices)[0]) < 1e-9 * size
         out.append(Piece(mesh, shared[np.asarray(mesh.faces)].all(axis=1)))
     return out
 
@@ -282,7 +284,7 @@ def erode(pieces: list[Piece], rng: np.random.Generator, size: float, chips: int
     for mesh, rim in zip(out, rims, strict=True):
         mesh = _subdivided(mesh, size)
         if len(rim):
-            near = cKDTree(rim).query(mesh.vertices)[0] < 0.03 * size
+            near = np.asarray(cKDTree(rim).query(mesh.vertices)[0]) < 0.03 * size
             smooth = mesh.copy()
             trimesh.smoothing.filter_taubin(smooth, iterations=10)
             mesh = trimesh.Trimesh(np.where(near[:, None], smooth.vertices, mesh.vertices), mesh.faces, process=False)
