@@ -8,13 +8,15 @@ per-evaluation means over the records that exist.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
+from aw_eval.stats.design import Design
 from aw_eval.study.table import Study
 
-__all__ = ["quality", "resources", "outcomes", "cell_label"]
+__all__ = ["quality", "overall", "resources", "outcomes", "cell_label"]
 
 _SHORT_SOURCE = {"partnet": "PartNet", "ikea_manual": "IKEA", "assemblybench": "AB", "fantastic_breaks": "FB"}
 _SHORT_COND = {"none": "NR", "image": "IR", "manual": "M"}
@@ -32,6 +34,27 @@ def _nanmean_rows(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
     tot = w.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(tot > 0, np.nansum(np.where(ok, values, 0.0) * w, axis=1) / np.where(tot > 0, tot, 1), np.nan)
+
+
+def _cell_scd(d: Design, scd: np.ndarray) -> np.ndarray:
+    """``(C,)`` mean SCD x1000 of each cell over its scored tasks (``scd: (T,)``, NaN unscored)."""
+    return np.array(
+        [
+            1000 * float(_nanmean_rows(scd[None, d.task_cell == ci], d.task_weight[d.task_cell == ci])[0])
+            for ci in range(len(d.cells))
+        ]
+    )
+
+
+def overall(d: Design, vals: Mapping[str, np.ndarray]) -> dict[str, float]:
+    """Overall (eq. 3) of one system from its per-task values ``vals["pa"|"sr"|"sra"|"scd"]: (T,)``
+    (fractions, 0/1, raw SCD with NaN where unscored): PA, SR, SR^a in percent over all tasks
+    (unscored count 0), SCD x1000 by eq. 3 over the cell means of scored tasks (cells without any
+    are dropped)."""
+    out = {m: 100 * float(d.weights @ np.nan_to_num(vals[m], nan=0.0)) for m in ("pa", "sr", "sra")}
+    cell_w = np.array([d.weights[d.task_cell == ci].sum() for ci in range(len(d.cells))])
+    out["scd"] = float(_nanmean_rows(_cell_scd(d, vals["scd"])[None], cell_w)[0])
+    return out
 
 
 def quality(study: Study) -> dict[str, Any]:
@@ -56,25 +79,20 @@ def quality(study: Study) -> dict[str, Any]:
     }
     for si, name in enumerate(study.systems):
         row: dict[str, Any] = {"cells": [], "sources": {}, "overall": {}}
+        cell_scd = _cell_scd(d, vals["scd"][si])
         for ci in range(len(d.cells)):
-            members = d.task_cell == ci
-            scd = vals["scd"][si, members]
             row["cells"].append(
                 {
                     "pa": 100 * float(cw[ci] @ vals["pa"][si]),
                     "sr": 100 * float(cw[ci] @ vals["sr"][si]),
                     "sra": 100 * float(cw[ci] @ vals["sra"][si]),
-                    "scd": 1000 * float(_nanmean_rows(scd[None], d.task_weight[members])[0]),
-                    "n_scored": int(np.sum(~np.isnan(scd))),
+                    "scd": float(cell_scd[ci]),
+                    "n_scored": int(np.sum(~np.isnan(vals["scd"][si, d.task_cell == ci]))),
                 }
             )
         for k, src in enumerate(d.sources):
             row["sources"][src] = {m: 100 * float(sw[k] @ vals[m][si]) for m in ("pa", "sr", "sra")}
-        row["overall"] = {m: 100 * float(d.weights @ vals[m][si]) for m in ("pa", "sr", "sra")}
-        # SCD Overall: eq. 3 over the cell means of scored attempts (cells without any are dropped)
-        cell_scd = np.array([c["scd"] for c in row["cells"]])
-        cell_w = np.array([d.weights[d.task_cell == ci].sum() for ci in range(len(d.cells))])
-        row["overall"]["scd"] = float(_nanmean_rows(cell_scd[None], cell_w)[0])
+        row["overall"] = overall(d, {m: v[si] for m, v in vals.items()})
         row["n_scored"] = int(np.sum(~np.isnan(vals["scd"][si])))
         row["n_tasks"] = d.n_tasks
         out["systems"][name] = row
@@ -84,6 +102,7 @@ def quality(study: Study) -> dict[str, Any]:
 def _resource_values(study: Study, system: str) -> dict[str, list[float]]:
     cols: dict[str, list[float]] = {"time_min": [], "mcp_calls": [], "tokens_m": [], "cost_usd": []}
     src: dict[str, list[str]] = {"time_min": [], "mcp_calls": []}
+    refused: list[int] = []  # calls a harness refused before they reached aw-serve (run.json extra)
     for tid in study.original_ids:
         rec = study.record(system, tid)
         info, sc = rec.info, rec.score
@@ -107,7 +126,10 @@ def _resource_values(study: Study, system: str) -> dict[str, list[float]]:
                 cols["tokens_m"].append(tok / 1e6)
         if info is not None and info.cost_usd is not None:
             cols["cost_usd"].append(info.cost_usd)
+        if info is not None and isinstance(info.extra.get("refused_calls"), int):
+            refused.append(info.extra["refused_calls"])
     cols["_sources"] = src  # type: ignore[assignment]
+    cols["_refused"] = refused  # type: ignore[assignment]
     return cols
 
 
@@ -117,17 +139,21 @@ def resources(study: Study) -> dict[str, Any]:
 
     Time and calls come from ``run.json`` (``wall_seconds``, ``mcp_calls``) and fall back to the
     trajectory (time of the end record or last call; number of recorded calls) when run.json
-    lacks them; tokens and cost only from run.json.
+    lacks them; tokens and cost only from run.json. ``mcp_calls.refused_by_harness`` sums the
+    calls that run.json says the harness refused before they reached aw-serve (Inspect checks
+    arguments itself; they are part of ``mcp_calls``), over the runs that say it.
     """
     out = {}
     for s in study.systems:
         cols = _resource_values(study, s)
         srcs = cols.pop("_sources")
+        refused = cols.pop("_refused")
         row = {}
         for k, v in cols.items():
             row[k] = {"mean": float(np.mean(v)) if v else None, "n": len(v)}
         for k, v in srcs.items():
             row[k]["from_trajectory"] = int(sum(1 for x in v if x == "trajectory"))
+        row["mcp_calls"]["refused_by_harness"] = {"total": int(sum(refused)), "n": len(refused)}
         out[s] = row
     return out
 
