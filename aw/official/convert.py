@@ -8,6 +8,7 @@
     SUITE/eval_points/<task_id>.npz     the official evaluation points (1000 per part)
     SUITE/official/<task_id>.episode.zip  the sample's initial episode archive (its world), so
                                         runs recorded on the task export to official archives
+    SUITE/official/package.json         the package's identity: the SHA-256 of its benchmark.json
     RUNS/<system>/<task_id>/trajectory.jsonl, final.json, run.json
 
 The converted suite is for scoring: it has no ``tasks/`` folder (the package holds points, not
@@ -50,11 +51,20 @@ from aw.official.episode import PartEpisode, read_part_episode
 from aw.official.eval_points import eval_points_path, write_eval_inputs
 from aw.official.ids import sample_id_from_slug, task_id_for_sample
 from aw.official.jsonio import read_json_object
-from aw.official.package import REFERENCE_CONDITIONS, OfficialPackage
+from aw.official.package import (
+    BENCHMARK_SHA256,
+    EXPECTED_SAMPLES,
+    REFERENCE_CONDITIONS,
+    REPO,
+    OfficialPackage,
+    file_sha256,
+)
 from aw.runlock import RunDirBusy, RunDirLock
 
 __all__ = [
     "initial_archive_path",
+    "package_record_path",
+    "official_benchmark_problem",
     "convert_package",
     "project_camera",
     "end_reason",
@@ -72,6 +82,43 @@ _EXTRA_STATE = "state"  # tool name of a state a call recorded beyond its first
 
 def initial_archive_path(suite_dir: str | Path, task_id: str) -> Path:
     return Path(suite_dir) / "official" / f"{task_id}.episode.zip"
+
+
+def package_record_path(suite_dir: str | Path) -> Path:
+    return Path(suite_dir) / "official" / "package.json"
+
+
+def _write_package_record(pkg: OfficialPackage, out: Path, n_samples: int) -> None:
+    record = {
+        "format": "assemblyworld.official_package",
+        "repo": REPO,
+        "benchmark_sha256": file_sha256(pkg.root / "benchmark.json"),
+        "samples": n_samples,
+    }
+    package_record_path(out).write_bytes(orjson.dumps(record, option=orjson.OPT_INDENT_2) + b"\n")
+
+
+def official_benchmark_problem(suite_dir: str | Path) -> str | None:
+    """None when ``suite_dir`` is the official benchmark: converted (``aw-prepare official``) from
+    the package whose ``benchmark.json`` has the SHA-256 the official loader pins
+    (:data:`aw.official.package.BENCHMARK_SHA256`), with all of its 100 samples; else why not, in
+    a phrase."""
+    path = package_record_path(suite_dir)
+    if not path.is_file():
+        return "it was not converted from the official benchmark package (aw-prepare official PKG)"
+    try:
+        record = orjson.loads(path.read_bytes())
+        digest, n = record["benchmark_sha256"], int(record["samples"])
+    except (OSError, ValueError, TypeError, KeyError):
+        return f"{path} is unreadable"
+    if digest != BENCHMARK_SHA256:
+        return (
+            f"its package's benchmark.json (SHA-256 {str(digest)[:12]}...) is not the official benchmark's "
+            f"({BENCHMARK_SHA256[:12]}...)"
+        )
+    if n != EXPECTED_SAMPLES:
+        return f"it holds {n} of the official benchmark's {EXPECTED_SAMPLES} tasks"
+    return None
 
 
 _SUITE_ITEMS = ("targets", "eval_points", "official", "tasks", "manifest.json")  # manifest.json last: it makes a suite
@@ -109,7 +156,8 @@ def _write_suite(pkg: OfficialPackage, out: Path, chosen: list[tuple[str, str]])
         targets = Targets(
             task_id=tid,
             parts={
-                p: PartTarget(pose=[float(x) for x in pose]) for p, pose in zip(inputs.part_ids, inputs.target_poses)
+                p: PartTarget(pose=[float(x) for x in pose])
+                for p, pose in zip(inputs.part_ids, inputs.target_poses, strict=True)
             },
             equivalence_hint=hint,
             scale=1.0,
@@ -128,6 +176,7 @@ def _write_suite(pkg: OfficialPackage, out: Path, chosen: list[tuple[str, str]])
             )
         )
     manifest = SuiteManifest(name=f"official-{pkg.root.name}", generator="aw.official", tasks=entries)
+    _write_package_record(pkg, out, len(entries))
     write_manifest(out, manifest)
     return manifest
 
@@ -170,7 +219,7 @@ def convert_package(
 
 
 def _pose_dict(part_ids: list[str], poses: np.ndarray) -> dict[str, list[float]]:
-    return {p: [float(x) for x in pose] for p, pose in zip(part_ids, poses)}
+    return {p: [float(x) for x in pose] for p, pose in zip(part_ids, poses, strict=True)}
 
 
 def project_camera(camera: dict[str, list[float]]) -> CameraState | None:
@@ -235,7 +284,7 @@ def episode_records(ep: PartEpisode, task_id: str, system: str):
             }
             if index is not None:
                 prev, cur = poses[shown], poses[index]
-                rec["changed"] = [p for p, a, b in zip(ids, cur, prev) if not np.array_equal(a, b)]
+                rec["changed"] = [p for p, a, b in zip(ids, cur, prev, strict=True) if not np.array_equal(a, b)]
                 rec["poses"] = _pose_dict(ids, cur)
                 cam = arc.state(index).record["camera"]
                 if cam != arc.state(shown).record["camera"]:
@@ -461,7 +510,7 @@ def convert(
     staged_suite, staged_runs = staging_dir(suite, "aw-staging"), staging_dir(runs_root, "aw-staging")
     try:
         manifest = _write_suite(pkg, staged_suite, chosen)
-        for (name, block, sid, arc, extra), run_dir in zip(items, targets):
+        for (name, block, sid, arc, extra), run_dir in zip(items, targets, strict=True):
             inputs = pkg.evaluation_inputs(block, sid)
             ep = read_part_episode(arc, pkg.initial_archive(block, sid), inputs.part_ids)
             _write_run_files(ep, staged_runs / run_dir.relative_to(runs_root), system or name, run_dir.name, extra)
