@@ -12,6 +12,7 @@ from typing import Any
 from aw.cli.common import plural
 from aw_eval.analyses.failures import CLASSES
 from aw_eval.report.fmt import DASH, bold_best, ci, fixed, md_table, paper, pval, signed, threshold_label
+from aw_eval.report.published import MARK as PUBLISHED_MARK
 from aw_eval.report.results import protocol_of
 
 __all__ = ["render_markdown", "system_label", "SUMMARY_SECTIONS"]
@@ -157,6 +158,13 @@ def _resource_note(doc: dict[str, Any], systems: list[str]) -> str:
     out = ([f"Not recorded: {', '.join(none)}."] if none else []) + (
         [f"Means over fewer runs: {'; '.join(fewer)}."] if fewer else []
     )
+    refused = [(s, res[s]["mcp_calls"].get("refused_by_harness", {})) for s in systems]
+    said = [f"{s} {r['total']} in {plural(r['n'], 'run')}" for s, r in refused if r.get("n")]
+    if said:
+        out.append(
+            "MCP calls include the calls the harness refused before they reached aw-serve (Inspect checks "
+            f"arguments against the tools' schemas itself; Claude Code and Codex pass them on): {'; '.join(said)}."
+        )
     return " ".join(out)
 
 
@@ -181,7 +189,7 @@ def _table1(doc: dict[str, Any]) -> str:
     # Only real systems compete; lowest resource use is only "best" for a system that achieved
     # something (an idle system's few calls are not an achievement).
     real = [_role(doc, s) == "system" for s in systems]
-    achieved = [r and float(q["systems"][s]["overall"]["pa"] or 0) > 0 for r, s in zip(real, systems)]
+    achieved = [r and float(q["systems"][s]["overall"]["pa"] or 0) > 0 for r, s in zip(real, systems, strict=True)]
     text_cols = []
     for j, col in enumerate(cols):
         if j <= len(cells):
@@ -193,12 +201,62 @@ def _table1(doc: dict[str, Any]) -> str:
             txt = [fixed(v, digits) for v in col]
             text_cols.append(bold_best(txt, col, higher=False, eligible=achieved))
     rows = [[system_label(doc, s)] + [tc[i] for tc in text_cols] for i, s in enumerate(systems)]
+    rows += _published_table1(doc)
     note = (
         "SR (%) per source and condition (NR: no reference, IR: image, M: manual); Overall by eq. 3 (sources "
         "weighted equally). Resources: mean per run. Bold: best among real systems."
     )
     extra = _resource_note(doc, systems)
-    return md_table(header, rows) + "\n\n" + note + (f" {extra}" if extra else "")
+    return md_table(header, rows) + "\n\n" + note + (f" {extra}" if extra else "") + "\n\n" + _published_note(doc)
+
+
+def _published(doc: dict[str, Any]) -> list[dict[str, Any]]:
+    pub = doc.get("published") or {}
+    return pub.get("systems", []) if pub.get("shown") else []
+
+
+def _published_label(row: dict[str, Any]) -> str:
+    return f"{row['system']} ({row['harness']}; {PUBLISHED_MARK})"
+
+
+def _published_table1(doc: dict[str, Any]) -> list[list[str]]:
+    """The paper's Table 1 rows in this table's columns (a cell the paper does not have: a dash)."""
+    pub = doc.get("published") or {}
+    where = {tuple(c): i for i, c in enumerate(pub.get("cells", []))}
+    rows = []
+    for r in _published(doc):
+        cells = [
+            r["sr_cells"][where[k]] if (k := (c["source"], c["condition"])) in where else None
+            for c in doc["quality"]["cells"]
+        ]
+        rows.append(
+            [_published_label(r)]
+            + [paper(v) for v in cells]
+            + [
+                paper(r["sr"]),
+                fixed(r["time_min"], 2),
+                fixed(r["mcp_calls"], 0),
+                fixed(r["tokens_m"], 2),
+                fixed(r["cost_usd"], 2),
+            ]
+        )
+    return rows
+
+
+def _published_note(doc: dict[str, Any]) -> str:
+    """One line: where the published rows come from, or why they are absent."""
+    pub = doc.get("published")
+    if not pub:
+        return "The paper's eight systems are not shown: this scores.json predates them."
+    if pub["shown"]:
+        return (
+            f"Rows marked '{PUBLISHED_MARK}': the paper's eight systems on the same 100 tasks, as published "
+            f"({pub['source']}); no per-task data is published, so they are in no paired test and never bold."
+        )
+    return (
+        "The paper's eight systems are not shown: they are published for the official benchmark's 100 tasks only, "
+        f"and this suite is not it: {pub['why']}."
+    )
 
 
 def _quality_full(doc: dict[str, Any]) -> str:
@@ -209,7 +267,7 @@ def _quality_full(doc: dict[str, Any]) -> str:
     for s in _order(doc):
         row = q["systems"][s]
         rows = []
-        for c, v in zip(q["cells"], row["cells"]):
+        for c, v in zip(q["cells"], row["cells"], strict=True):
             rows.append(
                 [
                     c["label"],
@@ -262,6 +320,10 @@ def _overview(doc: dict[str, Any]) -> str:
                 str(oc[s]["errors_timeouts"]),
             ]
         )
+    rows += [
+        [_published_label(r), paper(r["sr"]), ci(r["sr_ci"]), paper(r["pa"]), ci(r["pa_ci"]), str(r["errors_timeouts"])]
+        for r in _published(doc)
+    ]
     return (
         md_table(["System", "SR (%)", "95% CI", "PA (%)", "95% CI", "Errors/timeouts"], rows)
         + f"\n\nSource-weighted quality with pointwise percentile bootstrap intervals ({u['n_draws']:,} draws, seed "
@@ -522,7 +584,7 @@ def _curves(doc: dict[str, Any]) -> str:
             continue
         rows.append(
             [system_label(doc, s)]
-            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["normalized"], v["sr"]["normalized"])]
+            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["normalized"], v["sr"]["normalized"], strict=True)]
         )
     t1 = md_table(["System"] + [f"PA/SR (%) at {p:g}" for p in pts], rows)
     rows = []
@@ -532,7 +594,7 @@ def _curves(doc: dict[str, Any]) -> str:
             continue
         rows.append(
             [system_label(doc, s)]
-            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["budget"], v["sr"]["budget"])]
+            + [f"{paper(a)}/{paper(b)}" for a, b in zip(v["pa"]["budget"], v["sr"]["budget"], strict=True)]
             + [f"{paper(v['pa']['final'])}/{paper(v['sr']['final'])}", str(v["edits_after_last_budget"])]
         )
     t2 = md_table(

@@ -11,6 +11,7 @@ import numpy as np
 
 from aw_eval import analyses
 from aw_eval.analyses.failures import CLASSES, classify_parts
+from aw_eval.report.published import published_section
 from aw_eval.settings import ProtocolSettings
 from aw_eval.study.table import Study
 
@@ -169,5 +170,6 @@ def build_results(
         "categories": analyses.category_results(study),
         "completion": analyses.completion_reports(study),
         "robustness": analyses.robustness(study),
+        "published": published_section(suite_dir),
     }
     return doc
