@@ -1,6 +1,6 @@
-"""The import graph of aw, aw_eval and aw_server, read from the source (ast): no cycles, and no
-import from a lower layer into a higher one (aw is beneath aw_eval and aw_server; aw_eval's
-kernels are beneath its protocol modules). Imports inside functions count: a lazy import is
+"""The import graph of aw, aw_eval, aw_server and assemblyworld, read from the source (ast): no
+cycles, and no import from a lower layer into a higher one (aw is beneath aw_eval and aw_server;
+aw_eval's kernels are beneath its protocol modules; the Inspect task, assemblyworld, is on top). Imports inside functions count: a lazy import is
 still a dependency."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("aw", "aw_eval", "aw_server")
+PACKAGES = ("aw", "aw_eval", "aw_server", "assemblyworld")
 
 
 def _modules(root: Path) -> dict[str, Path]:
@@ -128,6 +128,7 @@ ALLOWED = {
     "aw_eval.kernels": {"aw"},
     "aw_eval": {"aw", "aw_eval.kernels"},
     "aw_server": {"aw"},
+    "assemblyworld": {"aw", "aw_eval", "aw_eval.kernels"},
 }
 
 
