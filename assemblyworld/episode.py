@@ -127,8 +127,12 @@ def assembly_episode(settings: EpisodeSettings) -> Solver:
             async with episode.server:  # starts aw-serve; a refused start raises here, with the server's line
                 episode.connected()
                 agent = react(prompt=None, tools=[episode.server], submit=False, on_continue=episode.go_on)
-                async with span(name="react", type="agent"):
-                    agent_state = await agent(agent_state)
+                try:
+                    async with span(name="react", type="agent"):
+                        agent_state = await agent(agent_state)
+                except BaseException:
+                    episode.note_server()  # alive or not when the episode failed (leaving this block stops it)
+                    raise
         except BaseException as exc:
             raise episode.ended_by(exc) from None
         finally:
@@ -171,6 +175,7 @@ class _Episode:
 
         self.proc: psutil.Process | None = None
         self.is_connected = False
+        self.server_gone = False  # when the agent failed
         self.end = EpisodeEnd()
         self.started_at = datetime.now(UTC).isoformat(timespec="seconds")
         self.t0 = time.monotonic()
@@ -181,6 +186,9 @@ class _Episode:
 
     def _server_gone(self) -> bool:
         return self.proc is not None and not _alive(self.proc)
+
+    def note_server(self) -> None:
+        self.server_gone = self._server_gone()
 
     def failed(self, what: str, cause: BaseException | None = None) -> ServerFailed:
         """The sample's error: what happened to aw-serve, its message and its last stderr lines."""
@@ -214,7 +222,7 @@ class _Episode:
         if isinstance(exc, Exception) and not isinstance(exc, ServerFailed):
             if not self.is_connected:
                 exc = self.failed("did not start", exc)
-            elif self._server_gone():
+            elif self.server_gone:
                 exc = self.failed("exited during the episode", exc)
         self.end.ended, self.end.error = "error", str(exc) or type(exc).__name__
         return exc

@@ -26,6 +26,7 @@ _CLI_COMMANDS = ("eval", "eval-retry")
 
 _epochs_by_eval: dict[str, int] = {}
 _epochs_by_sample: dict[str, int] = {}
+_failed_by_eval: dict[str, int] = {}
 
 
 def epochs_of(sample_uuid: str) -> int | None:
@@ -38,13 +39,14 @@ def is_assemblyworld_log(log: EvalLog) -> bool:
 
 
 def failed_samples(log: EvalLog) -> str | None:
-    """Why ``log`` counts as failed (samples that did not complete, an error, a cancel), or None."""
+    """Why ``log`` counts as failed (an error, a cancel, samples that failed), or None. The
+    sample-end hook counts failed samples: a header-only log (the CLI's) does not list them."""
     if log.status != "success":
         return f"the eval ended with status {log.status}" + (f": {log.error.message}" if log.error else "")
-    res = log.results
-    if res is not None and res.completed_samples < res.total_samples:
-        return f"{res.total_samples - res.completed_samples} of {res.total_samples} samples failed"
-    return None
+    failed = _failed_by_eval.get(log.eval.eval_id, 0)
+    if log.samples is not None:
+        failed = sum(1 for s in log.samples if s.error is not None)
+    return f"{failed} sample{'s' if failed != 1 else ''} failed" if failed else None
 
 
 def _inspect_cli_context() -> Any:
@@ -77,6 +79,8 @@ class AssemblyWorldHooks(Hooks):
 
     async def on_sample_end(self, data: SampleEnd) -> None:
         _epochs_by_sample.pop(data.sample_id, None)
+        if data.sample.error is not None:
+            _failed_by_eval[data.eval_id] = _failed_by_eval.get(data.eval_id, 0) + 1
 
     async def on_run_end(self, data: RunEnd) -> None:
         ctx = _inspect_cli_context()

@@ -14,6 +14,7 @@ any others.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from importlib.metadata import version
 from pathlib import Path
@@ -53,7 +54,7 @@ def refused_calls(messages: list[ChatMessage]) -> list[dict[str, str]]:
     ]
 
 
-def usage_by_model(events: list[Event]) -> dict[str, ModelUsage]:
+def usage_by_model(events: Sequence[Event]) -> dict[str, ModelUsage]:
     """Model usage summed per model over a transcript's completed model calls."""
     out: dict[str, ModelUsage] = {}
     for ev in events:

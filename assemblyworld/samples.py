@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from inspect_ai.dataset import MemoryDataset, Sample
-from inspect_ai.model import ChatMessageUser, Content, ContentImage, ContentText
+from inspect_ai.model import ChatMessage, ChatMessageUser, Content, ContentImage, ContentText
 
 from aw.formats import read_manifest, read_task
 from aw.formats.suite import SuiteEntry, suite_paths
@@ -41,7 +41,7 @@ def _image(path: Path) -> ContentImage:
     return ContentImage(image=f"data:{mime};base64,{base64.b64encode(path.read_bytes()).decode('ascii')}")
 
 
-def sample_input(task_dir: Path) -> list[ChatMessageUser]:
+def sample_input(task_dir: Path) -> list[ChatMessage]:
     """The user message of a task: its prompt, then its reference images (if any), in order."""
     task = read_task(task_dir)
     content: list[Content] = [ContentText(text=task.prompt)]

@@ -12,12 +12,11 @@ sample's epochs before the metrics, so with several epochs the metrics are the m
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from pathlib import Path
 
 import anyio
 import numpy as np
-from inspect_ai.scorer import Metric, SampleScore, Score, Scorer, Target, metric, scorer
+from inspect_ai.scorer import Metric, SampleScore, Score, Scorer, Target, Value, metric, scorer
 from inspect_ai.solver import TaskState
 
 from assemblyworld.episode import RUN_DIR_KEY
@@ -55,11 +54,12 @@ def explanation(run: RunScore, part_ids: list[str], threshold: float = 0.01) -> 
     return "\n".join(lines)
 
 
-def _eq3(key: str) -> Callable[[list[SampleScore]], float]:
+def _eq3(key: str) -> Metric:
     """The eq. 3 aggregate of ``key`` over the scored samples (their metadata gives the design)."""
 
-    def compute(scores: list[SampleScore]) -> float:
-        metas, vals = [], {m: [] for m in ("pa", "sr", "sra", "scd")}
+    def compute(scores: list[SampleScore]) -> Value:
+        metas: list[TaskMeta] = []
+        vals: dict[str, list[float]] = {m: [] for m in ("pa", "sr", "sra", "scd")}
         for s in scores:
             md = s.sample_metadata or {}
             value = s.score.value

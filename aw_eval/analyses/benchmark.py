@@ -99,7 +99,8 @@ def quality(study: Study) -> dict[str, Any]:
     return out
 
 
-def _resource_values(study: Study, system: str) -> dict[str, list[float]]:
+def _resource_values(study: Study, system: str) -> tuple[dict[str, list[float]], dict[str, list[str]], list[int]]:
+    """``(values per resource, where time and calls came from, refused calls per run that says)``."""
     cols: dict[str, list[float]] = {"time_min": [], "mcp_calls": [], "tokens_m": [], "cost_usd": []}
     src: dict[str, list[str]] = {"time_min": [], "mcp_calls": []}
     refused: list[int] = []  # calls a harness refused before they reached aw-serve (run.json extra)
@@ -128,9 +129,7 @@ def _resource_values(study: Study, system: str) -> dict[str, list[float]]:
             cols["cost_usd"].append(info.cost_usd)
         if info is not None and isinstance(info.extra.get("refused_calls"), int):
             refused.append(info.extra["refused_calls"])
-    cols["_sources"] = src  # type: ignore[assignment]
-    cols["_refused"] = refused  # type: ignore[assignment]
-    return cols
+    return cols, src, refused
 
 
 def resources(study: Study) -> dict[str, Any]:
@@ -145,14 +144,12 @@ def resources(study: Study) -> dict[str, Any]:
     """
     out = {}
     for s in study.systems:
-        cols = _resource_values(study, s)
-        srcs = cols.pop("_sources")
-        refused = cols.pop("_refused")
-        row = {}
+        cols, srcs, refused = _resource_values(study, s)
+        row: dict[str, dict[str, Any]] = {}
         for k, v in cols.items():
             row[k] = {"mean": float(np.mean(v)) if v else None, "n": len(v)}
-        for k, v in srcs.items():
-            row[k]["from_trajectory"] = int(sum(1 for x in v if x == "trajectory"))
+        for k, where in srcs.items():
+            row[k]["from_trajectory"] = int(sum(1 for x in where if x == "trajectory"))
         row["mcp_calls"]["refused_by_harness"] = {"total": int(sum(refused)), "n": len(refused)}
         out[s] = row
     return out

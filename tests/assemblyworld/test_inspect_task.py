@@ -34,6 +34,7 @@ from inspect_helpers import (  # noqa: E402
     servers_of,
 )
 
+from assemblyworld.hooks import failed_samples  # noqa: E402
 from aw.formats import read_final, read_run_info, read_trajectory  # noqa: E402
 from aw_eval.cli import main as aw_score  # noqa: E402
 
@@ -257,7 +258,7 @@ def test_a_server_that_dies_fails_the_sample_naming_it(suite, tmp_path):
         log_dir=str(tmp_path / "logs"),
         display="none",
     )
-    assert log.status == "error"
+    assert log.status == "error" and "ended with status error" in failed_samples(log)
     [sample] = log.samples
     assert sample.error is not None and "aw-serve" in sample.error.message
     assert "exited during the episode" in sample.error.message
@@ -290,11 +291,11 @@ def test_inspect_eval_exits_1_when_a_server_refuses_to_start_and_keeps_the_old_r
     before = recording()
     done = _inspect(
         "eval", TASK, "--model", "mockllm/model", "-T", f"suite={suite}", "-T", f"runs={runs}", "-T", f"tasks={NONE_TASK}",
-        "--log-dir", str(tmp_path / "logs"), "--display", "plain", cwd=tmp_path,
+        "--log-dir", str(tmp_path / "logs"), "--display", "plain", "--no-fail-on-error", cwd=tmp_path,
     )  # fmt: skip
     assert done.returncode == 1, done.stdout + done.stderr
     said = done.stdout + done.stderr
-    assert "already holds a recording" in said and "assemblyworld: error:" in said
+    assert "already holds a recording" in said and "1 sample failed" in said  # the eval itself "succeeded"
     assert recording() == before and "run.json" in before
     assert servers_of(str(runs)) == []
 
@@ -321,3 +322,22 @@ def test_ctrl_c_leaves_no_server_and_keeps_the_recording(suite, tmp_path):
     assert read_final(run_dir / "final.json").reason in ("disconnect", "interrupted")
     info = read_run_info(run_dir / "run.json")
     assert info.ended == "error" and info.error == "interrupted" and info.extra["recorded_calls"] == 1
+
+
+def test_a_model_error_fails_the_sample_with_its_own_message(suite, tmp_path):
+    def broken(messages):
+        raise RuntimeError("the provider is out of reach")
+
+    script = Script([lambda m: output("call", "list_objects", {}), broken])
+    [log] = inspect_eval(
+        TASK,
+        model=script.model(),
+        task_args={"suite": str(suite), "runs": str(tmp_path / "runs"), "tasks": NONE_TASK},
+        log_dir=str(tmp_path / "logs"),
+        display="none",
+    )
+    [sample] = log.samples
+    assert "the provider is out of reach" in sample.error.message and "aw-serve" not in sample.error.message
+    info = read_run_info(tmp_path / "runs" / "model" / NONE_TASK / "run.json")
+    assert info.ended == "error" and info.error == "the provider is out of reach"
+    assert servers_of(str(tmp_path / "runs")) == []
