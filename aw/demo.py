@@ -249,6 +249,7 @@ def _demo(args: argparse.Namespace) -> int:
         print("plots:")
         for pl in plots:
             print(f"  {pl}")
+    print(f"\nwatch the episodes in a browser (live while a batch runs; --suite adds scores): aw-view {runs}")
     wall = time.monotonic() - t_all
     print(f"\ndone in {wall / 60:.1f} min (" + ", ".join(f"{k} {v:.0f} s" for k, v in timings.items()) + ")")
     return 0

@@ -134,6 +134,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="skip report.html and its folder report_files/ (pictures of every run, 3D views)",
     )
+    p.add_argument(
+        "--viewer-url",
+        metavar="URL",
+        help="the URL aw-view printed for these RUNS: report.html links each run to its episode page there "
+        "(default: no links, the report stays self-contained)",
+    )
     add_no_progress(p)
     return p
 
@@ -199,6 +205,8 @@ def _score(args: argparse.Namespace) -> int:
     from aw_eval import official_runs
 
     out = check_out_dir(args.out)
+    if args.viewer_url is not None and not args.viewer_url.startswith(("http://", "https://")):
+        raise UsageError(f"--viewer-url must be the http:// URL that aw-view printed, got {args.viewer_url!r}")
     if official_runs.is_official_package(args.suite_dir):  # an official package and its run logs
         return official_runs.main(args.suite_dir, args.runs_dir, args.out, args.jobs)
 
@@ -263,6 +271,7 @@ def _score(args: argparse.Namespace) -> int:
         html=not args.no_html,
         log=log,
         jobs=args.jobs,
+        viewer_url=args.viewer_url,
     )
     doc = res["doc"]
     unscored = ", ".join(f"{len(v)} {k}" for k, v in sorted(doc["unscored_runs"].items()))

@@ -14,7 +14,7 @@ import pytest
 
 from aw.cores import available_cores
 
-COMMANDS = ["aw-prepare", "aw-serve", "aw-score", "aw-run", "aw-demo"]
+COMMANDS = ["aw-prepare", "aw-serve", "aw-score", "aw-run", "aw-demo", "aw-view"]
 
 
 def _parsers() -> dict[str, argparse.ArgumentParser]:
@@ -23,8 +23,9 @@ def _parsers() -> dict[str, argparse.ArgumentParser]:
     from aw.runner.cli import build_parser as run
     from aw_eval.cli import build_parser as score
     from aw_server.cli import build_parser as serve
+    from aw_view.cli import build_parser as view
 
-    out = {"aw-serve": serve(), "aw-score": score(), "aw-run": run(), "aw-demo": demo()}
+    out = {"aw-serve": serve(), "aw-score": score(), "aw-run": run(), "aw-demo": demo(), "aw-view": view()}
     top = prepare()
     out["aw-prepare"] = top
     for action in top._actions:
@@ -132,6 +133,7 @@ def test_missing_inputs_are_one_line_usage_errors(tmp_path):
         ("aw-score", [str(tmp_path / "nope"), str(tmp_path), "--out", str(tmp_path / "o")]),
         ("aw-serve", [str(tmp_path / "nope"), "--record", str(tmp_path / "r")]),
         ("aw-prepare", ["folder", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]),
+        ("aw-view", [str(tmp_path / "nope"), "--port", "0"]),
     ):
         proc = _run(cmd, *args)
         assert proc.returncode == 2, (cmd, proc.stderr)

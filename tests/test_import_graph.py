@@ -1,8 +1,9 @@
-"""The import graph of aw, aw_eval, aw_server and assemblyworld, read from the source (ast): no
-cycles between modules, none between folders (sub-packages such as aw.runner and aw.agents), and
-no import from a lower layer into a higher one (aw is beneath aw_eval and aw_server; aw_eval's
-kernels are beneath its protocol modules; the Inspect task, assemblyworld, is above them all).
-Imports inside functions and under TYPE_CHECKING count: a lazy import is
+"""The import graph of aw, aw_eval, aw_server, aw_view and assemblyworld, read from the source
+(ast): no cycles between modules, none between folders (sub-packages such as aw.runner and
+aw.agents), and no import from a lower layer into a higher one (aw is beneath aw_eval and
+aw_server; aw_eval's kernels are beneath its protocol modules; the viewer, aw_view, is above aw
+and aw_eval; the Inspect task, assemblyworld, above aw and aw_eval too). Imports inside
+functions and under TYPE_CHECKING count: a lazy import is
 still a dependency."""
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("aw", "aw_eval", "aw_server", "assemblyworld")
+PACKAGES = ("aw", "aw_eval", "aw_server", "aw_view", "assemblyworld")
 
 
 def _modules(root: Path) -> dict[str, Path]:
@@ -167,6 +168,7 @@ ALLOWED = {
     "aw_eval.kernels": {"aw"},
     "aw_eval": {"aw", "aw_eval.kernels"},
     "aw_server": {"aw"},
+    "aw_view": {"aw", "aw_eval"},
     "assemblyworld": {"aw", "aw_eval", "aw_eval.kernels"},
 }
 
@@ -228,6 +230,7 @@ def test_the_checks_see_cycles_and_upward_imports(tmp_path):
         "aw_eval/kernels/__init__.py": "from aw_eval.kernels.z import z\n",
         "aw_eval/kernels/z.py": "from aw_eval import x\n",
         "aw_server/__init__.py": "",
+        "aw_view/__init__.py": "",
     }
     for rel, text in files.items():
         (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)

@@ -45,3 +45,31 @@ def read_run_info(path: str | Path) -> RunInfo:
 
 def write_run_info(path: str | Path, info: RunInfo) -> None:
     write_json_atomic(path, info)
+
+
+BATCH_FILE = ".aw-batch.json"
+
+
+class BatchPlan(BaseModel):
+    """``RUNS/<system>/.aw-batch.json``: what an ``aw-run`` batch is running, for watchers
+    (``aw-view`` shows the tasks not yet started as queued, and finds their public task files)."""
+
+    model_config = ConfigDict(extra="forbid")
+    format: Literal["assemblyworld.batch"] = "assemblyworld.batch"
+    format_version: Literal[1] = 1
+    system: str
+    suite_dir: str = Field(description="absolute path of the suite")
+    tasks: list[str] = Field(description="the episodes this batch runs, in order")
+    pid: int = Field(description="the aw-run process")
+    host: str
+    started_unix: float = Field(description="seconds since the epoch when the batch started")
+    finished_unix: float | None = Field(default=None, description="when the batch ended (None while it runs)")
+    budget_minutes: float | None = Field(default=None, description="--budget-minutes (None: each task's own)")
+
+
+def read_batch_plan(path: str | Path) -> BatchPlan:
+    return read_model(BatchPlan, path)
+
+
+def write_batch_plan(path: str | Path, plan: BatchPlan) -> None:
+    write_json_atomic(path, plan)

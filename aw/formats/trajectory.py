@@ -8,6 +8,7 @@ A checkpoint for scoring is the initial state plus the state after every pose-ch
 from __future__ import annotations
 
 import os
+import stat
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -173,6 +174,58 @@ def _check_pose_ids(poses: dict | None, part_ids: list[str], what: str, path: Pa
         )
 
 
+class _Records:
+    """The ordering rules of a trajectory, applied one record at a time (shared by
+    :func:`read_trajectory` and :class:`TrajectoryFollower`). ``keep_calls=False`` keeps only the
+    last call (and the count), for readers that need a summary of a long recording."""
+
+    def __init__(self, path: Path, keep_calls: bool = True):
+        self.path = path
+        self.keep_calls = keep_calls
+        self.traj: Trajectory | None = None
+        self.n_calls = 0
+        self.last_call: TrajectoryCall | None = None
+        self.last_image: str | None = None  # the latest capture (relative to the run directory)
+        self.clock_offset: float | None = None  # server_t - t: when the episode clock started
+
+    def add(self, rec: BaseModel, i: int) -> None:
+        path, traj = self.path, self.traj
+        if traj is None:
+            if not isinstance(rec, TrajectoryHeader):
+                raise FormatError(path, f"line {i}: the first record must be the header")
+            if len(set(rec.part_ids)) != len(rec.part_ids):
+                raise FormatError(path, f"line {i}: duplicate part ids in the header")
+            _check_pose_ids(rec.initial_poses, rec.part_ids, f"line {i}", path)
+            self.traj = Trajectory(path=path, header=rec)
+            return
+        if traj.end is not None:
+            raise FormatError(path, f"line {i}: record after the end record")
+        if isinstance(rec, TrajectoryHeader):
+            raise FormatError(path, f"line {i}: a second header")
+        assert isinstance(rec, TrajectoryCall | TrajectoryEnd)
+        _check_pose_ids(rec.poses, traj.header.part_ids, f"line {i}", path)
+        if isinstance(rec, TrajectoryCall):
+            unknown = [c for c in rec.changed if c not in traj.header.part_ids]
+            if unknown:
+                raise FormatError(path, f"line {i}: changed names unknown part ids {unknown}")
+            if rec.changed and rec.poses is None:
+                raise FormatError(path, f"line {i}: parts changed but the poses after the call are missing")
+            if rec.t is None and rec.server_t is None:
+                raise FormatError(path, f"line {i}: a call needs t or server_t")
+            if self.last_call is not None and rec.seq <= self.last_call.seq:
+                raise FormatError(path, f"line {i}: sequence number {rec.seq} is not increasing")
+            self.n_calls += 1
+            self.last_call = rec
+            if rec.image is not None:
+                self.last_image = rec.image
+            if self.clock_offset is None and rec.t is not None and rec.server_t is not None:
+                self.clock_offset = rec.server_t - rec.t
+            if self.keep_calls:
+                traj.calls.append(rec)
+        else:
+            traj.end = rec
+
+
 def read_trajectory(path: str | Path) -> Trajectory:
     """Read a trajectory. A last line cut mid-write is dropped (``truncated=True``); any other
     malformed line raises :class:`FormatError` naming the file and line."""
@@ -189,7 +242,7 @@ def read_trajectory(path: str | Path) -> Trajectory:
     complete_tail = data.endswith(b"\n")
     if complete_tail:
         lines = lines[:-1]
-    traj: Trajectory | None = None
+    records = _Records(path)
     truncated = False
     for i, raw in enumerate(lines, start=1):
         if not raw.strip():
@@ -202,32 +255,8 @@ def read_trajectory(path: str | Path) -> Trajectory:
                 truncated = True
                 break
             raise FormatError(path, f"line {i}: not valid JSON ({exc.detail})") from None
-        if traj is None:
-            if not isinstance(rec, TrajectoryHeader):
-                raise FormatError(path, f"line {i}: the first record must be the header")
-            if len(set(rec.part_ids)) != len(rec.part_ids):
-                raise FormatError(path, f"line {i}: duplicate part ids in the header")
-            _check_pose_ids(rec.initial_poses, rec.part_ids, f"line {i}", path)
-            traj = Trajectory(path=path, header=rec)
-            continue
-        if traj.end is not None:
-            raise FormatError(path, f"line {i}: record after the end record")
-        if isinstance(rec, TrajectoryHeader):
-            raise FormatError(path, f"line {i}: a second header")
-        _check_pose_ids(rec.poses, traj.header.part_ids, f"line {i}", path)
-        if isinstance(rec, TrajectoryCall):
-            unknown = [c for c in rec.changed if c not in traj.header.part_ids]
-            if unknown:
-                raise FormatError(path, f"line {i}: changed names unknown part ids {unknown}")
-            if rec.changed and rec.poses is None:
-                raise FormatError(path, f"line {i}: parts changed but the poses after the call are missing")
-            if rec.t is None and rec.server_t is None:
-                raise FormatError(path, f"line {i}: a call needs t or server_t")
-            if traj.calls and rec.seq <= traj.calls[-1].seq:
-                raise FormatError(path, f"line {i}: sequence number {rec.seq} is not increasing")
-            traj.calls.append(rec)
-        else:
-            traj.end = rec
+        records.add(rec, i)
+    traj = records.traj
     if traj is None:
         raise FormatError(path, "empty or truncated before the header line")
     _resolve_times(traj)
@@ -237,6 +266,120 @@ def read_trajectory(path: str | Path) -> Trajectory:
     if traj.end is None:
         traj.problems.append("no end record (the episode did not close)")
     return traj
+
+
+class TrajectoryFollower:
+    """Reads a trajectory while it is being written: each :meth:`poll` reads only the bytes added
+    since the last one and applies the rules of :func:`read_trajectory` to every complete line. A
+    last line without its newline yet is waited for, not an error; a file replaced by a new
+    recording (another inode, or shorter than what was read) is read again from its start, and
+    a deleted one is forgotten (``generation`` counts those restarts). Times are as recorded (``t`` is None for calls
+    before the episode clock started). Raises :class:`FormatError` naming the file and line;
+    ``max_line_bytes`` bounds the memory a hostile file can take."""
+
+    def __init__(self, path: str | Path, keep_calls: bool = True, max_line_bytes: int = 16 << 20):
+        self.path = Path(path)
+        self.keep_calls = keep_calls
+        self.max_line_bytes = max_line_bytes
+        self._read_limit = max(2 * max_line_bytes, 64 << 20)  # per poll: a huge file is read in steps
+        self.generation = 0
+        self._identity: tuple[int, int] | None = None
+        self._restart()
+
+    def _restart(self) -> None:
+        self._error: FormatError | None = None
+        self._records = _Records(self.path, self.keep_calls)
+        self._offset = 0
+        self._lineno = 0
+        self._pending = b""
+
+    @property
+    def trajectory(self) -> Trajectory | None:
+        """What has been read so far (None before the header line is complete)."""
+        return self._records.traj
+
+    @property
+    def n_calls(self) -> int:
+        return self._records.n_calls
+
+    @property
+    def last_call(self) -> TrajectoryCall | None:
+        return self._records.last_call
+
+    @property
+    def last_image(self) -> str | None:
+        """The latest call's capture (relative to the run directory), or None."""
+        return self._records.last_image
+
+    @property
+    def clock_offset(self) -> float | None:
+        """``server_t`` at which the episode clock started, once a call says it."""
+        return self._records.clock_offset
+
+    @property
+    def waiting(self) -> bool:
+        """Whether a line is still being written (bytes after the last newline)."""
+        return bool(self._pending)
+
+    def poll(self) -> bool:
+        """Read what was appended; True when the file was replaced or complete lines were added.
+        A damaged line raises the same :class:`FormatError` on every poll until the file is replaced."""
+        try:
+            fd = os.open(self.path, os.O_RDONLY)
+        except FileNotFoundError:
+            if self._identity is not None:  # deleted: what was read of it is dropped
+                self.generation += 1
+                self._identity = None
+                self._restart()
+            raise FormatError(self.path, "file not found") from None
+        except OSError as exc:
+            raise FormatError(self.path, f"cannot be read ({exc.strerror})") from None
+        try:
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode):
+                raise FormatError(self.path, "is not a regular file")
+            identity = (st.st_dev, st.st_ino)
+            replaced = self._identity is not None and (
+                identity != self._identity or st.st_size < self._offset + len(self._pending)
+            )
+            if replaced:
+                self.generation += 1
+                self._restart()
+            self._identity = identity
+            if self._error is not None:
+                raise self._error
+            start = self._offset + len(self._pending)
+            want = min(st.st_size - start, self._read_limit)
+            if want <= 0:
+                return replaced
+            added = os.pread(fd, want, start)
+        finally:
+            os.close(fd)
+        try:
+            return self._take(self._pending + added) or replaced
+        except FormatError as exc:
+            self._error = exc
+            raise
+
+    def _take(self, data: bytes) -> bool:
+        cut = data.rfind(b"\n") + 1
+        complete, self._pending = data[:cut], data[cut:]
+        lines = complete.split(b"\n")[:-1]
+        for raw in lines:
+            self._lineno += 1
+            self._offset += len(raw) + 1
+            if len(raw) > self.max_line_bytes:
+                raise FormatError(self.path, f"line {self._lineno}: longer than {self.max_line_bytes} bytes")
+            if not raw.strip():
+                continue
+            try:
+                rec = _parse_line(raw, self._lineno, self.path)
+            except _BadJSON as exc:
+                raise FormatError(self.path, f"line {self._lineno}: not valid JSON ({exc.detail})") from None
+            self._records.add(rec, self._lineno)
+        if len(self._pending) > self.max_line_bytes:
+            raise FormatError(self.path, f"line {self._lineno + 1}: longer than {self.max_line_bytes} bytes")
+        return bool(lines)
 
 
 def _resolve_times(traj: Trajectory) -> None:

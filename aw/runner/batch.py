@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import socket
 import sys
 import tempfile
 import threading
@@ -23,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from aw.formats import FormatError, RunInfo, read_manifest, read_run_info, read_trajectory, write_run_info
+from aw.formats.run import BATCH_FILE, BatchPlan, write_batch_plan
 from aw.formats.suite import suite_paths
 from aw.formats.task import MAX_BUDGET_MINUTES
 from aw.formats.trajectory import FinalState, write_final
@@ -589,6 +591,30 @@ class BatchResult:
         return Counter(r.ended for r in self.runs)
 
 
+def _write_plan(cfg: BatchConfig, episodes: list[Episode]) -> BatchPlan:
+    """Say in ``RUNS/<system>/.aw-batch.json`` which episodes this batch runs (watchers show
+    those not started yet as queued)."""
+    plan = BatchPlan(
+        system=cfg.system,
+        suite_dir=str(Path(cfg.suite_dir).resolve()),
+        tasks=[ep.task_id for ep in episodes],
+        pid=os.getpid(),
+        host=socket.gethostname(),
+        started_unix=time.time(),
+        budget_minutes=cfg.budget_minutes,
+    )
+    write_batch_plan(cfg.out_dir / cfg.system / BATCH_FILE, plan)
+    return plan
+
+
+def _close_plan(cfg: BatchConfig, plan: BatchPlan) -> None:
+    plan.finished_unix = time.time()
+    try:
+        write_batch_plan(cfg.out_dir / cfg.system / BATCH_FILE, plan)
+    except OSError:  # a full disk: the batch's own error, if any, is the one to report
+        pass
+
+
 def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None) -> BatchResult:
     """Run every planned episode, ``cfg.jobs`` at a time, with a progress bar."""
     check_config(cfg)
@@ -604,6 +630,7 @@ def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None
                 todo.append(ep)
         episodes = todo
     (cfg.out_dir / cfg.system).mkdir(parents=True, exist_ok=True)
+    plan = _write_plan(cfg, episodes)
     env = episode_env()
     t0 = time.monotonic()
     runs: list[RunInfo] = []
@@ -655,6 +682,7 @@ def run_batch(cfg: BatchConfig, on_done: Callable[[RunInfo], None] | None = None
             w.close()
         if bar is not None:
             bar.close()
+        _close_plan(cfg, plan)
     order = {ep.task_id: i for i, ep in enumerate(episodes)}
     runs.sort(key=lambda r: order.get(r.task_id, 0))
     return BatchResult(runs=runs, skipped=skipped, wall_seconds=time.monotonic() - t0)

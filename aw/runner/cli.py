@@ -7,6 +7,7 @@
     aw-run SUITE --harness claude-code|codex --check     the harness check alone
     aw-run SUITE --refiner NAME --out RUNS [--initial-poses DIR]   a geometric refiner as a system
     aw-run SUITE --refinement-study --agent NAME --refiner NAME --out RUNS   the four arms
+    aw-run SUITE --agent NAME --out RUNS --view [PORT]   watch the batch live (aw-view)
 
 Each task gets its own aw-serve (stdio) and a clean RUNS/LABEL/<task_id>/; see docs/agents.md.
 A harness batch starts with the harness check (binary, version, login, one short session that
@@ -21,6 +22,7 @@ import argparse
 import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from aw.cli.common import (
     CliError,
@@ -37,6 +39,9 @@ from aw.cli.common import (
 )
 from aw.runner.batch import BatchConfig, RunnerError, check_config, run_batch, system_label
 
+if TYPE_CHECKING:
+    from aw.runner.viewer import ViewerProcess
+
 
 def _agent_option(text: str) -> tuple[str, object]:
     if "=" not in text:
@@ -48,6 +53,16 @@ def _agent_option(text: str) -> tuple[str, object]:
         except ValueError:
             pass
     return key, value
+
+
+def _port(text: str) -> int:
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--view PORT must be an integer, got {text!r}") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"--view PORT must be in 0..65535, got {port}")
+    return port
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -144,6 +159,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--skip-check", action="store_true", help="with --harness: start the batch without the harness check"
+    )
+    p.add_argument(
+        "--view",
+        nargs="?",
+        const=0,
+        type=_port,
+        metavar="PORT",
+        help="watch the batch live in a browser: start aw-view on the --out folder and print its URL "
+        "(PORT default: any free port); it stops with the batch",
     )
     add_no_progress(p)
     from aw.runner.refiner_cli import add_refiner_arguments
@@ -244,11 +268,25 @@ def _batch_config(args: argparse.Namespace) -> BatchConfig:
     return cfg
 
 
+def _start_viewer(args: argparse.Namespace) -> ViewerProcess:
+    """``aw-view`` on ``--out`` (the suite's public tasks for the scene), its URL printed."""
+    from aw.runner.viewer import ViewerFailed, ViewerProcess
+
+    try:
+        viewer = ViewerProcess(args.out, args.view, args.suite / "tasks")
+    except ViewerFailed as exc:
+        raise UsageError(f"--view: aw-view did not start: {exc}") from None
+    print(f"aw-run: watch the episodes at {viewer.url}", flush=True)
+    return viewer
+
+
 def _run(args: argparse.Namespace) -> int:
     from aw.runner.refiner_cli import run_refiner_command, wants_refiner
 
     if not (args.agent or args.harness or wants_refiner(args)):
         raise UsageError("give --agent NAME, --harness NAME or --refiner NAME")
+    if args.view is not None and (wants_refiner(args) or args.check):
+        raise UsageError("--view applies to --agent and --harness batches")
     if wants_refiner(args) and not args.check:
         return run_refiner_command(args, lambda: _batch_config(args))
     if args.check or args.skip_check:
@@ -260,6 +298,7 @@ def _run(args: argparse.Namespace) -> int:
     system = cfg.system
     if args.harness and not args.skip_check and not _check(args):
         return 1
+    viewer = _start_viewer(args) if args.view is not None else None
     try:
         result = run_batch(cfg)
     except RunnerError as exc:
@@ -269,6 +308,10 @@ def _run(args: argparse.Namespace) -> int:
             "\naw-run: interrupted; finished episodes are kept, run the same command again to resume", file=sys.stderr
         )
         return 130
+    finally:
+        if viewer is not None:
+            viewer.stop()
+            print(f"aw-run: the viewer stopped with the batch; to watch again: aw-view {args.out}", file=sys.stderr)
     ends = result.endings()
     summary = ", ".join(f"{k} {v}" for k, v in sorted(ends.items())) or "nothing to run"
     print(f"{system}: {plural(len(result.runs), 'episode')} in {result.wall_seconds:.1f} s ({summary})", end="")

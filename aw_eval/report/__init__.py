@@ -54,9 +54,11 @@ def write_outputs(
     html: bool = True,
     log: Callable[[str], None] | None = None,
     jobs: int = 1,
+    viewer_url: str | None = None,
 ) -> dict[str, Any]:
     """Write every output; returns ``{"doc": scores document, "files": {name: path}}``. ``jobs``:
-    processes that build report.html's cards."""
+    processes that build report.html's cards; ``viewer_url``: an ``aw-view`` of the same runs,
+    which report.html links each run to."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     doc = build_results(study, settings, suite_dir=suite_dir, runs_dir=runs_dir, score_stats=score_stats)
@@ -89,7 +91,9 @@ def write_outputs(
     if html:
         from aw_eval.report.html import write_html  # imports plotly only when asked
 
-        files["html"] = write_html(study, doc, markdown, out, suite_dir or None, log=log, jobs=jobs).path
+        files["html"] = write_html(
+            study, doc, markdown, out, suite_dir or None, log=log, jobs=jobs, viewer_url=viewer_url
+        ).path
     for k, v in made.items():
         files[f"plot_{k}"] = out / "plots" / v
     return {"doc": doc, "files": files}

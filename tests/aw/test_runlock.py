@@ -102,3 +102,22 @@ def test_the_lock_file_names_its_holder_during_and_after(tmp_path):
         during == after == {"pid": os.getpid(), "host": socket.gethostname(), "command": "aw-score suite runs --out x"}
     )
     assert holder_of(tmp_path / "run") is None  # the record of an ended holder holds nothing
+
+
+def test_live_holder_tells_a_live_lock_from_a_stale_one_without_taking_it(holder):
+    """Unlike holder_of, live_holder never takes the lock (a watcher must never make a starting
+    recorder refuse its directory): while it looks, the holder still holds the lock exclusively,
+    and a new recorder can take it the moment the holder dies."""
+    from aw.runlock import kernel_flocks, live_holder
+
+    run, proc = holder
+    assert f"pid {proc.pid}" in live_holder(run)
+    assert f"pid {proc.pid}" in live_holder(run, flocks=None)  # no kernel list: the recorded pid is alive
+    listed = kernel_flocks()
+    assert listed is not None and f"pid {proc.pid}" in live_holder(run, listed)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert live_holder(run) is None and live_holder(run, flocks=None) is None
+    with RunDirLock(run):
+        assert f"pid {os.getpid()}" in live_holder(run)
+    assert live_holder(tmp_path_missing := run / "nowhere") is None and not tmp_path_missing.exists()

@@ -8,11 +8,13 @@ import html
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote, urlsplit, urlunsplit
 
 import numpy as np
 import orjson
 
 from aw.formats import FormatError, read_final, read_trajectory
+from aw.meshes import display_parts
 from aw_eval.analyses.curves import NORMALIZED_POINTS, normalized_states
 from aw_eval.report.fmt import DASH, fixed
 from aw_eval.report.html.markup import scroll_box, slug
@@ -33,6 +35,7 @@ __all__ = [
     "registration_hint",
     "viewer_data",
     "system_colors",
+    "episode_link",
     "CARD_SIZE",
     "FRAME_SIZE",
     "MAX_VIEWER_STATES",
@@ -42,7 +45,6 @@ __all__ = [
 CARD_SIZE = (320, 240)  # target and final-state pictures
 FRAME_SIZE = (160, 120)  # filmstrip frames
 MAX_VIEWER_STATES = 200  # recorded states per run in the 3D viewer (evenly spaced; first and last kept)
-MAX_VIEWER_FACES = 1500  # triangles per part in the 3D viewer (vertex clustering above it)
 MAX_LISTED_CALLS = 2000  # tool calls listed per run
 _SYSTEM_PALETTE = (
     "#4C72B0",
@@ -56,6 +58,14 @@ _SYSTEM_PALETTE = (
     "#CCB974",
     "#64B5CD",
 )
+
+
+def episode_link(viewer_url: str, system: str, task_id: str) -> str:
+    """The episode page of run ``RUNS/<system>/<task_id>`` in an ``aw-view`` of ``RUNS`` at
+    ``viewer_url`` (the URL it printed; a token in its query is kept)."""
+    url = urlsplit(viewer_url)
+    path = url.path.rstrip("/") + "/episode/" + quote(f"{system}/{task_id}", safe="/")
+    return urlunsplit((url.scheme, url.netloc, path, url.query, ""))
 
 
 def system_colors(systems: list[str]) -> dict[str, str]:
@@ -252,7 +262,7 @@ def _part_table(scene_ids: list[str], colors: np.ndarray | None, study: TaskRuns
     for i, pid in enumerate(scene_ids):
         sw = ""
         if colors is not None:
-            c = "#%02x%02x%02x" % tuple(int(round(255 * x)) for x in colors[i])
+            c = "#" + "".join(f"{int(round(255 * x)):02x}" for x in colors[i])
             sw = f'<span class="sw" style="background:{c}"></span>'
         tds = f'<td class="l">{sw}{html.escape(pid)}</td>'
         for s in systems:
@@ -302,7 +312,7 @@ def _curves(study: TaskRuns, task_id: str, views: dict[str, RunView], colors: di
 def _filmstrip(view: RunView, scene: TaskScene, camera, folder: Path, rel: str) -> str:
     r = view.score
     frames = []
-    for u, k in zip(NORMALIZED_POINTS, normalized_states(r)):
+    for u, k in zip(NORMALIZED_POINTS, normalized_states(r), strict=True):
         if k is None or len(view.states) == 0:
             poses, pa, scd = view.final, r.pa, r.scd
         else:
@@ -368,10 +378,12 @@ def task_card(
     colors: dict[str, str],
     no_pictures: str = NO_MESHES,
     threshold: float = ProtocolSettings.threshold,
+    viewer_url: str | None = None,
 ) -> Card:
     """One task's card; pictures are rendered into ``folder`` (``rel``: its path from the page);
     without a ``scene`` the card says ``no_pictures`` instead. ``threshold``: the protocol's
-    part-correct threshold (for the note on parts placed but not counted)."""
+    part-correct threshold (for the note on parts placed but not counted). ``viewer_url``: an
+    ``aw-view`` of the same runs folder, which each run links to (:func:`episode_link`)."""
     tid = task["task_id"]
     camera = None
     if scene is not None:
@@ -386,6 +398,14 @@ def task_card(
         f'<section class="card" id="task-{slug(tid)}"><h3>{html.escape(tid)}</h3><p class="meta">{html.escape(meta)}</p>',
         _finals(pictures, views),
     ]
+    if viewer_url:
+        links = [
+            f'<a class="live" href="{html.escape(episode_link(viewer_url, s, tid))}">{html.escape(s)}</a>'
+            for s in study.systems
+            if study.record(s, tid).run_dir is not None
+        ]
+        if links:
+            parts.append(f'<p class="note">Episode pages in aw-view: {" · ".join(links)}</p>')
     if scene is None:
         parts.append(f'<p class="note">{html.escape(no_pictures)}</p>')
     else:
@@ -421,23 +441,6 @@ def task_card(
 
 
 # ---------------------------------------------------------------- 3D viewer data
-def _cluster(vertices: np.ndarray, faces: np.ndarray, max_faces: int) -> tuple[np.ndarray, np.ndarray]:
-    """Vertex clustering: snap vertices to a grid that leaves at most ``max_faces`` triangles."""
-    if len(faces) <= max_faces:
-        return vertices, faces
-    extent = float(np.ptp(vertices, axis=0).max()) or 1.0
-    cells = 64
-    while True:
-        q = np.floor((vertices - vertices.min(axis=0)) / (extent / cells)).astype(np.int64)
-        _, first, inverse = np.unique(q, axis=0, return_index=True, return_inverse=True)
-        f = inverse.reshape(-1)[faces]
-        f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]
-        f = np.unique(np.sort(f, axis=1), axis=0) if len(f) > max_faces else f
-        if len(f) <= max_faces or cells <= 4:
-            return vertices[first], f
-        cells //= 2
-
-
 def _pick(n: int, k: int) -> list[int]:
     if n <= k:
         return list(range(n))
@@ -448,17 +451,7 @@ def viewer_data(scene: TaskScene, views: dict[str, RunView]) -> dict[str, Any]:
     """The data file of one task: for the 3D view, decimated part meshes (baked frame), the target
     poses, and per system its recorded states (aligned poses, PA, SCD), at most
     :data:`MAX_VIEWER_STATES` of them plus the final state; per system its tool calls."""
-    parts = []
-    for pid, m, c in zip(scene.part_ids, scene.meshes, scene.colors):
-        v, f = _cluster(np.asarray(m.vertices, np.float64), np.asarray(m.faces, np.int64), MAX_VIEWER_FACES)
-        parts.append(
-            {
-                "id": pid,
-                "color": "#%02x%02x%02x" % tuple(int(round(255 * x)) for x in c),
-                "v": np.round(v, 5).reshape(-1).tolist(),
-                "f": f.reshape(-1).tolist(),
-            }
-        )
+    parts = display_parts(scene.part_ids, scene.meshes, scene.colors)
     systems = {}
     for s, view in views.items():
         r = view.score

@@ -181,6 +181,7 @@ class CardJob:
     files: str
     colors: dict[str, str]
     threshold: float  # the protocol's part-correct threshold
+    viewer_url: str | None = None  # an aw-view of the same runs: each run links to its episode page
 
 
 @dataclass
@@ -230,6 +231,7 @@ def build_card(job: CardJob) -> CardResult:
                     viewer_src,
                     job.colors,
                     threshold=job.threshold,
+                    viewer_url=job.viewer_url,
                 )
             except RenderError as exc:
                 no_render = f"No pictures: offscreen rendering is unavailable ({exc})."
@@ -245,6 +247,7 @@ def build_card(job: CardJob) -> CardResult:
                 viewer_src,
                 job.colors,
                 **({"no_pictures": no_render} if no_render else {}),
+                viewer_url=job.viewer_url,
             )
     finally:
         if scene is not None:
@@ -275,10 +278,12 @@ def write_html(
     suite_dir: str | Path | None,
     log: Callable[[str], None] | None = None,
     jobs: int = 1,
+    viewer_url: str | None = None,
 ) -> HtmlStats:
     """Write ``out_dir/report.html`` and ``out_dir/report_files/``; ``markdown`` is report.md's text
     (its image links are relative to ``out_dir``). Cards are built in ``jobs`` processes. Tasks
-    whose meshes cannot be read (no ``suite_dir``, official packages) get cards without pictures."""
+    whose meshes cannot be read (no ``suite_dir``, official packages) get cards without pictures.
+    ``viewer_url``: an ``aw-view`` of the same runs folder; each run links to its episode page."""
     t0 = time.perf_counter()
     out = Path(out_dir)
     files = out / ASSETS_DIR
@@ -299,6 +304,7 @@ def write_html(
             str(files),
             colors,
             protocol_of(doc).threshold,
+            viewer_url,
         )
         for t in doc["tasks"]
     ]
@@ -306,7 +312,7 @@ def write_html(
     used_viewer: set[str] = set()
     cards, pictures, no_render = [], {}, None
     # spawned workers take seconds to start: not worth it for a handful of cards
-    for job, res in zip(card_jobs, _cards(card_jobs, jobs if len(card_jobs) >= MIN_POOL_TASKS else 1)):
+    for job, res in zip(card_jobs, _cards(card_jobs, jobs if len(card_jobs) >= MIN_POOL_TASKS else 1), strict=True):
         cards.append(res.html)
         pictures[job.task["task_id"]] = res.pictures
         used_renders.update(res.render_files)

@@ -1,5 +1,5 @@
 """report.html end to end: a tiny study scored by ``aw-score``, its page opened in Debian's
-Chromium (playwright, ``/usr/bin/chromium``, installed by scripts/install.sh) from the file system
+Chromium (playwright, ``/usr/bin/chromium``: the ``browser`` fixture of tests/conftest.py) from the file system
 with the network cut: no console error, sortable tables, the 3D view's slider and system switcher,
 cards with real pictures, tool-call lists; renders reused on a second call; ``--no-html``."""
 
@@ -17,7 +17,6 @@ from PIL import Image
 from aw_eval.cli import main
 from aw_eval.study.fixtures import box_suite, write_scripted_run
 
-CHROMIUM = "/usr/bin/chromium"
 OPTS = [
     "--protocol-setting",
     "n_surface=256",
@@ -109,18 +108,6 @@ def test_cards_built_by_worker_processes_are_the_same(report):
     assert sorted(p.name for p in (other / "report_files" / "renders").iterdir()) == sorted(
         p.name for p in (report["out"] / "report_files" / "renders").iterdir()
     )
-
-
-@pytest.fixture(scope="module")
-def browser():
-    if not Path(CHROMIUM).is_file():
-        pytest.fail(f"{CHROMIUM} not found: run scripts/install.sh as root (it installs Debian's chromium)")
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        b = p.chromium.launch(executable_path=CHROMIUM, args=["--enable-unsafe-swiftshader", "--use-angle=swiftshader"])
-        yield b
-        b.close()
 
 
 def _cells(page, table: str, col: int) -> list[str]:
@@ -304,3 +291,19 @@ def test_cards_say_why_parts_in_place_score_zero(report):
     assert "the parts left away, p02, p03, pull that transform" in hints[0]
     assert hints[1].startswith("gamma: 2 of 3 parts lie at their targets as placed, yet PA is 0.0%")
     assert "the part left away, p03, pulls that transform off the parts in place" in hints[1]
+
+
+def test_viewer_url_links_each_run_to_its_episode_page(report):
+    """Last in this module: it rewrites the report with the links (renders and scores reused)."""
+    url = "http://127.0.0.1:8770/?token=abc"
+    assert (
+        main([str(report["suite"]), str(report["runs"]), "--out", str(report["out"]), *OPTS, "--viewer-url", url]) == 0
+    )
+    page = (report["out"] / "report.html").read_text()
+    card = page.split(f'id="task-{TASK}"')[1].split('<section class="card"')[0]
+    links = re.findall(r'<a class="live" href="([^"]+)">([^<]+)</a>', card)
+    assert ("http://127.0.0.1:8770/episode/alpha/" + TASK + "?token=abc", "alpha") in links
+    assert len(links) == 5  # every system with a run of this task
+    assert (
+        main([str(report["suite"]), str(report["runs"]), "--out", str(report["out"]), *OPTS, "--viewer-url", "x"]) == 2
+    )

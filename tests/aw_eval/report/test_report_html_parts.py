@@ -7,10 +7,11 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from aw.meshes import simplify_for_display
 from aw.pose import apply_pose, matrix_to_quat
 from aw_eval.analyses.curves import normalized_states, normalized_values
 from aw_eval.report.fmt import md_table
-from aw_eval.report.html.cards import RunView, _cluster, registration_hint
+from aw_eval.report.html.cards import RunView, registration_hint
 from aw_eval.report.html.markup import markdown_to_html, sort_value
 from aw_eval.report.html.scenes import TaskScene, aligned_poses
 from aw_eval.study.model import RunScore
@@ -114,10 +115,10 @@ def test_renders_are_named_by_content_and_reused(tmp_path):
 
 def test_viewer_meshes_are_decimated_below_the_cap():
     m = trimesh.creation.icosphere(subdivisions=5)  # 20,480 faces
-    v, f = _cluster(np.asarray(m.vertices), np.asarray(m.faces), 1500)
+    v, f = simplify_for_display(np.asarray(m.vertices), np.asarray(m.faces), 1500)
     assert 100 < len(f) <= 1500 and f.max() < len(v)
     small = trimesh.creation.box()
-    v2, f2 = _cluster(np.asarray(small.vertices), np.asarray(small.faces), 1500)
+    v2, f2 = simplify_for_display(np.asarray(small.vertices), np.asarray(small.faces), 1500)
     assert len(f2) == len(small.faces)
 
 

@@ -1,7 +1,8 @@
 // The 3D view of a task's runs (plotly mesh3d, loaded on first use from the report's folder):
 // each system's recorded states over the target, a slider over the states, a system switcher;
 // and the runs' tool-call lists. A task's data file, loaded when one of them opens, calls
-// AWViewer.register(taskId, data); poses are [x, y, z, qw, qx, qy, qz].
+// AWViewer.register(taskId, data); poses are [x, y, z, qw, qx, qy, qz]. AWViewer.place and
+// AWViewer.mesh draw a part at a pose for other pages (aw-view's live episode page).
 (function () {
   "use strict";
   const PLOTLY_SRC = document.currentScript.dataset.plotly;
@@ -62,6 +63,8 @@
     return { type: "mesh3d", x: xyz[0], y: xyz[1], z: xyz[2], i: ijk[0], j: ijk[1], k: ijk[2], color: part.color,
              opacity: opacity, flatshading: true, name: name, hoverinfo: "name", showscale: false };
   }
+  window.AWViewer.place = place;
+  window.AWViewer.mesh = mesh;
   function fmt(x, d) { return x === null || x === undefined ? "\u2013" : x.toFixed(d); }
   function build(box, d) {
     const systems = Object.keys(d.systems);
