@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from aw.cli.common import default_jobs
+from aw.cores import available_cores
 
 COMMANDS = ["aw-prepare", "aw-serve", "aw-score", "aw-run", "aw-demo"]
 
@@ -58,7 +58,7 @@ def test_help_is_plain_and_every_flag_says_what_it_does(name):
         assert "--protocol" not in visible  # aw-prepare's --protocol picks the preparation; here: --protocol-setting
     if "--jobs" in visible:
         jobs = next(a for a in p._actions if "--jobs" in a.option_strings)
-        assert jobs.default == default_jobs() and "number of CPU cores" in jobs.help
+        assert jobs.default == available_cores() and "number of CPU cores" in jobs.help
 
 
 def test_replace_existing_is_overwrite_everywhere_with_the_old_names_as_aliases():

@@ -1,6 +1,7 @@
-"""The import graph of aw, aw_eval and aw_server, read from the source (ast): no cycles, and no
-import from a lower layer into a higher one (aw is beneath aw_eval and aw_server; aw_eval's
-kernels are beneath its protocol modules). Imports inside functions count: a lazy import is
+"""The import graph of aw, aw_eval and aw_server, read from the source (ast): no cycles between
+modules, none between folders (sub-packages such as aw.runner and aw.agents), and no import from a
+lower layer into a higher one (aw is beneath aw_eval and aw_server; aw_eval's kernels are beneath
+its protocol modules). Imports inside functions and under TYPE_CHECKING count: a lazy import is
 still a dependency."""
 
 from __future__ import annotations
@@ -116,6 +117,43 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return found
 
 
+def folder(module: str, packages: set[str]) -> str:
+    """The sub-package a module lives in (``aw.runner.batch`` -> ``aw.runner``,
+    ``aw_eval.report.html.page`` -> ``aw_eval.report``); a package's top-level modules
+    (``aw.scene``) are its own floor, the package name. ``packages``: the modules that have
+    submodules."""
+    parts = module.split(".")
+    return ".".join(parts[:2]) if len(parts) > 2 or module in packages else parts[0]
+
+
+# Folders allowed to import each other, each with its reason. Empty: every folder stands above
+# what it imports.
+FOLDER_CYCLE_EXCEPTIONS: dict[frozenset[str], str] = {}
+
+
+def folder_graph(graph: dict[str, set[str]]) -> dict[str, set[str]]:
+    """Folder -> the other folders it imports (package top-level modules left out: they are the
+    package's own floor, which both its folders and its top files stand on)."""
+    packages = {m.rpartition(".")[0] for m in graph}
+    out: dict[str, set[str]] = {}
+    for m, targets in graph.items():
+        src = folder(m, packages)
+        if "." not in src:
+            continue
+        for t in targets:
+            dst = folder(t, packages)
+            if dst != src and "." in dst:
+                out.setdefault(src, set()).add(dst)
+                out.setdefault(dst, set())
+    return out
+
+
+def folder_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Groups of folders that import each other, directly or around a loop, less the named exceptions."""
+    found = cycles(folder_graph(graph))
+    return [c for c in found if frozenset(c) not in FOLDER_CYCLE_EXCEPTIONS]
+
+
 def _layer(module: str) -> str:
     if module == "aw_eval.kernels" or module.startswith("aw_eval.kernels."):
         return "aw_eval.kernels"
@@ -142,6 +180,30 @@ def upward_imports(graph: dict[str, set[str]]) -> list[str]:
 
 def test_no_import_cycles():
     assert cycles(import_graph()) == []
+
+
+def test_no_folders_import_each_other():
+    assert folder_cycles(import_graph()) == []
+
+
+def test_folder_cycles_are_seen(tmp_path):
+    """On a made-up tree: two folders tied by a function-level import and a TYPE_CHECKING import
+    are a folder cycle; a folder importing a package's top-level module that imports it back is not
+    (the top files are the package's own floor)."""
+    files = {
+        "aw/__init__.py": "",
+        "aw/top.py": "from aw.runner.batch import run\n",
+        "aw/runner/__init__.py": "",
+        "aw/runner/batch.py": "from aw.top import x\nfrom aw.agents.a import go\n",
+        "aw/agents/__init__.py": "",
+        "aw/agents/a.py": "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from aw.runner.batch import run\n",
+    }
+    for rel, text in files.items():
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text(text)
+    graph = import_graph(tmp_path)
+    assert folder_graph(graph) == {"aw.runner": {"aw.agents"}, "aw.agents": {"aw.runner"}}
+    assert folder_cycles(graph) == [["aw.agents", "aw.runner"]]
 
 
 def test_no_upward_imports():

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from aw.runner.tools import ToolSession
+from aw.agents.session import ToolSession
 
 
 @dataclass

@@ -19,8 +19,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from aw.agents.base import AgentContext, AgentOutcome, ObjectInfo, aim_camera, begin, inspect_objects, look_around
+from aw.agents.session import ToolSession
 from aw.pose import matrix_to_quat, quat_to_matrix
-from aw.runner.tools import ToolSession
 
 STICK_ASPECT = 2.5
 SAME_LENGTH = 0.15

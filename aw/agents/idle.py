@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from aw.agents.base import AgentContext, AgentOutcome, begin, inspect_objects, look_around
-from aw.runner.tools import ToolSession
+from aw.agents.session import ToolSession
 
 
 async def run(tools: ToolSession, ctx: AgentContext) -> AgentOutcome:

@@ -19,9 +19,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from aw.agents.base import AgentContext, AgentOutcome, aim_camera, begin, inspect_objects
+from aw.agents.session import ToolSession
 from aw.formats import read_targets
 from aw.pose import apply_pose, matrix_to_quat, quat_to_matrix
-from aw.runner.tools import ToolSession
 
 TRANSLATION_PER_LEVEL = 0.05  # times the largest part's bounding-box diagonal
 ROTATION_DEG_PER_LEVEL = 6.0

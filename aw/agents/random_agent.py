@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 
 from aw.agents.base import AgentContext, AgentOutcome, begin, inspect_objects, object_ids
+from aw.agents.session import ToolSession
 from aw.pose import matrix_from_xyz_sequence, matrix_to_quat
-from aw.runner.tools import ToolSession
 
 
 def _vec(rng: np.random.Generator, scale: float) -> list[float]:

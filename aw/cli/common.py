@@ -3,7 +3,7 @@
 - Help is plain text (no markup); every flag has a help line.
 - ``--overwrite`` is the only replace-existing flag (``--force`` / ``--fresh`` are accepted,
   hidden, for old scripts).
-- ``--jobs J`` defaults to the number of CPU cores this process may use (:func:`default_jobs`).
+- ``--jobs J`` defaults to the number of CPU cores this process may use (:func:`aw.cores.available_cores`).
 - Exit status 2: a usage error (bad flag or value, a path that cannot be used), said before any
   work starts; 1: a failure while working (including a run in which every episode failed);
   130: interrupted. Errors are one line, ``PROG: error: ...``, never a traceback.
@@ -19,6 +19,8 @@ import textwrap
 from collections.abc import Callable
 from pathlib import Path
 
+from aw.cores import available_cores
+
 __all__ = [
     "EXIT_OK",
     "EXIT_FAILURE",
@@ -32,7 +34,6 @@ __all__ = [
     "add_hidden_alias",
     "add_jobs",
     "add_no_progress",
-    "default_jobs",
     "positive_int",
     "positive_float",
     "nonnegative_float",
@@ -112,14 +113,6 @@ def add_overwrite(p: argparse.ArgumentParser, what: str) -> None:
     add_hidden_alias(p, "--force", "--fresh", dest="overwrite", action="store_true")
 
 
-def default_jobs() -> int:
-    """The CPU cores this process may run on (the affinity mask where the OS has one)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
-
-
 def positive_int(name: str) -> Callable[[str], int]:
     def parse(text: str) -> int:
         try:
@@ -159,9 +152,9 @@ def add_jobs(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument(
         "--jobs",
         type=positive_int("--jobs"),
-        default=default_jobs(),
+        default=available_cores(),
         metavar="J",
-        help=f"{what} in parallel (default: the number of CPU cores, here {default_jobs()})",
+        help=f"{what} in parallel (default: the number of CPU cores, here {available_cores()})",
     )
 
 

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from aw.assembly import AssembledObject
+from aw.cores import available_cores
 from aw.formats import SuiteEntry, SuiteManifest, write_manifest
 from aw.formats.io import staging_dir
 from aw.prepare.build import VariantPlan, prepare_object
@@ -150,13 +151,6 @@ def prepare_output_dir(out: str | Path, force: bool = False) -> Path:
     return out
 
 
-def default_jobs() -> int:
-    """Worker processes by default: the CPU cores this process may use (the CLI's one rule)."""
-    from aw.cli.common import default_jobs as cores
-
-    return cores()
-
-
 def build_suite(
     specs: Sequence[ObjectSpec],
     out: str | Path,
@@ -224,7 +218,7 @@ def _build_into(
     if len(plans) != len(specs):
         raise ValueError("variants must be one plan or one per spec")
     settings = [_Settings(str(out), seed, plan, tuple(image_size), tuple(manual_size), protocol) for plan in plans]
-    jobs = default_jobs() if jobs is None else max(1, int(jobs))
+    jobs = available_cores() if jobs is None else max(1, int(jobs))
     needs_render = any(c != "none" for s in specs for c in s.conditions)
     if needs_render:
         from aw.render_platform import select_platform

@@ -146,7 +146,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--skip-check", action="store_true", help="with --harness: start the batch without the harness check"
     )
     add_no_progress(p)
-    from aw.refine.cli import add_refiner_arguments
+    from aw.runner.refiner_cli import add_refiner_arguments
 
     add_refiner_arguments(p)
     return p
@@ -245,7 +245,7 @@ def _batch_config(args: argparse.Namespace) -> BatchConfig:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from aw.refine.cli import run_refiner_command, wants_refiner
+    from aw.runner.refiner_cli import run_refiner_command, wants_refiner
 
     if not (args.agent or args.harness or wants_refiner(args)):
         raise UsageError("give --agent NAME, --harness NAME or --refiner NAME")

@@ -68,7 +68,7 @@ async def run_episode(spec: EpisodeSpec) -> EpisodeResult:
 
     from aw.agents import AGENTS
     from aw.agents.base import AgentContext
-    from aw.runner.tools import ServerHung, ToolFailed, ToolSession
+    from aw.agents.session import ServerHung, ToolFailed, ToolSession
 
     agent = AGENTS[spec.agent]
     ctx = AgentContext(

@@ -23,7 +23,7 @@ from aw.formats.suite import suite_paths
 from aw.meshes import load_task_meshes
 from aw.prepare.official_protocol import fracture_samples
 from aw.refine.runs import fracture_identity
-from aw.refine.study import ARMS, STUDY_FILE
+from aw.runner.refinement_study import ARMS, STUDY_FILE
 from aw_eval.fracture import SEED, fracture_metrics_from_samples
 
 __all__ = ["ARM_LABELS", "PAIRS", "TOLERANCE", "paired_changes", "refinement_study"]

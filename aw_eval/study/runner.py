@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from aw.cli.common import plural
+from aw.cores import available_cores
 from aw.formats import FormatError, read_manifest, read_run_info
 from aw.formats.suite import suite_paths
 from aw.progress import warnings_in_one_line
@@ -31,7 +32,7 @@ from aw_eval.study.model import STATUS_MISSING, RunScore
 from aw_eval.study.table import RunRecord, Study
 from aw_eval.workers import stop_pool, watch_parent
 
-__all__ = ["StudyError", "ScoringFailed", "Coverage", "discover_runs", "score_study", "ScoreStats", "default_jobs"]
+__all__ = ["StudyError", "ScoringFailed", "Coverage", "discover_runs", "score_study", "ScoreStats"]
 
 
 class StudyError(Exception):
@@ -58,12 +59,6 @@ class ScoreStats:
     seconds_checkpoints: float = 0.0
     seconds_final: float = 0.0
     coverage: Coverage | None = None  # how the runs found match the suite
-
-
-def default_jobs() -> int:
-    from aw.cli.common import default_jobs as cores
-
-    return cores()
 
 
 def shape_family(task_dir: Path) -> str:
@@ -369,7 +364,7 @@ def score_study(
             )
     jobs = schedule_jobs(jobs, {e.task_id: e.n_parts for e in entries})
     stats.tasks_dispatched = len(jobs)
-    outputs, stats.executor, close = _run_jobs(jobs, scheduler=scheduler, n_jobs=n_jobs or default_jobs())
+    outputs, stats.executor, close = _run_jobs(jobs, scheduler=scheduler, n_jobs=n_jobs or available_cores())
     if log and jobs:
         log(
             f"scoring {plural(sum(len(j.runs) for j in jobs), 'run')} of {plural(len(jobs), 'task')} ({stats.executor}); "

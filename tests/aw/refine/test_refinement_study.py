@@ -177,7 +177,7 @@ def test_usage_errors(fracture_suite, argv, message, capsys):
 
 
 def test_refiner_options_keep_words_that_read_as_non_finite_numbers():
-    from aw.refine.cli import _option
+    from aw.runner.refiner_cli import _option
 
     assert _option("behaviour=nan") == ("behaviour", "nan")
     assert _option("mode=inf") == ("mode", "inf")

@@ -124,7 +124,7 @@ def run_refiner_command(args: argparse.Namespace, agent_config) -> int:
             raise UsageError("--refinement-study needs --agent NAME (or --harness) and --refiner/--refiner-command")
         if args.initial_poses is not None:
             raise UsageError("--refinement-study starts from the tasks' layouts; drop --initial-poses")
-        from aw.refine.study import run_study
+        from aw.runner.refinement_study import run_study
 
         agent_cfg = agent_config()  # --system labels the agent's arm; the refiner's is its name
         cfg.system = spec.name
