@@ -59,7 +59,7 @@ def aw_serve_command() -> list[str]:
     found = shutil.which("aw-serve")
     if found:
         return [found]
-    return [sys.executable, "-c", "import sys; from aw_server.cli import main; sys.exit(main())"]
+    return [sys.executable, "-c", "from aw_server.cli import run; run()"]
 
 
 def episode_env() -> dict[str, str]:
