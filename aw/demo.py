@@ -1,6 +1,7 @@
 """aw-demo: the whole loop of the paper on the embedded synthetic benchmark, in one command.
 
-    1. build the synthetic suite (aw-prepare synthetic);
+    1. build the synthetic suite (aw-prepare synthetic): two objects per source by default,
+       every source and condition; --full builds five per source (25 tasks);
     2. run idle, heuristic and the oracle at two noise levels on every task, each episode
        through its own aw-serve over MCP (--jobs at a time);
     3. rescore every trajectory (aw-score: final states by the protocol, exact registration);
@@ -32,13 +33,16 @@ from aw.cli.common import (
 )
 from aw.runner.batch import system_label
 
-DEFAULT_PER_SOURCE = 5
+DEFAULT_PER_SOURCE = 2  # 10 tasks: every source and condition twice, so the intervals have a spread
+FULL_PER_SOURCE = 5  # --full: 25 tasks
 DEFAULT_NOISE = (0.5, 1.5)
 QUICK_DRAWS = ("--bootstrap", "1000", "--permutations", "10000")  # the paper: 10,000 and 100,000
-# Minutes per episode per core, the whole demo included (suite, episodes, scoring, report): the
-# defaults (25 tasks x 4 systems, --jobs 2) took 3 to 10 minutes on the 2-core development
-# machine, and 31 minutes while six other sessions shared it (load average 16).
-MINUTES_PER_EPISODE_CORE = (0.06, 0.2)
+# The whole demo (suite, episodes, scoring, report) on idle cores: a fixed part plus core-seconds
+# per episode (its aw-serve with the renderer, and its share of scoring and of the report). Set
+# from --full's 6.7 minutes on an idle 2-core machine and the CPU seconds of both sizes measured
+# side by side (docs/agents.md): the defaults come to about 2.5 minutes.
+FIXED_SECONDS = 15.0
+SECONDS_PER_EPISODE_CORE = 6.9
 
 
 def _bin(name: str) -> list[str]:
@@ -82,6 +86,11 @@ def summary_from_report(report_md: Path, wanted: tuple[str, ...] = ("Table 1:", 
     return text.strip()[:4000]
 
 
+def expected_minutes(episodes: int, jobs: int) -> float:
+    """About how long the demo takes on an idle machine with ``jobs`` cores."""
+    return (FIXED_SECONDS + SECONDS_PER_EPISODE_CORE * episodes / jobs) / 60.0
+
+
 def plan_line(per_source: int, blocks: str | None, noise_levels: tuple[float, ...], jobs: int) -> str:
     """What the demo is about to do and about how long it takes, said before it starts."""
     from aw.sources.synthetic import BLOCKS
@@ -90,13 +99,12 @@ def plan_line(per_source: int, blocks: str | None, noise_levels: tuple[float, ..
     n_tasks = per_source * sum(len(BLOCKS[b].conditions) for b in names)
     n_systems = len(systems(noise_levels))
     episodes = n_tasks * n_systems
-    lo, hi = (episodes / jobs * m for m in MINUTES_PER_EPISODE_CORE)
-    took = "under a minute" if hi < 1 else f"about {max(1, round(lo))} to {max(2, round(hi))} minutes"
-    basis = "" if (episodes, jobs) == (100, 2) else " (scaled from 3 to 10 minutes with the defaults on 2 cores)"
+    minutes = expected_minutes(episodes, jobs)
+    took = "about a minute" if minutes < 1.5 else f"about {round(minutes)} minutes"
     return (
         f"aw-demo: builds a synthetic suite of {plural(n_tasks, 'task')}, runs {plural(n_systems, 'system')} on "
         f"every task ({plural(episodes, 'episode')} through aw-serve, {jobs} at a time), rescores every "
-        f"trajectory with aw-score and writes the report; expect {took} on {plural(jobs, 'core')}{basis}, "
+        f"trajectory with aw-score and writes the report; expect {took} on {plural(jobs, 'idle core')}, "
         "longer when other work shares the cores"
     )
 
@@ -111,12 +119,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--out", type=Path, default=Path("aw-demo"), metavar="DIR", help="working directory (default ./aw-demo)"
     )
-    p.add_argument(
+    size = p.add_mutually_exclusive_group()
+    size.add_argument(
         "--per-source",
         type=positive_int("--per-source"),
-        default=DEFAULT_PER_SOURCE,
         metavar="N",
-        help=f"objects per benchmark source (default {DEFAULT_PER_SOURCE}; the paper's suite has 20)",
+        help=f"objects per benchmark source (default {DEFAULT_PER_SOURCE}; --full: {FULL_PER_SOURCE}; the paper's "
+        "suite has 20)",
+    )
+    size.add_argument(
+        "--full",
+        action="store_true",
+        help=f"the larger demo: {FULL_PER_SOURCE} objects per source (25 tasks, 100 episodes)",
     )
     add_jobs(p, "objects prepared, episodes and scoring workers")
     p.add_argument(
@@ -141,8 +155,16 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """The command line, with ``per_source`` resolved (``--per-source``, else ``--full``'s or the default)."""
     args = build_parser().parse_args(argv)
+    if args.per_source is None:
+        args.per_source = FULL_PER_SOURCE if args.full else DEFAULT_PER_SOURCE
+    return args
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
     return run_main("aw-demo", lambda: _demo(args))
 
 
@@ -188,6 +210,7 @@ def _demo(args: argparse.Namespace) -> int:
         _run(cmd)
         recipe.write_text(want)
     timings["suite"] = time.monotonic() - t0
+    print(f"  suite ready ({timings['suite']:.0f} s)", flush=True)
 
     sys_list = systems(tuple(args.noise))
     _stage(
@@ -198,11 +221,15 @@ def _demo(args: argparse.Namespace) -> int:
     t0 = time.monotonic()
     problems = []
     for label, agent, noise in sys_list:
+        t_system = time.monotonic()
         res = run_batch(
             BatchConfig(
                 suite_dir=suite, system=label, out_dir=runs, agent=agent, noise=noise, jobs=args.jobs, seed=args.seed
             )
         )
+        endings = ", ".join(f"{k} {v}" for k, v in sorted(res.endings().items())) or "nothing to run"
+        reused = f", {len(res.skipped)} reused" if res.skipped else ""
+        print(f"  {label}: {endings}{reused} ({time.monotonic() - t_system:.0f} s)", flush=True)
         bad = {k: v for k, v in res.endings().items() if k != "finished"}
         if bad:
             problems.append(f"{label}: {bad}")
@@ -234,6 +261,7 @@ def _demo(args: argparse.Namespace) -> int:
         score_cmd += list(QUICK_DRAWS)
     _run(score_cmd)
     timings["scoring"] = time.monotonic() - t0
+    print(f"  scored and reported in {timings['scoring']:.0f} s", flush=True)
 
     _stage(4, total, "summary")
     report_md = report / "report.md"

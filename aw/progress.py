@@ -49,7 +49,7 @@ class LineProgress:
             self._last = now
             self._print(now)
 
-    def set_postfix_str(self, text: str, refresh: bool = True) -> None:  # noqa: ARG002 (tqdm's signature)
+    def set_postfix_str(self, text: str, refresh: bool = True) -> None:  # tqdm's signature
         self.postfix = text
 
     def close(self) -> None:

@@ -250,7 +250,7 @@ class Scorer:
             with self._lock:
                 task.error = f"the task cannot be scored: {exc}"
             return
-        except Exception as exc:  # noqa: BLE001 - said on the page, never retried in a loop
+        except Exception as exc:  # said on the page, never retried in a loop
             with self._lock:
                 task.error = f"the task cannot be scored: {_one_line(exc)}"
             return
@@ -274,7 +274,7 @@ class Scorer:
                 "translation": np.asarray(r.reg_translation, dtype=np.float64),
                 "mode": "fast",
             }
-        except Exception as exc:  # noqa: BLE001 - said on the page, never retried in a loop
+        except Exception as exc:  # said on the page, never retried in a loop
             res = {"error": f"this state could not be scored: {_one_line(exc)}"}
         with self._lock:
             self._states[(task.geometry_key, _state_key(poses))] = res
@@ -293,7 +293,7 @@ class Scorer:
         )
         try:
             out = score_task(job)
-        except Exception as exc:  # noqa: BLE001 - said on the page, never retried in a loop
+        except Exception as exc:  # said on the page, never retried in a loop
             with self._lock:
                 self._failed[(req.rid, key)] = f"the run could not be scored: {_one_line(exc)}"
             return

@@ -42,7 +42,7 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   # pip's own output (150+ lines) goes to a log; the terminal gets a summary, or the log's tail on failure
   log=.venv/install.log
   echo "[install] installing AssemblyWorld and its dependencies into .venv (first time: a few minutes; log: $log)"
-  if ! { .venv/bin/python -m pip install --upgrade pip && .venv/bin/python -m pip install -e ".[test]"; } >"$log" 2>&1; then
+  if ! { .venv/bin/python -m pip install --upgrade pip && .venv/bin/python -m pip install -e ".[test,inspect]"; } >"$log" 2>&1; then
     tail -n 30 "$log" >&2
     echo "[install] ERROR: pip failed; the whole output is in $log" >&2
     exit 1
@@ -51,6 +51,10 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   echo "[install] $(grep '^Successfully installed' "$log" | tail -n 1 | wc -w | awk '{print ($1>2)?$1-2:0}') packages installed or updated; $warnings warning line(s) in $log"
   touch "$stamp"
 fi
+# pip leaves a build by-product, assemblyworld.egg-info, in the repository root; wherever the root is on
+# sys.path (pytest, python -c) it hides the installed dist-info, whose direct_url.json is how Inspect
+# tells an installed package and names its task assemblyworld/assemblyworld
+rm -rf assemblyworld.egg-info
 # numba caches compiled kernels beside their modules; compile them once here, not in every process
 .venv/bin/python -W ignore -c "from aw_eval.kernels import compile_kernels; compile_kernels()" >>.venv/install.log 2>&1 || {
   tail -n 30 .venv/install.log >&2

@@ -7,7 +7,7 @@ bash scripts/install.sh
 
 # ruff formats and lints every Python folder; mypy checks the packages ([tool.mypy] in
 # pyproject.toml; its cache is .mypy_cache/, so a second run takes seconds).
-lint_paths=(aw aw_eval aw_server aw_view tests benchmarks scripts)
+lint_paths=(aw aw_eval aw_server aw_view assemblyworld tests benchmarks scripts)
 .venv/bin/ruff format --check -q "${lint_paths[@]}" || {
   echo "test.sh: error: ruff format: the files above are not formatted (run .venv/bin/ruff format FILES)" >&2; exit 1; }
 .venv/bin/ruff check -q "${lint_paths[@]}" || {

@@ -118,3 +118,85 @@ def test_blocks_run_in_order(tmp_path):
                 f"{b.where}: the ```{b.lang} block failed (exit {proc.returncode})\n{b.code}\n"
                 f"--- stdout ---\n{proc.stdout[-3000:]}\n--- stderr ---\n{proc.stderr[-3000:]}"
             )
+
+
+# The docs describe the present; how things changed, what a figure used to be and which issue
+# asked for it belong in CHANGELOG.md and the commit log.
+HISTORY = re.compile(r"\b(?:was|were)\b|\bissues?\s*#?\d+|\b(?:the|this|that) issue\b|\bissue's\b", re.IGNORECASE)
+BEFORE = re.compile(r"\bbefore\b", re.IGNORECASE)
+# "before" in the sense of an order of steps, never of an earlier state of the project.
+BEFORE_ALLOWED = (
+    "before a batch",
+    "before any ",
+    "before anything",
+    "before and after",
+    "before composing",
+    "before drawing",
+    "before each ",
+    "before it ",
+    "before registration",
+    "before scoring",
+    "before the clock",
+    "before the episode",
+    "before the first",
+    "before the reply",
+    "before writing",
+)
+# Messages of the programs themselves, quoted as they read.
+QUOTED = ("this call was not carried out",)
+PERFORMANCE_MAX_LINES = 250
+
+
+def history_words(text: str) -> list[str]:
+    """The places in ``text`` that speak of the project's past (was, were, an issue, "before"
+    outside ``BEFORE_ALLOWED``), each with 40 characters of context on either side."""
+    flat = re.sub(r"\s+", " ", text)
+    for quote in QUOTED:
+        flat = flat.replace(quote, "")
+    spots = [m.start() for m in HISTORY.finditer(flat)]
+    spots += [m.start() for m in BEFORE.finditer(flat) if not flat[m.start() :].lower().startswith(BEFORE_ALLOWED)]
+    return [flat[max(0, i - 40) : i + 40] for i in sorted(spots)]
+
+
+def test_history_words_are_found():
+    assert history_words("exact is 14x (was 31x against\nthe old reference)") == [
+        "exact is 14x (was 31x against the old reference)"
+    ]
+    assert len(history_words("Targets of issue 24: not met. The issue's target; the issue measured it.")) == 3
+    assert len(history_words("9.3 s before: the graph is built once (as before). Before these fixes it hung.")) == 3
+    assert len(history_words("Workers were killed. Issues #12 and 13.")) == 2
+    assert (
+        history_words("checked before anything runs, before the first episode; commands only a human may issue") == []
+    )
+    assert history_words("its reply says `recording failed: this call was not carried out`") == []
+
+
+def test_docs_state_the_present():
+    bad = [f"{p.relative_to(ROOT)}: ...{spot}..." for p in PAGES for spot in history_words(p.read_text())]
+    assert not bad, "the docs describe the present (history goes to CHANGELOG.md):\n" + "\n".join(bad)
+
+
+def test_every_page_opens_with_what_it_gives():
+    """After the title comes a paragraph of prose (what a user gets, how to use it), not a
+    table, a list, a code block or another heading. The README opens with its two set-up
+    commands (the project's rule), and then such a paragraph."""
+    bad = []
+    for page in PAGES:
+        lines = [line for line in page.read_text().splitlines() if line.strip()]
+        if page.name == "README.md" and lines[1].startswith("`" * 3):
+            end = lines.index("`" * 3, 2)
+            assert end == 4, "README.md opens with exactly two commands"
+            lines = lines[:1] + lines[end + 1 :]
+        if not lines[0].startswith("# ") or lines[1].lstrip().startswith(("#", "|", "`" * 3, "- ", "* ", ">")):
+            bad.append(f"{page.relative_to(ROOT)}: {lines[1][:60]}")
+    assert not bad, "open each page with a title and a paragraph:\n" + "\n".join(bad)
+
+
+def test_performance_page_answers_first_and_stays_short():
+    lines = (ROOT / "docs" / "performance.md").read_text().splitlines()
+    assert len(lines) <= PERFORMANCE_MAX_LINES, (
+        f"docs/performance.md has {len(lines)} lines (at most {PERFORMANCE_MAX_LINES})"
+    )
+    first_screen = lines[:30]
+    for mode in ("| `exact` (numba", "| `fast` (numba", '| `exact`, `backend="jax"`'):
+        assert any(line.startswith(mode) for line in first_screen), f"the first screen gives no row for {mode}"

@@ -1,7 +1,8 @@
-"""The import graph of aw, aw_eval, aw_server and aw_view, read from the source (ast): no cycles
-between modules, none between folders (sub-packages such as aw.runner and aw.agents), and no import
-from a lower layer into a higher one (aw is beneath aw_eval and aw_server; aw_eval's kernels are
-beneath its protocol modules; the viewer, aw_view, is above aw and aw_eval). Imports inside
+"""The import graph of aw, aw_eval, aw_server, aw_view and assemblyworld, read from the source
+(ast): no cycles between modules, none between folders (sub-packages such as aw.runner and
+aw.agents), and no import from a lower layer into a higher one (aw is beneath aw_eval and
+aw_server; aw_eval's kernels are beneath its protocol modules; the viewer, aw_view, is above aw
+and aw_eval; the Inspect task, assemblyworld, above aw and aw_eval too). Imports inside
 functions and under TYPE_CHECKING count: a lazy import is
 still a dependency."""
 
@@ -13,7 +14,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("aw", "aw_eval", "aw_server", "aw_view")
+PACKAGES = ("aw", "aw_eval", "aw_server", "aw_view", "assemblyworld")
 
 
 def _modules(root: Path) -> dict[str, Path]:
@@ -168,6 +169,7 @@ ALLOWED = {
     "aw_eval": {"aw", "aw_eval.kernels"},
     "aw_server": {"aw"},
     "aw_view": {"aw", "aw_eval"},
+    "assemblyworld": {"aw", "aw_eval", "aw_eval.kernels"},
 }
 
 

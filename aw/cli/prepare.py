@@ -148,7 +148,7 @@ def _cmd_folder(args: argparse.Namespace) -> int:
         pile = piled_parts(obj)
         if pile is not None:
             piles.append(
-                f"{f.path}: {pile.reason()}: each part was likely exported centred at its own origin, not where it "
+                f"{f.path}: {pile.reason()}: each part is likely saved centred at its own origin, not where it "
                 "sits in the assembled object, so the target would be a pile on one point"
             )
     if piles and not args.allow_overlap:

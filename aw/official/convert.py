@@ -8,6 +8,7 @@
     SUITE/eval_points/<task_id>.npz     the official evaluation points (1000 per part)
     SUITE/official/<task_id>.episode.zip  the sample's initial episode archive (its world), so
                                         runs recorded on the task export to official archives
+    SUITE/official/package.json         the package's identity: the SHA-256 of its benchmark.json
     RUNS/<system>/<task_id>/trajectory.jsonl, final.json, run.json
 
 The converted suite is for scoring: it has no ``tasks/`` folder (the package holds points, not
@@ -51,11 +52,20 @@ from aw.official.archive import EpisodeArchive, iso_timestamp, parse_timestamp
 from aw.official.episode import PartEpisode, read_part_episode
 from aw.official.eval_points import eval_points_path, write_eval_inputs
 from aw.official.ids import sample_id_from_slug, task_id_for_sample
-from aw.official.package import REFERENCE_CONDITIONS, OfficialPackage
+from aw.official.package import (
+    BENCHMARK_SHA256,
+    EXPECTED_SAMPLES,
+    REFERENCE_CONDITIONS,
+    REPO,
+    OfficialPackage,
+    file_sha256,
+)
 from aw.runlock import RunDirBusy, RunDirLock
 
 __all__ = [
     "initial_archive_path",
+    "package_record_path",
+    "official_benchmark_problem",
     "convert_package",
     "project_camera",
     "end_reason",
@@ -73,6 +83,43 @@ _EXTRA_STATE = "state"  # tool name of a state a call recorded beyond its first
 
 def initial_archive_path(suite_dir: str | Path, task_id: str) -> Path:
     return Path(suite_dir) / "official" / f"{task_id}.episode.zip"
+
+
+def package_record_path(suite_dir: str | Path) -> Path:
+    return Path(suite_dir) / "official" / "package.json"
+
+
+def _write_package_record(pkg: OfficialPackage, out: Path, n_samples: int) -> None:
+    record = {
+        "format": "assemblyworld.official_package",
+        "repo": REPO,
+        "benchmark_sha256": file_sha256(pkg.root / "benchmark.json"),
+        "samples": n_samples,
+    }
+    package_record_path(out).write_bytes(orjson.dumps(record, option=orjson.OPT_INDENT_2) + b"\n")
+
+
+def official_benchmark_problem(suite_dir: str | Path) -> str | None:
+    """None when ``suite_dir`` is the official benchmark: converted (``aw-prepare official``) from
+    the package whose ``benchmark.json`` has the SHA-256 the official loader pins
+    (:data:`aw.official.package.BENCHMARK_SHA256`), with all of its 100 samples; else why not, in
+    a phrase."""
+    path = package_record_path(suite_dir)
+    if not path.is_file():
+        return "it was not converted from the official benchmark package (aw-prepare official PKG)"
+    try:
+        record = orjson.loads(path.read_bytes())
+        digest, n = record["benchmark_sha256"], int(record["samples"])
+    except (OSError, ValueError, TypeError, KeyError):
+        return f"{path} is unreadable"
+    if digest != BENCHMARK_SHA256:
+        return (
+            f"its package's benchmark.json (SHA-256 {str(digest)[:12]}...) is not the official benchmark's "
+            f"({BENCHMARK_SHA256[:12]}...)"
+        )
+    if n != EXPECTED_SAMPLES:
+        return f"it holds {n} of the official benchmark's {EXPECTED_SAMPLES} tasks"
+    return None
 
 
 _SUITE_ITEMS = ("targets", "eval_points", "official", "tasks", "manifest.json")  # manifest.json last: it makes a suite
@@ -130,6 +177,7 @@ def _write_suite(pkg: OfficialPackage, out: Path, chosen: list[tuple[str, str]])
             )
         )
     manifest = SuiteManifest(name=f"official-{pkg.root.name}", generator="aw.official", tasks=entries)
+    _write_package_record(pkg, out, len(entries))
     write_manifest(out, manifest)
     return manifest
 

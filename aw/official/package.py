@@ -43,6 +43,8 @@ from aw.official.ids import sample_slug
 __all__ = [
     "REPO",
     "REVISION",
+    "BENCHMARK_SHA256",
+    "EXPECTED_SAMPLES",
     "BLOCKS",
     "BENCHMARK_EVALUATION",
     "REFERENCE_CONDITIONS",
@@ -53,6 +55,9 @@ __all__ = [
 
 REPO = "AssemblyWorld/AssemblyWorldBench"
 REVISION = "f351f0f6e9f8a314ec7593e847d07a45b776481e"  # the pinned dataset revision (data.py)
+# The official benchmark's identity: the SHA-256 the official loader pins benchmark.json to
+# (assembly-world-bench frozen.json at 22646c9).
+BENCHMARK_SHA256 = "2e45070ffa1d3eafe4f1a127d0df96feda0244c00ea77e2e260b249b551b06c3"
 BLOCKS = ("partnet-none", "partnet-final-image", "ikea-manualbook", "assemblybench-manualbook", "fantastic-breaks-none")
 BENCHMARK_EVALUATION = {
     "protocol": EVALUATION_PROTOCOL,

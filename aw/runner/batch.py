@@ -59,7 +59,7 @@ def aw_serve_command() -> list[str]:
     found = shutil.which("aw-serve")
     if found:
         return [found]
-    return [sys.executable, "-c", "import sys; from aw_server.cli import main; sys.exit(main())"]
+    return [sys.executable, "-c", "from aw_server.cli import run; run()"]
 
 
 def episode_env() -> dict[str, str]:
@@ -332,7 +332,7 @@ def _progress_state(path: Path) -> dict[str, Any] | None:
         return None
 
 
-def _trajectory_facts(run_dir: Path) -> dict[str, Any]:
+def trajectory_facts(run_dir: Path) -> dict[str, Any]:
     """Server-side truth about the episode: call counts, end reason, final poses."""
     path = run_dir / "trajectory.jsonl"
     if not path.is_file():
@@ -353,7 +353,7 @@ def _trajectory_facts(run_dir: Path) -> dict[str, Any]:
     }
 
 
-def _ensure_final(run_dir: Path, facts: dict[str, Any], task_id: str) -> str | None:
+def ensure_final(run_dir: Path, facts: dict[str, Any], task_id: str) -> str | None:
     """Where final.json came from: the server, or (if it was killed before writing it) the last
     state its trajectory recorded. None if there is no record at all."""
     if (run_dir / "final.json").is_file():
@@ -439,8 +439,8 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
         error = f"the agent process died (exit code {sup.returncode}) without a result" + (f":\n{tail}" if tail else "")
     else:
         ended, error = result.ended, result.error
-    facts = _trajectory_facts(ep.run_dir)
-    final_source = _ensure_final(ep.run_dir, facts, ep.task_id)
+    facts = trajectory_facts(ep.run_dir)
+    final_source = ensure_final(ep.run_dir, facts, ep.task_id)
     extra.update(
         {
             "call_counts": facts.get("call_counts", result.call_counts if result else {}),
@@ -502,8 +502,8 @@ def _run_harness_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str]) -> 
     )
     usage = adapter.parse(ep.run_dir / adapter.transcript_name, opts)
     shutil.rmtree(prepared.cwd, ignore_errors=True)
-    facts = _trajectory_facts(ep.run_dir)
-    final_source = _ensure_final(ep.run_dir, facts, ep.task_id)
+    facts = trajectory_facts(ep.run_dir)
+    final_source = ensure_final(ep.run_dir, facts, ep.task_id)
     ended: RunEnded
     error: str | None
     if sup.timed_out:

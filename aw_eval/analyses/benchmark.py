@@ -8,14 +8,16 @@ per-evaluation means over the records that exist.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from aw_eval.stats.design import Design
 from aw_eval.study.table import RunRecord, Study
 
-__all__ = ["quality", "resources", "outcomes", "cell_label", "first_stage"]
+__all__ = ["quality", "overall", "resources", "outcomes", "cell_label", "first_stage"]
 
 _SHORT_SOURCE = {"partnet": "PartNet", "ikea_manual": "IKEA", "assemblybench": "AB", "fantastic_breaks": "FB"}
 _SHORT_COND = {"none": "NR", "image": "IR", "manual": "M"}
@@ -33,6 +35,27 @@ def _nanmean_rows(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
     tot = w.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(tot > 0, np.nansum(np.where(ok, values, 0.0) * w, axis=1) / np.where(tot > 0, tot, 1), np.nan)
+
+
+def _cell_scd(d: Design, scd: np.ndarray) -> np.ndarray:
+    """``(C,)`` mean SCD x1000 of each cell over its scored tasks (``scd: (T,)``, NaN unscored)."""
+    return np.array(
+        [
+            1000 * float(_nanmean_rows(scd[None, d.task_cell == ci], d.task_weight[d.task_cell == ci])[0])
+            for ci in range(len(d.cells))
+        ]
+    )
+
+
+def overall(d: Design, vals: Mapping[str, np.ndarray]) -> dict[str, float]:
+    """Overall (eq. 3) of one system from its per-task values ``vals["pa"|"sr"|"sra"|"scd"]: (T,)``
+    (fractions, 0/1, raw SCD with NaN where unscored): PA, SR, SR^a in percent over all tasks
+    (unscored count 0), SCD x1000 by eq. 3 over the cell means of scored tasks (cells without any
+    are dropped)."""
+    out = {m: 100 * float(d.weights @ np.nan_to_num(vals[m], nan=0.0)) for m in ("pa", "sr", "sra")}
+    cell_w = np.array([d.weights[d.task_cell == ci].sum() for ci in range(len(d.cells))])
+    out["scd"] = float(_nanmean_rows(_cell_scd(d, vals["scd"])[None], cell_w)[0])
+    return out
 
 
 def quality(study: Study) -> dict[str, Any]:
@@ -57,25 +80,20 @@ def quality(study: Study) -> dict[str, Any]:
     }
     for si, name in enumerate(study.systems):
         row: dict[str, Any] = {"cells": [], "sources": {}, "overall": {}}
+        cell_scd = _cell_scd(d, vals["scd"][si])
         for ci in range(len(d.cells)):
-            members = d.task_cell == ci
-            scd = vals["scd"][si, members]
             row["cells"].append(
                 {
                     "pa": 100 * float(cw[ci] @ vals["pa"][si]),
                     "sr": 100 * float(cw[ci] @ vals["sr"][si]),
                     "sra": 100 * float(cw[ci] @ vals["sra"][si]),
-                    "scd": 1000 * float(_nanmean_rows(scd[None], d.task_weight[members])[0]),
-                    "n_scored": int(np.sum(~np.isnan(scd))),
+                    "scd": float(cell_scd[ci]),
+                    "n_scored": int(np.sum(~np.isnan(vals["scd"][si, d.task_cell == ci]))),
                 }
             )
         for k, src in enumerate(d.sources):
             row["sources"][src] = {m: 100 * float(sw[k] @ vals[m][si]) for m in ("pa", "sr", "sra")}
-        row["overall"] = {m: 100 * float(d.weights @ vals[m][si]) for m in ("pa", "sr", "sra")}
-        # SCD Overall: eq. 3 over the cell means of scored attempts (cells without any are dropped)
-        cell_scd = np.array([c["scd"] for c in row["cells"]])
-        cell_w = np.array([d.weights[d.task_cell == ci].sum() for ci in range(len(d.cells))])
-        row["overall"]["scd"] = float(_nanmean_rows(cell_scd[None], cell_w)[0])
+        row["overall"] = overall(d, {m: v[si] for m, v in vals.items()})
         row["n_scored"] = int(np.sum(~np.isnan(vals["scd"][si])))
         row["n_tasks"] = d.n_tasks
         out["systems"][name] = row
@@ -106,6 +124,17 @@ def _own_resources(rec: RunRecord) -> dict[str, tuple[float, str] | None]:
             out["tokens_m"] = (tok / 1e6, "run.json")
     if info is not None and info.cost_usd is not None:
         out["cost_usd"] = (info.cost_usd, "run.json")
+    return out
+
+
+def _refused_calls(study: Study, system: str) -> list[int]:
+    """Per run that says it: the calls its harness refused before they reached aw-serve
+    (``run.json`` ``extra.refused_calls``)."""
+    out = []
+    for tid in study.original_ids:
+        info = study.record(system, tid).info
+        if info is not None and isinstance(info.extra.get("refused_calls"), int):
+            out.append(int(info.extra["refused_calls"]))
     return out
 
 
@@ -164,6 +193,9 @@ def resources(study: Study) -> dict[str, Any]:
     (a composed refinement arm) counts both stages: ``composed`` says how many figures of a mean
     add an earlier stage, ``stages_left_out`` how many leave one out (its run is not in this
     study, or the start was a poses file); each key appears only where it is not zero.
+    ``mcp_calls.refused_by_harness`` sums the calls that run.json says the harness refused before
+    they reached aw-serve (Inspect checks arguments itself; they are part of ``mcp_calls``), over
+    the runs that say it.
     """
     out = {}
     for s in study.systems:
@@ -190,6 +222,8 @@ def resources(study: Study) -> dict[str, Any]:
                 row[k]["stages_left_out"] = left_out[k]
         for k, src in srcs.items():
             row[k]["from_trajectory"] = int(sum(1 for x in src if x == "trajectory"))
+        refused = _refused_calls(study, s)
+        row["mcp_calls"]["refused_by_harness"] = {"total": int(sum(refused)), "n": len(refused)}
         out[s] = row
     return out
 

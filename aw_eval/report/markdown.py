@@ -13,6 +13,7 @@ from aw.cli.common import plural
 from aw_eval.analyses.failures import CLASSES, HIGH_PA
 from aw_eval.report.fmt import DASH, bold_best, ci, fixed, md_table, paper, pval, signed, threshold_label
 from aw_eval.report.heaps import far_from_assembled_note
+from aw_eval.report.published import MARK as PUBLISHED_MARK
 from aw_eval.report.refinement import REFINEMENT_TITLE, refinement_headline, render_refinement
 from aw_eval.report.results import protocol_of
 
@@ -193,6 +194,13 @@ def _resource_note(doc: dict[str, Any], systems: list[str]) -> str:
             f"{', '.join(short)}: resources leave out the stage that made their start states (a run outside this "
             "study, or a poses file); never bolded."
         )
+    refused = [(s, res[s]["mcp_calls"].get("refused_by_harness", {})) for s in systems]
+    said = [f"{s} {r['total']} in {plural(r['n'], 'run')}" for s, r in refused if r.get("n")]
+    if said:
+        out.append(
+            "MCP calls include the calls the harness refused before they reached aw-serve (Inspect checks "
+            f"arguments against the tools' schemas itself; Claude Code and Codex pass them on): {'; '.join(said)}."
+        )
     return " ".join(out)
 
 
@@ -231,12 +239,62 @@ def _table1(doc: dict[str, Any]) -> str:
             whole = [a and not res[s][k].get("stages_left_out") for a, s in zip(achieved, systems, strict=True)]
             text_cols.append(bold_best(txt, col, higher=False, eligible=whole))
     rows = [[system_label(doc, s)] + [tc[i] for tc in text_cols] for i, s in enumerate(systems)]
+    rows += _published_table1(doc)
     note = (
         "SR (%) per source and condition (NR: no reference, IR: image, M: manual); Overall by eq. 3 (sources "
         "weighted equally). Resources: mean per run. Bold: best among real systems."
     )
     extra = _resource_note(doc, systems)
-    return md_table(header, rows) + "\n\n" + note + (f" {extra}" if extra else "")
+    return md_table(header, rows) + "\n\n" + note + (f" {extra}" if extra else "") + "\n\n" + _published_note(doc)
+
+
+def _published(doc: dict[str, Any]) -> list[dict[str, Any]]:
+    pub = doc.get("published") or {}
+    return pub.get("systems", []) if pub.get("shown") else []
+
+
+def _published_label(row: dict[str, Any]) -> str:
+    return f"{row['system']} ({row['harness']}; {PUBLISHED_MARK})"
+
+
+def _published_table1(doc: dict[str, Any]) -> list[list[str]]:
+    """The paper's Table 1 rows in this table's columns (a cell the paper does not have: a dash)."""
+    pub = doc.get("published") or {}
+    where = {tuple(c): i for i, c in enumerate(pub.get("cells", []))}
+    rows = []
+    for r in _published(doc):
+        cells = [
+            r["sr_cells"][where[k]] if (k := (c["source"], c["condition"])) in where else None
+            for c in doc["quality"]["cells"]
+        ]
+        rows.append(
+            [_published_label(r)]
+            + [paper(v) for v in cells]
+            + [
+                paper(r["sr"]),
+                fixed(r["time_min"], 2),
+                fixed(r["mcp_calls"], 0),
+                fixed(r["tokens_m"], 2),
+                fixed(r["cost_usd"], 2),
+            ]
+        )
+    return rows
+
+
+def _published_note(doc: dict[str, Any]) -> str:
+    """One line: where the published rows come from, or why they are absent."""
+    pub = doc.get("published")
+    if not pub:
+        return "The paper's eight systems are not shown: this scores.json predates them."
+    if pub["shown"]:
+        return (
+            f"Rows marked '{PUBLISHED_MARK}': the paper's eight systems on the same 100 tasks, as published "
+            f"({pub['source']}); no per-task data is published, so they are in no paired test and never bold."
+        )
+    return (
+        "The paper's eight systems are not shown: they are published for the official benchmark's 100 tasks only, "
+        f"and this suite is not it: {pub['why']}."
+    )
 
 
 def _quality_full(doc: dict[str, Any]) -> str:
@@ -300,6 +358,10 @@ def _overview(doc: dict[str, Any]) -> str:
                 str(oc[s]["errors_timeouts"]),
             ]
         )
+    rows += [
+        [_published_label(r), paper(r["sr"]), ci(r["sr_ci"]), paper(r["pa"]), ci(r["pa_ci"]), str(r["errors_timeouts"])]
+        for r in _published(doc)
+    ]
     return (
         md_table(["System", "SR (%)", "95% CI", "PA (%)", "95% CI", "Errors/timeouts"], rows)
         + f"\n\nSource-weighted quality with pointwise percentile bootstrap intervals ({u['n_draws']:,} draws, seed "

@@ -9,12 +9,12 @@ from pathlib import Path
 from typing import Any
 
 import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from aw.formats.io import atomic_path
 
-from aw.formats.io import atomic_path  # noqa: E402
+matplotlib.use("Agg")  # files only: no display is needed or wanted, even where one exists
 
 __all__ = ["write_plots"]
 

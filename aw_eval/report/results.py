@@ -17,6 +17,7 @@ from aw_eval.analyses.failures import (
     placed_as_recorded,
     placed_parts,
 )
+from aw_eval.report.published import published_section
 from aw_eval.settings import ProtocolSettings
 from aw_eval.study.table import Study
 
@@ -197,5 +198,6 @@ def build_results(
         "categories": analyses.category_results(study),
         "completion": analyses.completion_reports(study),
         "robustness": analyses.robustness(study),
+        "published": published_section(suite_dir),
     }
     return doc

@@ -253,7 +253,7 @@ def _prescore_runs(job: TaskJob, geom, all_ids: list[str], centroids: np.ndarray
                 final_only=st.final_only,
                 trust_final=st.trust_final,
             )
-        except Exception as exc:  # noqa: BLE001 - unreadable here is reported by the run's own scoring
+        except Exception as exc:  # unreadable here is reported by the run's own scoring
             interrupts.reraise_if_interrupted(exc)
             continue
         if st.checkpoint_mode == "exact" and len(ep.ck_poses):
@@ -262,7 +262,7 @@ def _prescore_runs(job: TaskJob, geom, all_ids: list[str], centroids: np.ndarray
             poses.append(ep.final_poses[None])
     try:
         return evaluator.prescore(geom, poses, "exact", st.backend)
-    except Exception as exc:  # noqa: BLE001 - the per-run path reports the failure against its run
+    except Exception as exc:  # the per-run path reports the failure against its run
         interrupts.reraise_if_interrupted(exc)
         return None
 

@@ -6,7 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from aw.demo import plan_line, summary_from_report, systems
+from aw.demo import DEFAULT_PER_SOURCE, FULL_PER_SOURCE, parse_args, plan_line, summary_from_report, systems
 from aw.formats import read_run_info
 
 
@@ -26,11 +26,14 @@ def test_demo_runs_the_whole_loop(tmp_path):
     )
     for n in range(1, 5):
         assert f"[{n}/4]" in proc.stdout
+    # A line on stdout as each stage and each system finishes.
+    assert "  suite ready (" in proc.stdout and "  scored and reported in " in proc.stdout
     labels = [s[0] for s in systems((0.5, 1.5))]
     for label in labels:
         (run_dir,) = [p for p in (out / "runs" / label).iterdir() if p.is_dir()]  # beside aw-run's .aw-batch.json
         assert read_run_info(run_dir / "run.json").ended == "finished"
-        assert label in proc.stdout  # every system is in the printed summary
+        assert f"\n  {label}: finished 1 (" in proc.stdout
+        assert label in proc.stdout.split("[4/4]")[1]  # every system is in the printed summary
     report = out / "report" / "report.md"
     assert report.is_file() and str(report) in proc.stdout
     page = out / "report" / "report.html"
@@ -45,6 +48,7 @@ def test_demo_runs_the_whole_loop(tmp_path):
         timeout=600,
     )
     assert again.returncode == 0 and "reusing the suite" in again.stdout
+    assert "  idle: nothing to run, 1 reused (" in again.stdout
 
 
 def test_summary_is_table_1_with_its_intervals(tmp_path):
@@ -60,14 +64,32 @@ def test_summary_is_table_1_with_its_intervals(tmp_path):
 
 
 def test_the_demo_says_up_front_what_it_does_and_how_long_it_takes():
-    line = plan_line(5, None, (0.5, 1.5), 2)  # the defaults on 2 cores
+    line = plan_line(DEFAULT_PER_SOURCE, None, (0.5, 1.5), 2)  # the defaults on 2 cores
     assert line.startswith(
-        "aw-demo: builds a synthetic suite of 25 tasks, runs 4 systems on every task "
-        "(100 episodes through aw-serve, 2 at a time)"
+        "aw-demo: builds a synthetic suite of 10 tasks, runs 4 systems on every task "
+        "(40 episodes through aw-serve, 2 at a time)"
     )
-    assert line.endswith("expect about 3 to 10 minutes on 2 cores, longer when other work shares the cores")
-    assert plan_line(1, "fantastic_breaks", (0.5, 1.5), 2).endswith(
-        "expect under a minute on 2 cores (scaled from 3 to 10 minutes with the defaults on 2 cores), longer when "
-        "other work shares the cores"
-    )
+    assert line.endswith("expect about 3 minutes on 2 idle cores, longer when other work shares the cores")
+    full = plan_line(FULL_PER_SOURCE, None, (0.5, 1.5), 2)
+    assert "of 25 tasks" in full and "(100 episodes" in full and "expect about 6 minutes on 2 idle cores" in full
+    assert "expect about 5 minutes on 1 idle core," in plan_line(DEFAULT_PER_SOURCE, None, (0.5, 1.5), 1)
+    assert "expect about a minute on 2 idle cores" in plan_line(1, "fantastic_breaks", (0.5, 1.5), 2)
     assert "of 6 tasks, runs 3 systems" in plan_line(2, "partnet,ikea_manual,nonsense", (0.5,), 16)
+
+
+def test_defaults_and_full_choose_the_suite_size():
+    assert parse_args([]).per_source == DEFAULT_PER_SOURCE == 2
+    assert parse_args(["--full"]).per_source == FULL_PER_SOURCE == 5
+    assert parse_args(["--per-source", "3"]).per_source == 3
+
+
+def test_full_and_per_source_together_are_a_usage_error(tmp_path):
+    demo = Path(sys.executable).with_name("aw-demo")
+    proc = subprocess.run(
+        [str(demo), "--full", "--per-source", "3", "--out", str(tmp_path / "d")],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 2 and "not allowed with argument" in proc.stderr
+    assert not (tmp_path / "d").exists()

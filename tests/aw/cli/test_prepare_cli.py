@@ -239,7 +239,7 @@ def test_folder_refuses_parts_saved_at_their_own_origins_unless_allowed(tmp_path
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1] == (
         f"aw-prepare: error: {src / 'stool'}: the bounding boxes of its parts mostly overlap (3 of 3 part pairs "
-        "share most of the smaller part's box): each part was likely exported centred at its own origin, not where "
+        "share most of the smaller part's box): each part is likely saved centred at its own origin, not where "
         "it sits in the assembled object, so the target would be a pile on one point; export the parts in the "
         "assembled frame, or pass --allow-overlap if they truly nest"
     )

@@ -15,6 +15,7 @@ import pytest
 
 from aw.formats import read_task
 from aw.refine.base import RefinerError
+from aw.refine.exchange import write_request
 from aw.refine.plugins import RefinerSpec, available, command_label, resolve, run_refiner
 from aw.refine.runs import build_request
 
@@ -51,7 +52,7 @@ def test_command_without_placeholders_gets_both_files_appended(request_, tmp_pat
     assert run_refiner(spec, _with(request_, behaviour="shift"), tmp_path, 60).shape == (2, 7)
 
 
-R = "refiner scripted_refiner: "
+R = "refiner scripted_refiner.py: "
 RESULT = R + "result file refine-result.json: "
 
 
@@ -80,12 +81,12 @@ def test_bad_external_answers_are_named(request_, tmp_path, behaviour, start, en
 PEAK = """
 import resource, sys
 from pathlib import Path
-from aw.formats import read_task
 from aw.refine.base import RefinerError
+from aw.refine.exchange import write_request
+from aw.refine.exchange import read_request
 from aw.refine.plugins import RefinerSpec, run_refiner
-from aw.refine.runs import build_request
-suite, script, work = map(Path, sys.argv[1:4])
-request = build_request(read_task(suite / "tasks" / "frac_cylinder_1"), suite, None)
+request_file, script, work = map(Path, sys.argv[1:4])
+request = read_request(request_file)
 spec = RefinerSpec("scripted", (sys.executable, str(script), "{request}", "{result}"))
 for behaviour in ("big", "loud"):
     request.options = {"behaviour": behaviour}
@@ -99,9 +100,14 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024)
 
 def test_a_300_mib_answer_or_log_is_never_read_whole(fracture_suite, tmp_path):
     """The result file is refused by its size and only the log's tail is read: the parent's peak
-    memory stays far below the 300 MiB either file holds (reading either whole takes over 300 MB)."""
+    memory stays far below the 300 MiB either file holds (reading either whole takes over 300 MB).
+    The request is built beforehand, so that no kernel compiles in the measured process."""
+    request_file = tmp_path / "request.json"
+    write_request(
+        request_file, build_request(read_task(fracture_suite / "tasks" / "frac_cylinder_1"), fracture_suite, None)
+    )
     proc = subprocess.run(
-        [sys.executable, "-c", PEAK, str(fracture_suite), str(SCRIPT), str(tmp_path)],
+        [sys.executable, "-c", PEAK, str(request_file), str(SCRIPT), str(tmp_path)],
         capture_output=True,
         text=True,
         timeout=900,

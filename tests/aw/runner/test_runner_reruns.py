@@ -1,10 +1,10 @@
-"""Reruns retry what failed: a run that ended in an error (here a bad --initial-poses file) is run
-again by the same aw-run command once the input is fixed, which says so; --keep-failed keeps it
-(and says that it failed); a finished run is kept."""
+"""Reruns retry what failed: a run that ended in an error (here a part mesh that cannot be read)
+is run again by the same aw-run command once the input is fixed, which says so; --keep-failed
+keeps it (and says that it failed); a finished run is kept."""
 
 from __future__ import annotations
 
-import json
+from tiny_suite import make_tiny_suite  # tests/aw/runner, on the path from conftest.py
 
 from aw.formats import read_run_info, read_task
 from aw.formats.suite import suite_paths
@@ -13,20 +13,14 @@ from aw.runner.cli import main as aw_run
 TASK = "tiny_shelf_none"
 
 
-def _poses_file(path, task_id: str, poses: dict) -> None:
-    path.write_text(
-        json.dumps({"format": "assemblyworld.poses", "format_version": 1, "task_id": task_id, "poses": poses})
-    )
-
-
-def test_a_failed_run_is_retried_once_its_input_is_fixed(tiny_suite, tmp_path, capsys):
-    ids = read_task(suite_paths(tiny_suite, TASK)[0]).part_ids
-    starts, out = tmp_path / "starts", tmp_path / "runs"
-    starts.mkdir()
-    good = {pid: [0.1 * k, -0.2, 0.05 * k, 1.0, 0.0, 0.0, 0.0] for k, pid in enumerate(ids)}
-    _poses_file(starts / f"{TASK}.json", TASK, {ids[0]: good[ids[0]]})  # names one part of several
-    argv = [str(tiny_suite), "--agent", "idle", "--tasks", TASK, "--initial-poses", str(starts)]
-    argv += ["--out", str(out), "--no-progress", "--jobs", "1"]
+def test_a_failed_run_is_retried_once_its_input_is_fixed(tmp_path, capsys):
+    suite = make_tiny_suite(tmp_path / "suite")  # its own copy: a part of it is broken below
+    task_dir = suite_paths(suite, TASK)[0]
+    mesh = task_dir / read_task(task_dir).parts[0].mesh
+    good_mesh = mesh.read_bytes()
+    mesh.write_bytes(b"not a mesh\n")  # the episode's server refuses the task
+    out = tmp_path / "runs"
+    argv = [str(suite), "--agent", "idle", "--tasks", TASK, "--out", str(out), "--no-progress", "--jobs", "1"]
     run_json = out / "idle" / TASK / "run.json"
 
     assert aw_run(argv) == 1
@@ -41,7 +35,7 @@ def test_a_failed_run_is_retried_once_its_input_is_fixed(tiny_suite, tmp_path, c
     assert f"  {TASK}: kept (--keep-failed); it failed: {failed.failure}" in said.out
     assert read_run_info(run_json) == failed
 
-    _poses_file(starts / f"{TASK}.json", TASK, good)  # the input fixed: the same command retries
+    mesh.write_bytes(good_mesh)  # the input fixed: the same command retries
     assert aw_run(argv) == 0
     said = capsys.readouterr()
     assert f"aw-run: retrying 1 run that failed: {TASK} ({failed.failure})" in said.err
