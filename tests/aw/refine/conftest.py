@@ -20,5 +20,5 @@ def fracture_suite(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def break_suite(tmp_path_factory) -> Path:
     """Objects of the refiners' break families: two planar cuts and a 3-piece break."""
-    objects = (("breaks_planar/0", 0), ("breaks_planar/2", 0), ("breaks_pieces/3", 0))
+    objects = (("breaks_planar/0", 0), ("breaks_planar/2", 0), ("breaks_pieces/0", 0))
     return make_fracture_suite(tmp_path_factory.mktemp("breaks") / "suite", objects)

@@ -50,7 +50,7 @@ def test_global_search_assembles_a_planar_cut_within_2_degrees(break_suite, tid)
 
 
 def test_a_three_piece_break_has_every_piece_placed(break_suite):
-    task, target = _task(break_suite, "frac_breaks_pieces_3_0")
+    task, target = _task(break_suite, "frac_breaks_pieces_0_0")
     request = build_request(task, break_suite, None)
     assert len(request.part_ids) == 3
     m = _metrics(request, refine(request), target)
