@@ -33,16 +33,16 @@ from aw.cli.common import (
 )
 from aw.runner.batch import system_label
 
-DEFAULT_PER_SOURCE = 2  # 10 tasks: every source and condition twice, so the intervals have a spread
+DEFAULT_PER_SOURCE = 1  # 5 tasks: every source and condition once (--per-source 2: intervals with a spread)
 FULL_PER_SOURCE = 5  # --full: 25 tasks
 DEFAULT_NOISE = (0.5, 1.5)
 QUICK_DRAWS = ("--bootstrap", "1000", "--permutations", "10000")  # the paper: 10,000 and 100,000
 # The whole demo (suite, episodes, scoring, report) on idle cores: a fixed part plus core-seconds
-# per episode (its aw-serve with the renderer, and its share of scoring and of the report). Set
-# from --full's 6.7 minutes on an idle 2-core machine and the CPU seconds of both sizes measured
-# side by side (docs/agents.md): the defaults come to about 2.5 minutes.
-FIXED_SECONDS = 15.0
-SECONDS_PER_EPISODE_CORE = 6.9
+# per episode (its aw-serve with the renderer, and its share of scoring and of the report), fitted
+# to `time aw-demo` on an idle 2-core machine: 1.5 minutes for the defaults (20 episodes), 3.4 for
+# --per-source 2 (40), 6.7 for --full (100) (docs/agents.md).
+FIXED_SECONDS = 13.0
+SECONDS_PER_EPISODE_CORE = 7.8
 
 
 def _bin(name: str) -> list[str]:
@@ -268,6 +268,11 @@ def _demo(args: argparse.Namespace) -> int:
     if report_md.is_file():
         print(summary_from_report(report_md))
     print(f"\nscores: final states by the paper's protocol (exact registration); intervals from {draws}.")
+    if args.per_source == 1:
+        print(
+            "one object per source: the bootstrap resamples objects within a source, so the intervals "
+            "have no width here; --per-source 2 (about 3.5 minutes) or --full gives intervals worth reading."
+        )
     print("\noracle-* systems read the hidden targets: calibration upper bounds, never results.")
     print(f"\nreport: {report_md}")
     if (report / "report.html").is_file():

@@ -66,19 +66,19 @@ def test_summary_is_table_1_with_its_intervals(tmp_path):
 def test_the_demo_says_up_front_what_it_does_and_how_long_it_takes():
     line = plan_line(DEFAULT_PER_SOURCE, None, (0.5, 1.5), 2)  # the defaults on 2 cores
     assert line.startswith(
-        "aw-demo: builds a synthetic suite of 10 tasks, runs 4 systems on every task "
-        "(40 episodes through aw-serve, 2 at a time)"
+        "aw-demo: builds a synthetic suite of 5 tasks, runs 4 systems on every task "
+        "(20 episodes through aw-serve, 2 at a time)"
     )
-    assert line.endswith("expect about 3 minutes on 2 idle cores, longer when other work shares the cores")
+    assert line.endswith("expect about 2 minutes on 2 idle cores, longer when other work shares the cores")
     full = plan_line(FULL_PER_SOURCE, None, (0.5, 1.5), 2)
-    assert "of 25 tasks" in full and "(100 episodes" in full and "expect about 6 minutes on 2 idle cores" in full
-    assert "expect about 5 minutes on 1 idle core," in plan_line(DEFAULT_PER_SOURCE, None, (0.5, 1.5), 1)
+    assert "of 25 tasks" in full and "(100 episodes" in full and "expect about 7 minutes on 2 idle cores" in full
+    assert "expect about 3 minutes on 1 idle core," in plan_line(DEFAULT_PER_SOURCE, None, (0.5, 1.5), 1)
     assert "expect about a minute on 2 idle cores" in plan_line(1, "fantastic_breaks", (0.5, 1.5), 2)
     assert "of 6 tasks, runs 3 systems" in plan_line(2, "partnet,ikea_manual,nonsense", (0.5,), 16)
 
 
 def test_defaults_and_full_choose_the_suite_size():
-    assert parse_args([]).per_source == DEFAULT_PER_SOURCE == 2
+    assert parse_args([]).per_source == DEFAULT_PER_SOURCE == 1
     assert parse_args(["--full"]).per_source == FULL_PER_SOURCE == 5
     assert parse_args(["--per-source", "3"]).per_source == 3
 
