@@ -71,6 +71,15 @@ def make_study(root: Path, n_parts: tuple[int, ...] = (4, 5)) -> tuple[Path, Pat
     return suite, root / "runs"
 
 
+def _alive(pid: int, started: float) -> bool:
+    """Whether the process ``pid`` that started at ``started`` still runs (not a zombie)."""
+    try:
+        p = psutil.Process(pid)
+        return p.create_time() == started and p.status() != psutil.STATUS_ZOMBIE
+    except psutil.Error:
+        return False
+
+
 def snapshot(out: Path) -> dict[str, str]:
     """``relative path -> sha256`` of every output file (the cache and the lock file are not outputs)."""
     files = {}
@@ -174,13 +183,13 @@ class Sweep:
 
         reader = threading.Thread(target=read, daemon=True)
         reader.start()
-        family: set[int] = set()
+        family: dict[int, float] = {}  # pid -> start time: a pid the system reuses is not a survivor
         while not seen.is_set() and proc.poll() is None:  # the anchor line, or the start
             seen.wait(0.02)
         deadline = time.monotonic() + delay
         while time.monotonic() < deadline and proc.poll() is None:
             try:  # every process of the call, to check that none outlives it
-                family |= {c.pid for c in psutil.Process(proc.pid).children(recursive=True)}
+                family |= {c.pid: c.create_time() for c in psutil.Process(proc.pid).children(recursive=True)}
             except psutil.Error:
                 pass
             time.sleep(0.02)
@@ -200,7 +209,7 @@ class Sweep:
         reader.join(10)
         err = "".join(lines)
         time.sleep(0.5)
-        survivors = [p for p in family if psutil.pid_exists(p) and psutil.Process(p).status() != psutil.STATUS_ZOMBIE]
+        survivors = [pid for pid, started in family.items() if _alive(pid, started)]
         after = snapshot(out)
         # complete outputs of the same study: the same numbers, and the same bytes where no time is recorded
         complete = numbers(out) == self.reference and all(after.get(f) == before.get(f) for f in _TIMELESS)

@@ -41,6 +41,7 @@ POINTS = interrupt_sweep.plan(4, seed=0, variants=[["--jobs", "1"], ["--jobs", "
 def test_an_interrupt_leaves_the_previous_report_as_it_was(sweep, index):
     point = POINTS[index]
     row = sweep.trial(index, point)
+    print(row)  # shown whole when the test fails (an assertion message is cut short)
     assert row["ok"], row
     assert row["exit"] in (0, 128 + point.signal), row
 

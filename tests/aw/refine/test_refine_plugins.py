@@ -79,29 +79,42 @@ def test_bad_external_answers_are_named(request_, tmp_path, behaviour, start, en
 
 
 PEAK = """
-import resource, sys
+import sys, threading
 from pathlib import Path
+import psutil
 from aw.refine.base import RefinerError
-from aw.refine.exchange import write_request
 from aw.refine.exchange import read_request
 from aw.refine.plugins import RefinerSpec, run_refiner
 request_file, script, work = map(Path, sys.argv[1:4])
 request = read_request(request_file)
 spec = RefinerSpec("scripted", (sys.executable, str(script), "{request}", "{result}"))
+me = psutil.Process()
+base = peak = me.memory_info().rss
+done = threading.Event()
+def watch():
+    global peak
+    while not done.is_set():
+        peak = max(peak, me.memory_info().rss)
+        done.wait(0.002)
+watcher = threading.Thread(target=watch)
+watcher.start()
 for behaviour in ("big", "loud"):
     request.options = {"behaviour": behaviour}
     try:
         run_refiner(spec, request, work / behaviour, 300)  # a loaded machine: time is not the point
     except RefinerError as exc:
         print(exc)
-print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss // 1024)
+done.set()
+watcher.join()
+print((peak - base) >> 20)
 """
 
 
 def test_a_300_mib_answer_or_log_is_never_read_whole(fracture_suite, tmp_path):
-    """The result file is refused by its size and only the log's tail is read: the parent's peak
-    memory stays far below the 300 MiB either file holds (reading either whole takes over 300 MB).
-    The request is built beforehand, so that no kernel compiles in the measured process."""
+    """The result file is refused by its size and only the log's tail is read: while the refiner
+    runs and answers, the parent's memory grows far less than the 300 MiB either file holds
+    (reading either whole takes over 300 MB). Sampled every few milliseconds from the request
+    read onwards, so that imports and compiled kernels do not count."""
     request_file = tmp_path / "request.json"
     write_request(
         request_file, build_request(read_task(fracture_suite / "tasks" / "frac_cylinder_1"), fracture_suite, None)
@@ -113,10 +126,10 @@ def test_a_300_mib_answer_or_log_is_never_read_whole(fracture_suite, tmp_path):
         timeout=900,
     )
     assert proc.returncode == 0, proc.stderr
-    big, loud, peak_mb = proc.stdout.strip().splitlines()
+    big, loud, growth_mb = proc.stdout.strip().splitlines()
     assert big.endswith("314572800 bytes, over the limit of 16777216 for a JSON file"), big
     assert loud == "refiner scripted: exited with code 3: scripted refiner: out of patience", loud
-    assert int(peak_mb) < 250, f"peak {peak_mb} MB"
+    assert int(growth_mb) < 100, f"grew by {growth_mb} MiB"
 
 
 def test_a_refiner_past_its_time_limit_is_killed_and_named(request_, tmp_path):
