@@ -26,7 +26,7 @@ from inspect_ai.model import ChatMessage, ChatMessageAssistant, ChatMessageTool,
 
 from aw.formats import RunInfo, write_run_info
 from aw.formats.run import TokenUsage
-from aw.runner.batch import ensure_final, trajectory_facts
+from aw.runner.batch import recorded_episode
 
 __all__ = ["EpisodeEnd", "refused_calls", "usage_by_model", "token_usage", "episode_run_info", "write_episode_run_info"]
 
@@ -99,18 +99,12 @@ def episode_run_info(
     settings: dict[str, Any],
 ) -> RunInfo:
     """The ``run.json`` of an episode recorded in ``run_dir`` (see the module doc)."""
-    facts = trajectory_facts(run_dir)
-    final_source = ensure_final(run_dir, facts, task_id)
+    facts, recorded_extra = recorded_episode(run_dir, task_id)
     refused = refused_calls(messages)
     tokens, cost = token_usage(usage)
     recorded = facts.get("n_calls")
     extra: dict[str, Any] = {
-        "call_counts": facts.get("call_counts", {}),
-        "tool_errors": facts.get("tool_errors"),
-        "edits": facts.get("edits"),
-        "server_end": facts.get("server_end"),
-        "episode_seconds": facts.get("episode_seconds"),
-        "final_source": final_source,
+        **recorded_extra,
         "recorded_calls": recorded,
         "refused_calls": len(refused),
         "refused": refused,
@@ -120,8 +114,6 @@ def episode_run_info(
     }
     if end.server_stderr:
         extra["server_stderr_tail"] = end.server_stderr[-12:]
-    if "trajectory_problem" in facts:
-        extra["trajectory_problem"] = facts["trajectory_problem"]
     return RunInfo(
         system=system,
         task_id=task_id,

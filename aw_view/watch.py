@@ -285,6 +285,13 @@ class Watch:
         ep.run_info = (stamp, info)
         return info
 
+    @staticmethod
+    def _detail(ep: Episode) -> TrajectoryFollower:
+        """The follower of ``ep``'s whole recording, made on first use (hold ``ep.lock``)."""
+        if ep.detail is None:
+            ep.detail = TrajectoryFollower(ep.trajectory_path, keep_calls=True)
+        return ep.detail
+
     def _poll(self, follower: TrajectoryFollower) -> str | None:
         """Read what was appended; the problem in one line, or None."""
         try:
@@ -415,11 +422,10 @@ class Watch:
                     old.detail = None
         row = self._row(ep, kernel_flocks())
         with ep.lock:
-            if ep.detail is None:
-                ep.detail = TrajectoryFollower(ep.trajectory_path, keep_calls=True)
-            problem = self._poll(ep.detail)
-            traj = ep.detail.trajectory
-            generation = ep.detail.generation
+            detail = self._detail(ep)
+            problem = self._poll(detail)
+            traj = detail.trajectory
+            generation = detail.generation
             out: dict[str, Any] = {"row": row, "generation": generation, "problem": problem}
             if traj is None:
                 out["n_calls"] = 0
@@ -482,10 +488,9 @@ class Watch:
             return None
         row = self._row(ep, kernel_flocks())
         with ep.lock:
-            if ep.detail is None:
-                ep.detail = TrajectoryFollower(ep.trajectory_path, keep_calls=True)
-            problem = self._poll(ep.detail)
-            traj = ep.detail.trajectory
+            detail = self._detail(ep)
+            problem = self._poll(detail)
+            traj = detail.trajectory
             if traj is None or row["status"] == "unreadable":
                 return {"error": problem or row.get("detail") or "no recording yet", "states": {}, "pending": 0}
             part_ids = list(traj.header.part_ids)

@@ -365,6 +365,25 @@ def ensure_final(run_dir: Path, facts: dict[str, Any], task_id: str) -> str | No
     return "runner: last state recorded in trajectory.jsonl"
 
 
+def recorded_episode(run_dir: Path, task_id: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """What the server recorded in ``run_dir``, for run.json: ``(facts, extra)``, the
+    :func:`trajectory_facts` and the ``extra`` entries every runner writes from them (call counts,
+    tool errors, edits, how the server ended, episode time, where final.json came from, and a
+    trajectory problem where there is one), final.json made sure of (:func:`ensure_final`)."""
+    facts = trajectory_facts(run_dir)
+    extra: dict[str, Any] = {
+        "call_counts": facts.get("call_counts", {}),
+        "tool_errors": facts.get("tool_errors"),
+        "edits": facts.get("edits"),
+        "server_end": facts.get("server_end"),
+        "episode_seconds": facts.get("episode_seconds"),
+        "final_source": ensure_final(run_dir, facts, task_id),
+    }
+    if "trajectory_problem" in facts:
+        extra["trajectory_problem"] = facts["trajectory_problem"]
+    return facts, extra
+
+
 def new_worker(env: dict[str, str]) -> WorkerProcess:
     """A worker process for baseline-agent episodes. Its own stderr (anything before the first
     episode redirects it to that episode's ``agent.log``) goes to a temporary file that is
@@ -439,24 +458,14 @@ def _run_agent_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str], worke
         error = f"the agent process died (exit code {sup.returncode}) without a result" + (f":\n{tail}" if tail else "")
     else:
         ended, error = result.ended, result.error
-    facts = trajectory_facts(ep.run_dir)
-    final_source = ensure_final(ep.run_dir, facts, ep.task_id)
-    extra.update(
-        {
-            "call_counts": facts.get("call_counts", result.call_counts if result else {}),
-            "client_call_counts": result.call_counts if result else {},
-            "tool_errors": facts.get("tool_errors"),
-            "edits": facts.get("edits"),
-            "server_end": facts.get("server_end"),
-            "episode_seconds": facts.get("episode_seconds"),
-            "final_source": final_source,
-            "exit_code": sup.returncode,
-        }
-    )
+    facts, recorded = recorded_episode(ep.run_dir, ep.task_id)
+    if "call_counts" not in facts and result is not None:  # no recording: what the client counted
+        recorded["call_counts"] = result.call_counts
+    extra.update(recorded)
+    extra["client_call_counts"] = result.call_counts if result else {}
+    extra["exit_code"] = sup.returncode
     if result is not None:
         extra["agent_stats"] = result.stats
-    if "trajectory_problem" in facts:
-        extra["trajectory_problem"] = facts["trajectory_problem"]
     return RunInfo(
         system=cfg.system,
         task_id=ep.task_id,
@@ -502,8 +511,7 @@ def _run_harness_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str]) -> 
     )
     usage = adapter.parse(ep.run_dir / adapter.transcript_name, opts)
     shutil.rmtree(prepared.cwd, ignore_errors=True)
-    facts = trajectory_facts(ep.run_dir)
-    final_source = ensure_final(ep.run_dir, facts, ep.task_id)
+    facts, recorded = recorded_episode(ep.run_dir, ep.task_id)
     ended: RunEnded
     error: str | None
     if sup.timed_out:
@@ -520,12 +528,7 @@ def _run_harness_episode(cfg: BatchConfig, ep: Episode, env: dict[str, str]) -> 
             error += f":\n{tail}" if tail else ""
     extra: dict[str, Any] = {
         "harness_command": prepared.display_command,
-        "call_counts": facts.get("call_counts", {}),
-        "tool_errors": facts.get("tool_errors"),
-        "edits": facts.get("edits"),
-        "server_end": facts.get("server_end"),
-        "episode_seconds": facts.get("episode_seconds"),
-        "final_source": final_source,
+        **recorded,
         "exit_code": sup.returncode,
         "limit_seconds": cfg.limit_seconds,
         "transcript": adapter.transcript_name,

@@ -20,25 +20,13 @@ from PIL import Image
 from aw.cli.prepare import main as aw_prepare
 from aw.formats import read_manifest, read_targets, read_task, write_manifest, write_targets, write_task
 from aw.prompt import task_prompt
+from aw_server.tools import TOOL_NAMES
 
 NONE_TASK = "fantastic_breaks-cylinder_000-none"
 MANUAL_TASK = "fantastic_breaks-cylinder_000-manual"
 PAGE_COLOURS = [(220, 30, 30), (30, 30, 220)]  # the manual's two pages, in order
 USAGE = {"input_tokens": 1000, "output_tokens": 20, "total_tokens": 1020}  # every scripted output's
-SERVER_TOOLS = {
-    "list_objects",
-    "get_object",
-    "get_scene",
-    "get_state",
-    "translate_objects",
-    "rotate_objects",
-    "set_object_pose",
-    "group_objects",
-    "ungroup_objects",
-    "capture_scene",
-    "move_camera",
-    "start_episode",
-}
+SERVER_TOOLS = frozenset(TOOL_NAMES)  # what aw-serve offers (tests/aw_server pins the list itself)
 
 
 def make_suite(root: Path) -> Path:
