@@ -216,7 +216,7 @@ class Sweep:
         if proc.returncode == 0:
             outcome = "finished before the signal" if not sent else "finished (the signal came after the outputs)"
             ok = complete
-        elif proc.returncode == 128 + sig:
+        elif proc.returncode in (128 + sig, -sig):  # -sig: ended by the signal itself (the shell's 128 + sig)
             if after == before:
                 outcome, ok = "stopped, outputs byte-identical", True
             else:
