@@ -53,7 +53,9 @@ def refine(request: RefineRequest) -> np.ndarray:
         raise ValueError(f"option mode must be local or global, got {mode!r}")
     rng = np.random.default_rng(request.seed)
     size = max(float(np.ptp(np.asarray(v), axis=0).max()) for v, _ in request.meshes)
-    fragments = [fragment(np.asarray(v, dtype=np.float64), np.asarray(f), size, rng) for v, f in request.meshes]
+    fragments = [
+        fragment(np.asarray(v, dtype=np.float64), np.asarray(f), size, rng, keep_whole=n > 2) for v, f in request.meshes
+    ]
     anchor = request.anchor
     init = np.asarray(request.initial_poses, dtype=np.float64)
     ra, ta = rotation_of(init[anchor, 3:]), init[anchor, :3]

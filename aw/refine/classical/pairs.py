@@ -55,7 +55,6 @@ AREA_RATIO = {True: 1.6, False: 2.5}  # the largest area ratio of two regions th
 EXTENT_RATIO = 1.4  # the largest ratio of two rough regions' principal extents
 ROUGH_PAIRS = 8  # rough pairs searched per pair of fragments, the most alike first
 PARTIAL_ROUGH_PAIRS = 3  # the same with three or more fragments (each search is dearer)
-SAG_MISMATCH = 0.5  # of the larger sag: how far two rough regions' sags may fail to cancel
 SAME_DEG = 5.0
 OUTLINE_SHARE = 0.2  # of eps: the outline misfit that halves a planar fit's score
 PARTIAL_RATIO = 1.3  # two regions' area ratio above which one may meet only part of the other
@@ -63,7 +62,7 @@ PARTIAL_AREA_RATIO = 5.0  # the largest area ratio of two regions that may meet,
 PARTIAL_CENTRES = 2
 POLISH = 0.3  # of eps: the pairing radius that local refinement ends with
 PARTIAL_STEPS = 12  # turns tried at each of those centres
-SAG_FLOOR = 0.01  # of the object's size: sags this small always cancel (near-flat breaks)
+SAG_UNIT = 0.01  # of the size: sags failing to cancel by this much rank a pair as far down as areas e times apart
 
 
 @dataclass
@@ -81,16 +80,19 @@ class Fit:
         return Fit(self.rot.T, -self.rot.T @ self.shift, self.score, regions)
 
 
-def score_fit(a: Fragment, b: Fragment, ra: Region, rb: Region, rot, shift, tol: Tolerance, fine: bool) -> float:
+def score_fit(
+    a: Fragment, b: Fragment, ra: Region, rb: Region, rot, shift, tol: Tolerance, fine: bool, partial: bool = False
+) -> float:
     """The score of ``b`` placed by ``(rot, shift)`` against ``a`` on the regions ``ra``, ``rb``
-    (``fine``: on the dense samples, else on the coarse ones)."""
+    (``fine``: on the dense samples, else on the coarse ones; ``partial``: as in
+    :func:`register_pair`)."""
     sa, sb = (ra.fine, rb.fine) if fine else (ra.coarse, rb.coarse)
     move = (rot, shift)
     back = inverse(move)
     touching = min(contact_share(sa, sb, tol, back) * ra.area, contact_share(sb, sa, tol, move) * rb.area)
     value = touching / min(a.mesh.area, b.mesh.area)
     if ra.planar and rb.planar:
-        value *= _outline_fit(ra, rb, rot, shift, tol)
+        value *= _outline_fit(ra, rb, rot, shift, tol, partial)
     elif not ra.planar and not rb.planar:
         value *= RUGGED_FACTOR
     body_a, body_b = (a.body, b.body) if fine else (a.coarse_body, b.coarse_body)
@@ -98,21 +100,21 @@ def score_fit(a: Fragment, b: Fragment, ra: Region, rb: Region, rot, shift, tol:
     return value - 2.0 * sunk
 
 
-def _outline_fit(ra: Region, rb: Region, rot: np.ndarray, shift: np.ndarray, tol: Tolerance) -> float:
+def _outline_fit(ra: Region, rb: Region, rot: np.ndarray, shift: np.ndarray, tol: Tolerance, partial: bool) -> float:
     """How well two planar outlines meet, in [0, 1]: ``1 / (1 + (misfit / (OUTLINE_SHARE * eps))^2)``
     (the misfit: root mean square distance of the outlines) times the square of the mean
-    agreement of the walls they meet (the absolute cosine of the normals across each outline
-    sample and its nearest in the other): at a cut the walls run on from one fragment into the
-    other (or, inside a break, face each other); a half-turned face of the same outline leaves a
-    crease. Faces of unlike areas (a break split between two
-    fragments) are judged on the part of the smaller outline that lies on the larger one, the
-    score scaled by that part's share."""
+    agreement of the walls they meet (the cosine of the normals across each outline sample and
+    its nearest in the other, at least 0): at a cut the walls run on from one fragment into the
+    other; a half-turned face of the same outline leaves a crease. With ``partial`` (three or
+    more fragments), faces of unlike areas (a break split between two fragments) are judged on
+    the part of the smaller outline that lies on the larger one, the score scaled by that part's
+    share."""
     moved = rb.outline @ rot.T + shift
-    if not _partial(ra, rb):
+    if not (partial and _partial(ra, rb)):
         misfit = 1.0 / (1.0 + (chamfer_rms(ra.outline, moved) / (OUTLINE_SHARE * tol.eps)) ** 2)
         j = cKDTree(moved).query(ra.outline)[1]
-        walls = float(np.mean(np.abs(np.einsum("ij,ij->i", ra.rim_normals, rb.rim_normals[j] @ rot.T))))
-        return misfit * walls**2
+        walls = float(np.mean(np.einsum("ij,ij->i", ra.rim_normals, rb.rim_normals[j] @ rot.T)))
+        return misfit * max(0.0, walls) ** 2
     small, small_walls, big, big_walls = (ra.outline, ra.rim_normals, moved, rb.rim_normals @ rot.T)
     if rb.area < ra.area:
         small, small_walls, big, big_walls = big, big_walls, small, small_walls
@@ -122,8 +124,8 @@ def _outline_fit(ra: Region, rb: Region, rot: np.ndarray, shift: np.ndarray, tol
     if not on.any():
         return 0.0
     misfit = 1.0 / (1.0 + (np.sqrt(np.mean(d[on] ** 2)) / (OUTLINE_SHARE * tol.eps)) ** 2)
-    walls = float(np.mean(np.abs(np.einsum("ij,ij->i", small_walls[on], big_walls[j[on]]))))
-    return float(on.mean()) * misfit * walls**2
+    walls = float(np.mean(np.einsum("ij,ij->i", small_walls[on], big_walls[j[on]])))
+    return float(on.mean()) * misfit * max(0.0, walls) ** 2
 
 
 def _partial(ra: Region, rb: Region) -> bool:
@@ -132,9 +134,11 @@ def _partial(ra: Region, rb: Region) -> bool:
 
 def _mismatch(ra: Region, rb: Region, size: float, partial: bool) -> float | None:
     """How unlike two regions are for meeting (0: alike), or ``None`` when they cannot meet: areas
-    (and, for rough regions, principal extents) too different, or two bulges (outer surfaces:
-    a break's bulge is its match's hollow). ``partial``: with three or more fragments a break
-    can meet part of another, so areas may differ more and extents are not compared."""
+    (and, for rough regions, principal extents) too different. Sags that fail to cancel (a
+    break's bulge is its match's hollow) rank a pair lower but never rule it out: one region may
+    hold more of the break than its match, and a wavy break's sag is poorly defined.
+    ``partial``: with three or more fragments a break can meet part of another, so areas may
+    differ more and extents are not compared."""
     planar = ra.planar and rb.planar
     area = np.log(max(ra.area, rb.area) / min(ra.area, rb.area))
     if area > np.log(PARTIAL_AREA_RATIO if partial else AREA_RATIO[planar]):
@@ -146,10 +150,8 @@ def _mismatch(ra: Region, rb: Region, size: float, partial: bool) -> float | Non
     )
     if not partial and extents.max() > np.log(EXTENT_RATIO):
         return None
-    sag = abs(ra.sag + rb.sag)
-    if sag > max(SAG_MISMATCH * max(abs(ra.sag), abs(rb.sag)), SAG_FLOOR * size):
-        return None
-    return float(area + (0.0 if partial else extents.sum()) + sag / (SAG_FLOOR * size))
+    sag = abs(ra.sag + rb.sag) / (SAG_UNIT * size)
+    return float(area + (0.0 if partial else extents.sum()) + sag)
 
 
 def register_pair(a: Fragment, b: Fragment, partial: bool = False) -> list[Fit]:
@@ -168,8 +170,9 @@ def register_pair(a: Fragment, b: Fragment, partial: bool = False) -> list[Fit]:
     # every planar pair (cheap), and the most alike rough pairs
     for _, ia, ib in planar + sorted(rough)[: PARTIAL_ROUGH_PAIRS if partial else ROUGH_PAIRS]:
         ra, rb = a.regions[ia], b.regions[ib]
-        for rot, shift in _starts(ra, rb, tol, size):
-            found.append((score_fit(a, b, ra, rb, rot, shift, tol, fine=False), len(found), ia, ib, rot, shift))
+        for rot, shift in _starts(ra, rb, tol, size, partial):
+            score = score_fit(a, b, ra, rb, rot, shift, tol, fine=False, partial=partial)
+            found.append((score, len(found), ia, ib, rot, shift))
     found.sort(key=lambda x: (-x[0], x[1]))
     chosen: list[tuple[int, int, np.ndarray, np.ndarray]] = []
     for _, _, ia, ib, rot, shift in found:  # distinct starts only: one basin refined once
@@ -178,19 +181,21 @@ def register_pair(a: Fragment, b: Fragment, partial: bool = False) -> list[Fit]:
         if len(chosen) == FINE_STARTS:
             break
     fits: list[Fit] = []
-    for fit in sorted((_fine(a, b, ia, ib, rot, shift, tol) for ia, ib, rot, shift in chosen), key=lambda f: -f.score):
+    refined = (_fine(a, b, ia, ib, rot, shift, tol, partial) for ia, ib, rot, shift in chosen)
+    for fit in sorted(refined, key=lambda f: -f.score):
         if not any(_same(fit.rot, fit.shift, f.rot, f.shift, tol.eps) for f in fits):
             fits.append(fit)
     return fits
 
 
-def _starts(ra: Region, rb: Region, tol: Tolerance, size: float) -> list[tuple[np.ndarray, np.ndarray]]:
+def _starts(ra: Region, rb: Region, tol: Tolerance, size: float, partial: bool) -> list[tuple[np.ndarray, np.ndarray]]:
     """Coarse placements of region ``rb`` against ``ra``: outlines laid on each other (two
-    planar regions; on part of the larger outline when the areas differ), else turns about the
-    facing normals, each refined on the coarse samples; when the areas differ, the smaller
-    region's centre also goes to ``PARTIAL_CENTRES`` spread points of the larger region."""
+    planar regions), else turns about the facing normals, each refined on the coarse samples.
+    With ``partial``, when the areas differ, a planar outline is laid on part of the larger one
+    and a rough region's centre also goes to ``PARTIAL_CENTRES`` spread points of the larger."""
+    partial = partial and _partial(ra, rb)
     if ra.planar and rb.planar:
-        if _partial(ra, rb):
+        if partial:
             return partial_placements(
                 rb.outline, ra.outline, rb.centroid, ra.centroid, rb.normal, ra.normal, OUTLINE_SHARE * tol.eps
             )
@@ -199,7 +204,7 @@ def _starts(ra: Region, rb: Region, tol: Tolerance, size: float) -> list[tuple[n
     face = facing(rb.normal, ra.normal)
     centre_b = rb.coarse.points.mean(0)
     centres = [ra.coarse.points.mean(0)]
-    if ra.area > PARTIAL_RATIO * rb.area:
+    if partial and ra.area > rb.area:
         centres += list(_spread(ra.coarse.points, PARTIAL_CENTRES))
     out = []
     for k, centre in enumerate(centres):
@@ -208,7 +213,7 @@ def _starts(ra: Region, rb: Region, tol: Tolerance, size: float) -> list[tuple[n
             rot = rotvec_matrix(angle * ra.normal) @ face
             shift = centre - rot @ centre_b
             out.append(contact_icp(rb.coarse, ra.coarse, rot, shift, 0.5 * size, tol.eps, COARSE_ITERATIONS))
-    if rb.area > PARTIAL_RATIO * ra.area:  # the smaller region is the anchor's: move the other's spread points onto it
+    if partial and rb.area > ra.area:  # the smaller region is the anchor's: move the other's spread points onto it
         for centre in _spread(rb.coarse.points, PARTIAL_CENTRES):
             for angle in np.arange(PARTIAL_STEPS) * 2 * np.pi / PARTIAL_STEPS:
                 rot = rotvec_matrix(angle * ra.normal) @ face
@@ -235,16 +240,16 @@ def _same(rot, shift, rot2, shift2, eps: float) -> bool:
     return bool(cos > np.cos(np.radians(SAME_DEG)) and np.linalg.norm(shift - shift2) < eps)
 
 
-def _fine(a: Fragment, b: Fragment, ia: int, ib: int, rot, shift, tol: Tolerance) -> Fit:
+def _fine(a: Fragment, b: Fragment, ia: int, ib: int, rot, shift, tol: Tolerance, partial: bool = False) -> Fit:
     """A fit refined on the regions' dense samples."""
     ra, rb = a.regions[ia], b.regions[ib]
-    if ra.planar and rb.planar and _partial(ra, rb):
+    if ra.planar and rb.planar and partial and _partial(ra, rb):
         pass  # the trimmed outline ICP of partial_placements is as fine as it gets
     elif ra.planar and rb.planar:
         rot, shift = symmetric_icp(rb.outline, ra.outline, rot, shift, max(a.size, b.size))
     else:
         rot, shift = contact_icp(rb.fine, ra.fine, rot, shift, 4 * tol.eps, tol.eps)
-    return Fit(rot, shift, score_fit(a, b, ra, rb, rot, shift, tol, fine=True), (ia, ib))
+    return Fit(rot, shift, score_fit(a, b, ra, rb, rot, shift, tol, fine=True, partial=partial), (ia, ib))
 
 
 def _union(fragment: Fragment) -> Cloud:

@@ -195,8 +195,7 @@ def _planar_parts(mesh: trimesh.Trimesh, normals: np.ndarray, faces: np.ndarray,
     """The large planar parts of a smooth region that is not planar as a whole: where a break
     meets the object's surface at a shallow angle the two run into one region, and a planar
     part of it (faces within ``PLANE_DEG`` of a common normal and within ``flat`` of one plane)
-    may be a cut face of its own; the region stays a candidate too (a rough break with flat
-    stretches is one break)."""
+    may be a cut face of its own."""
     out = []
     rest = faces
     area = mesh.area_faces
@@ -231,8 +230,25 @@ def _noise(body: Cloud, k: int = 12) -> float:
     return float(np.median(np.abs(np.einsum("ni,ni->n", body.points - nb.mean(axis=1), normal))))
 
 
-def fragment(vertices: np.ndarray, faces: np.ndarray, size: float, rng: np.random.Generator) -> Fragment:
-    """The fragment of a part mesh ``(vertices (v, 3), faces (f, 3))``; ``size``: the object's."""
+def _candidates(mesh: trimesh.Trimesh, normals: np.ndarray, faces: np.ndarray, flat: float, keep_whole: bool):
+    """A smooth region's candidate contacts: its planar parts (:func:`_planar_parts`) and, with
+    ``keep_whole``, the region itself as well (with three or more fragments a rough break with
+    flat stretches is still one break to some neighbour); else the rest of it, split into its
+    connected pieces (or the region whole when it has no planar part)."""
+    planar = _planar_parts(mesh, normals, faces, flat)
+    if keep_whole:
+        return [faces, *planar]
+    if not planar:
+        return [faces]
+    return planar + _components(mesh, np.setdiff1d(faces, np.concatenate(planar)))
+
+
+def fragment(
+    vertices: np.ndarray, faces: np.ndarray, size: float, rng: np.random.Generator, keep_whole: bool = False
+) -> Fragment:
+    """The fragment of a part mesh ``(vertices (v, 3), faces (f, 3))``; ``size``: the object's;
+    ``keep_whole``: smooth regions stay candidates beside their planar parts (for objects of
+    three or more fragments, see :func:`_candidates`)."""
     mesh = trimesh.Trimesh(vertices, faces, process=True)  # merged vertices: adjacency
     normals = filtered_normals(mesh)
     everything = np.arange(len(mesh.faces))
@@ -242,7 +258,7 @@ def fragment(vertices: np.ndarray, faces: np.ndarray, size: float, rng: np.rando
     for f in segment_regions(mesh, normals):
         if mesh.area_faces[f].sum() < MIN_REGION_SHARE * mesh.area:
             break
-        parts += [f, *_planar_parts(mesh, normals, f, PLANAR_RMS * size + 3.0 * noise)]
+        parts += _candidates(mesh, normals, f, PLANAR_RMS * size + 3.0 * noise, keep_whole)
     parts.sort(key=lambda f: -mesh.area_faces[f].sum())
     regions: list[Region] = []
     for f in parts:
