@@ -110,7 +110,7 @@ def _outline_fit(ra: Region, rb: Region, rot: np.ndarray, shift: np.ndarray, tol
     the part of the smaller outline that lies on the larger one, the score scaled by that part's
     share."""
     moved = rb.outline @ rot.T + shift
-    if not (partial and _partial(ra, rb)):
+    if not _meets_part(ra, rb, partial):
         misfit = 1.0 / (1.0 + (chamfer_rms(ra.outline, moved) / (OUTLINE_SHARE * tol.eps)) ** 2)
         j = cKDTree(moved).query(ra.outline)[1]
         walls = float(np.mean(np.einsum("ij,ij->i", ra.rim_normals, rb.rim_normals[j] @ rot.T)))
@@ -128,8 +128,10 @@ def _outline_fit(ra: Region, rb: Region, rot: np.ndarray, shift: np.ndarray, tol
     return float(on.mean()) * misfit * max(0.0, walls) ** 2
 
 
-def _partial(ra: Region, rb: Region) -> bool:
-    return max(ra.area, rb.area) > PARTIAL_RATIO * min(ra.area, rb.area)
+def _meets_part(ra: Region, rb: Region, partial: bool) -> bool:
+    """Whether, with ``partial`` (three or more fragments), one region may meet only part of the
+    other: their areas differ by more than ``PARTIAL_RATIO``."""
+    return partial and max(ra.area, rb.area) > PARTIAL_RATIO * min(ra.area, rb.area)
 
 
 def _mismatch(ra: Region, rb: Region, size: float, partial: bool) -> float | None:
@@ -193,7 +195,7 @@ def _starts(ra: Region, rb: Region, tol: Tolerance, size: float, partial: bool) 
     planar regions), else turns about the facing normals, each refined on the coarse samples.
     With ``partial``, when the areas differ, a planar outline is laid on part of the larger one
     and a rough region's centre also goes to ``PARTIAL_CENTRES`` spread points of the larger."""
-    partial = partial and _partial(ra, rb)
+    partial = _meets_part(ra, rb, partial)
     if ra.planar and rb.planar:
         if partial:
             return partial_placements(
@@ -243,7 +245,7 @@ def _same(rot, shift, rot2, shift2, eps: float) -> bool:
 def _fine(a: Fragment, b: Fragment, ia: int, ib: int, rot, shift, tol: Tolerance, partial: bool = False) -> Fit:
     """A fit refined on the regions' dense samples."""
     ra, rb = a.regions[ia], b.regions[ib]
-    if ra.planar and rb.planar and partial and _partial(ra, rb):
+    if ra.planar and rb.planar and _meets_part(ra, rb, partial):
         pass  # the trimmed outline ICP of partial_placements is as fine as it gets
     elif ra.planar and rb.planar:
         rot, shift = symmetric_icp(rb.outline, ra.outline, rot, shift, max(a.size, b.size))
