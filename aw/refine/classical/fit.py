@@ -204,9 +204,12 @@ def partial_placements(
     for angle in np.radians(np.arange(0.0, 360.0, INPLANE_STEP_DEG)):
         diff = (flat_big[None, :, :] - (flat_small @ _rot2(angle))[:, None, :]).reshape(-1, 2)
         bins = np.floor(diff / cell).astype(np.int64)
-        keys, inverse, counts = np.unique(bins, axis=0, return_inverse=True, return_counts=True)
+        low = bins.min(0)
+        # one integer per bin, in the bins' lexicographic order: a 1-D unique is far cheaper than a 2-D one
+        keys = (bins[:, 0] - low[0]) * (bins[:, 1].max() - low[1] + 1) + (bins[:, 1] - low[1])
+        found, counts = np.unique(keys, return_counts=True)
         top = int(np.argmax(counts))
-        votes.append((int(counts[top]), angle, diff[inverse.ravel() == top].mean(0)))
+        votes.append((int(counts[top]), angle, diff[keys == found[top]].mean(0)))
     votes.sort(key=lambda v: -v[0])
     out = []
     for _, angle, shift in votes[:keep]:

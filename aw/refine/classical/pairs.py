@@ -5,7 +5,8 @@ For every pair of candidate regions (one of each fragment) of compatible areas a
 
 - two planar regions (planar cuts): normals opposed, centroids together, the in-plane turns whose
   outlines agree best (:func:`fit.inplane_turns`), each refined by the symmetric ICP of the two
-  outlines (the compiled kernel of :mod:`aw.kernels.icp`);
+  outlines (the compiled kernel of :mod:`aw.kernels.icp`); with three or more fragments, also
+  laid on part of each other (a cut face split between two fragments) by a trimmed outline ICP;
 - otherwise (rough breaks): the other region's mean normal against the anchor's at
   ``IN_PLANE_STEPS`` turns about it, each refined by ICP restricted to the two regions.
 
@@ -106,15 +107,16 @@ def _outline_fit(ra: Region, rb: Region, rot: np.ndarray, shift: np.ndarray, tol
     agreement of the walls they meet (the cosine of the normals across each outline sample and
     its nearest in the other, at least 0): at a cut the walls run on from one fragment into the
     other; a half-turned face of the same outline leaves a crease. With ``partial`` (three or
-    more fragments), faces of unlike areas (a break split between two fragments) are judged on
-    the part of the smaller outline that lies on the larger one, the score scaled by that part's
-    share."""
+    more fragments), a cut face may hold parts of two fragments' faces, so the outlines are also
+    judged on the part of the smaller one that lies on the larger, the score scaled by that
+    part's share, and the better of the two judgements counts."""
     moved = rb.outline @ rot.T + shift
-    if not _meets_part(ra, rb, partial):
-        misfit = 1.0 / (1.0 + (chamfer_rms(ra.outline, moved) / (OUTLINE_SHARE * tol.eps)) ** 2)
-        j = cKDTree(moved).query(ra.outline)[1]
-        walls = float(np.mean(np.einsum("ij,ij->i", ra.rim_normals, rb.rim_normals[j] @ rot.T)))
-        return misfit * max(0.0, walls) ** 2
+    misfit = 1.0 / (1.0 + (chamfer_rms(ra.outline, moved) / (OUTLINE_SHARE * tol.eps)) ** 2)
+    j = cKDTree(moved).query(ra.outline)[1]
+    walls = float(np.mean(np.einsum("ij,ij->i", ra.rim_normals, rb.rim_normals[j] @ rot.T)))
+    whole = misfit * max(0.0, walls) ** 2
+    if not partial:
+        return whole
     small, small_walls, big, big_walls = (ra.outline, ra.rim_normals, moved, rb.rim_normals @ rot.T)
     if rb.area < ra.area:
         small, small_walls, big, big_walls = big, big_walls, small, small_walls
@@ -122,10 +124,10 @@ def _outline_fit(ra: Region, rb: Region, rot: np.ndarray, shift: np.ndarray, tol
     d, j = np.asarray(dist), np.asarray(found)
     on = d < OUTLINE_SHARE * tol.eps * 2
     if not on.any():
-        return 0.0
+        return whole
     misfit = 1.0 / (1.0 + (np.sqrt(np.mean(d[on] ** 2)) / (OUTLINE_SHARE * tol.eps)) ** 2)
     walls = float(np.mean(np.einsum("ij,ij->i", small_walls[on], big_walls[j[on]])))
-    return float(on.mean()) * misfit * max(0.0, walls) ** 2
+    return max(whole, float(on.mean()) * misfit * max(0.0, walls) ** 2)
 
 
 def _meets_part(ra: Region, rb: Region, partial: bool) -> bool:
@@ -193,16 +195,20 @@ def register_pair(a: Fragment, b: Fragment, partial: bool = False) -> list[Fit]:
 def _starts(ra: Region, rb: Region, tol: Tolerance, size: float, partial: bool) -> list[tuple[np.ndarray, np.ndarray]]:
     """Coarse placements of region ``rb`` against ``ra``: outlines laid on each other (two
     planar regions), else turns about the facing normals, each refined on the coarse samples.
-    With ``partial``, when the areas differ, a planar outline is laid on part of the larger one
-    and a rough region's centre also goes to ``PARTIAL_CENTRES`` spread points of the larger."""
-    partial = _meets_part(ra, rb, partial)
+    With ``partial``, a planar outline is also laid on part of the other (and only so when their
+    areas differ), and, when the areas differ, a rough region's centre also goes to
+    ``PARTIAL_CENTRES`` spread points of the larger."""
     if ra.planar and rb.planar:
-        if partial:
-            return partial_placements(
+        out = []
+        if not _meets_part(ra, rb, partial):
+            turns = inplane_turns(rb.outline, ra.outline, rb.centroid, ra.centroid, rb.normal, ra.normal)
+            out += [symmetric_icp(rb.outline, ra.outline, rot, shift, size) for rot, shift in turns]
+        if partial:  # two faces of like areas may still each hold a part the other lacks
+            out += partial_placements(
                 rb.outline, ra.outline, rb.centroid, ra.centroid, rb.normal, ra.normal, OUTLINE_SHARE * tol.eps
             )
-        turns = inplane_turns(rb.outline, ra.outline, rb.centroid, ra.centroid, rb.normal, ra.normal)
-        return [symmetric_icp(rb.outline, ra.outline, rot, shift, size) for rot, shift in turns]
+        return out
+    partial = _meets_part(ra, rb, partial)
     face = facing(rb.normal, ra.normal)
     centre_b = rb.coarse.points.mean(0)
     centres = [ra.coarse.points.mean(0)]
@@ -245,9 +251,12 @@ def _same(rot, shift, rot2, shift2, eps: float) -> bool:
 def _fine(a: Fragment, b: Fragment, ia: int, ib: int, rot, shift, tol: Tolerance, partial: bool = False) -> Fit:
     """A fit refined on the regions' dense samples."""
     ra, rb = a.regions[ia], b.regions[ib]
-    if ra.planar and rb.planar and _meets_part(ra, rb, partial):
-        pass  # the trimmed outline ICP of partial_placements is as fine as it gets
-    elif ra.planar and rb.planar:
+    if ra.planar and rb.planar and partial:
+        # as placed (a trimmed outline ICP is as fine as a partial placement gets) or the whole outlines' ICP
+        placements = [(rot, shift), symmetric_icp(rb.outline, ra.outline, rot, shift, max(a.size, b.size))]
+        fits = [Fit(r, t, score_fit(a, b, ra, rb, r, t, tol, fine=True, partial=True), (ia, ib)) for r, t in placements]
+        return max(fits, key=lambda f: f.score)
+    if ra.planar and rb.planar:
         rot, shift = symmetric_icp(rb.outline, ra.outline, rot, shift, max(a.size, b.size))
     else:
         rot, shift = contact_icp(rb.fine, ra.fine, rot, shift, 4 * tol.eps, tol.eps)

@@ -13,6 +13,8 @@ from scipy.spatial.transform import Rotation
 from aw.formats import read_targets, read_task
 from aw.prepare.official_protocol import pose_of, rotation_of
 from aw.refine.classical import refine
+from aw.refine.classical.contact import tolerance
+from aw.refine.classical.pairs import register_pair, score_fit
 from aw.refine.classical.surface import fragment
 from aw.refine.runs import build_request
 from aw_eval.fracture import fracture_metrics_from_samples
@@ -73,6 +75,36 @@ def test_a_three_piece_break_has_every_piece_placed(break_suite):
     assert len(request.part_ids) == 3
     m = _metrics(request, refine(request), target)
     assert m.pa == 1.0 and m.part_re.max() < 5.0, m.part_re
+
+
+def test_a_cut_face_split_by_a_later_cut_is_matched_on_the_part_both_fragments_share():
+    """Two pieces of a 5-piece vase (``breaks_pieces/11``) meet on a planar cut whose faces have
+    like areas, but a later cut took part of each: the outlines agree only where they both run.
+    Laid whole on each other they were matched turned by 121 degrees; the pair's best fit must now
+    be the cut itself (the fragments are given as cut, so the identity)."""
+    meshes = fragments("breaks_pieces/11", 0)
+    rng = np.random.default_rng(0)
+    frags = [fragment(np.asarray(m.vertices), np.asarray(m.faces), 1.0, rng, keep_whole=True) for m in meshes]
+    best = register_pair(frags[0], frags[2], partial=True)[0]
+    turned = np.degrees(Rotation.from_matrix(best.rot).magnitude())
+    assert turned < 10.0 and np.linalg.norm(best.shift) < 0.02, (turned, best.shift)
+
+
+def test_like_planar_faces_that_each_hold_part_of_the_other_are_scored_on_the_part_they_share():
+    """Two unit cubes, one on the other, shifted by 0.3 along x: the top face of the lower and the
+    bottom face of the upper have like areas but share only 70 % of each. With three or more
+    fragments (a cut face split between two pieces), the fit scores the contact (0.7 of a cube's
+    area of 6) times the share of the outline on the other face (the two sides along x, 2 x 0.7 of
+    4) times how closely it lies: about 0.04; the whole outlines do not meet (0)."""
+    rng = np.random.default_rng(0)
+    box = trimesh.creation.box(extents=[1.0, 1.0, 1.0])
+    lower, upper = (fragment(np.asarray(box.vertices), np.asarray(box.faces), 2.0, rng, True) for _ in range(2))
+    top = next(r for r in lower.regions if r.normal[2] > 0.9)
+    bottom = next(r for r in upper.regions if r.normal[2] < -0.9)
+    tol, shift = tolerance(lower, upper), np.array([0.3, 0.0, 1.0])
+    whole = score_fit(lower, upper, top, bottom, np.eye(3), shift, tol, fine=True, partial=False)
+    part = score_fit(lower, upper, top, bottom, np.eye(3), shift, tol, fine=True, partial=True)
+    assert whole < 1e-3 and 0.02 < part < 0.041, (whole, part)
 
 
 def _near(request, target, degrees, shift):
