@@ -95,7 +95,7 @@ def test_like_planar_faces_that_each_hold_part_of_the_other_are_scored_on_the_pa
     bottom face of the upper have like areas but share only 70 % of each. With three or more
     fragments (a cut face split between two pieces), the fit scores the contact (0.7 of a cube's
     area of 6) times the share of the outline on the other face (the two sides along x, 2 x 0.7 of
-    4) times how closely it lies: about 0.04; the whole outlines do not meet (0)."""
+    4) times how closely it lies (at most 1): about 0.03; the whole outlines do not meet (0)."""
     rng = np.random.default_rng(0)
     box = trimesh.creation.box(extents=[1.0, 1.0, 1.0])
     lower, upper = (fragment(np.asarray(box.vertices), np.asarray(box.faces), 2.0, rng, True) for _ in range(2))
