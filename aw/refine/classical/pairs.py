@@ -198,9 +198,10 @@ def _starts(ra: Region, rb: Region, tol: Tolerance, size: float, partial: bool) 
     With ``partial``, a planar outline is also laid on part of the other (and only so when their
     areas differ), and, when the areas differ, a rough region's centre also goes to
     ``PARTIAL_CENTRES`` spread points of the larger."""
+    meets_part = _meets_part(ra, rb, partial)
     if ra.planar and rb.planar:
         out = []
-        if not _meets_part(ra, rb, partial):
+        if not meets_part:
             turns = inplane_turns(rb.outline, ra.outline, rb.centroid, ra.centroid, rb.normal, ra.normal)
             out += [symmetric_icp(rb.outline, ra.outline, rot, shift, size) for rot, shift in turns]
         if partial:  # two faces of like areas may still each hold a part the other lacks
@@ -208,11 +209,10 @@ def _starts(ra: Region, rb: Region, tol: Tolerance, size: float, partial: bool) 
                 rb.outline, ra.outline, rb.centroid, ra.centroid, rb.normal, ra.normal, OUTLINE_SHARE * tol.eps
             )
         return out
-    partial = _meets_part(ra, rb, partial)
     face = facing(rb.normal, ra.normal)
     centre_b = rb.coarse.points.mean(0)
     centres = [ra.coarse.points.mean(0)]
-    if partial and ra.area > rb.area:
+    if meets_part and ra.area > rb.area:
         centres += list(_spread(ra.coarse.points, PARTIAL_CENTRES))
     out = []
     for k, centre in enumerate(centres):
@@ -221,7 +221,7 @@ def _starts(ra: Region, rb: Region, tol: Tolerance, size: float, partial: bool) 
             rot = rotvec_matrix(angle * ra.normal) @ face
             shift = centre - rot @ centre_b
             out.append(contact_icp(rb.coarse, ra.coarse, rot, shift, 0.5 * size, tol.eps, COARSE_ITERATIONS))
-    if partial and rb.area > ra.area:  # the smaller region is the anchor's: move the other's spread points onto it
+    if meets_part and rb.area > ra.area:  # the smaller region is the anchor's: move the other's spread points onto it
         for centre in _spread(rb.coarse.points, PARTIAL_CENTRES):
             for angle in np.arange(PARTIAL_STEPS) * 2 * np.pi / PARTIAL_STEPS:
                 rot = rotvec_matrix(angle * ra.normal) @ face
@@ -251,16 +251,14 @@ def _same(rot, shift, rot2, shift2, eps: float) -> bool:
 def _fine(a: Fragment, b: Fragment, ia: int, ib: int, rot, shift, tol: Tolerance, partial: bool = False) -> Fit:
     """A fit refined on the regions' dense samples."""
     ra, rb = a.regions[ia], b.regions[ib]
-    if ra.planar and rb.planar and partial:
-        # as placed (a trimmed outline ICP is as fine as a partial placement gets) or the whole outlines' ICP
-        placements = [(rot, shift), symmetric_icp(rb.outline, ra.outline, rot, shift, max(a.size, b.size))]
-        fits = [Fit(r, t, score_fit(a, b, ra, rb, r, t, tol, fine=True, partial=True), (ia, ib)) for r, t in placements]
-        return max(fits, key=lambda f: f.score)
     if ra.planar and rb.planar:
-        rot, shift = symmetric_icp(rb.outline, ra.outline, rot, shift, max(a.size, b.size))
+        whole = symmetric_icp(rb.outline, ra.outline, rot, shift, max(a.size, b.size))
+        # with partial, the placement as it came may be better: a trimmed outline ICP is as fine as a part gets
+        placements = [(rot, shift), whole] if partial else [whole]
     else:
-        rot, shift = contact_icp(rb.fine, ra.fine, rot, shift, 4 * tol.eps, tol.eps)
-    return Fit(rot, shift, score_fit(a, b, ra, rb, rot, shift, tol, fine=True, partial=partial), (ia, ib))
+        placements = [contact_icp(rb.fine, ra.fine, rot, shift, 4 * tol.eps, tol.eps)]
+    fits = [Fit(r, t, score_fit(a, b, ra, rb, r, t, tol, fine=True, partial=partial), (ia, ib)) for r, t in placements]
+    return max(fits, key=lambda f: f.score)
 
 
 def _union(fragment: Fragment) -> Cloud:
