@@ -6,7 +6,9 @@ they are close to it, never across a sharp rim), so that a scan's noise neither 
 into pieces nor hides the rim round it. The mesh is then split into smooth regions (faces joined
 across edges whose filtered normals bend less than ``SMOOTH_DEG``); a region is a candidate
 contact when it covers at least ``MIN_REGION_SHARE`` of the fragment, and it is planar when a
-plane fits it to within ``PLANAR_RMS`` of the object's size above the noise.
+plane fits it to within ``PLANAR_RMS`` of the object's size above the noise. With three or more
+fragments a region also offers its planar parts and, when it wraps round a thin slice, its two
+sides as candidates of their own (:func:`_candidates`).
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ MAX_REGIONS = 10
 PLANAR_RMS = 2e-3  # of the object's size, above the noise: a flat region
 PLANE_DEG = 8.0  # how far a face's normal may stray from its plane's and still lie on it
 PLANE_SEEDS = 5
+WRAP = 0.5  # a smooth region whose mean normal is shorter than this wraps round: both faces of a thin slice
+SIDE_DEG = 60.0  # how far a face's normal may stray from the slice's and still be on one side of it
 BODY_POINTS = 3000
 REGION_POINTS = 700
 COARSE_POINTS = 250
@@ -230,14 +234,33 @@ def _noise(body: Cloud, k: int = 12) -> float:
     return float(np.median(np.abs(np.einsum("ni,ni->n", body.points - nb.mean(axis=1), normal))))
 
 
+def _sides(mesh: trimesh.Trimesh, normals: np.ndarray, faces: np.ndarray) -> list[np.ndarray]:
+    """The two sides of a smooth region that wraps round (its area-weighted mean normal shorter
+    than ``WRAP``), each split into its connected pieces; ``[]`` for a region that does not wrap.
+    A thin slice whose break meets the object's surface along a rounded rim is one smooth region,
+    both faces and the rim between; its break is one side of it. The sides are the faces whose
+    normals lie within ``SIDE_DEG`` of either direction of the axis the region's normals spread
+    along most (the slice's normal)."""
+    area = mesh.area_faces[faces]
+    n = normals[faces]
+    if np.linalg.norm(np.average(n, axis=0, weights=area)) > WRAP:
+        return []
+    axis = np.linalg.eigh((n * area[:, None]).T @ n)[1][:, -1]
+    along = n @ axis
+    cos = np.cos(np.radians(SIDE_DEG))
+    sides = (faces[along > cos], faces[along < -cos])
+    return [piece for side in sides if len(side) for piece in _components(mesh, side)]
+
+
 def _candidates(mesh: trimesh.Trimesh, normals: np.ndarray, faces: np.ndarray, flat: float, keep_whole: bool):
     """A smooth region's candidate contacts: its planar parts (:func:`_planar_parts`) and, with
-    ``keep_whole``, the region itself as well (with three or more fragments a rough break with
-    flat stretches is still one break to some neighbour); else the rest of it, split into its
-    connected pieces (or the region whole when it has no planar part)."""
+    ``keep_whole``, the region itself and its two sides when it wraps round (:func:`_sides`) as
+    well (with three or more fragments a rough break with flat stretches is still one break to
+    some neighbour); else the rest of it, split into its connected pieces (or the region whole
+    when it has no planar part)."""
     planar = _planar_parts(mesh, normals, faces, flat)
     if keep_whole:
-        return [faces, *planar]
+        return [faces, *planar, *_sides(mesh, normals, faces)]
     if not planar:
         return [faces]
     return planar + _components(mesh, np.setdiff1d(faces, np.concatenate(planar)))

@@ -173,3 +173,21 @@ def test_a_planar_cut_meeting_the_surface_at_a_shallow_angle_is_still_its_own_re
         frag = fragment(np.asarray(mesh.vertices), np.asarray(mesh.faces), 1.0, np.random.default_rng(0))
         planar = [r for r in frag.regions if r.planar]
         assert planar and max(r.area for r in planar) > 0.3 * trimesh.Trimesh(mesh.vertices, mesh.faces).area
+
+
+def test_a_thin_slice_that_is_one_smooth_region_also_offers_its_two_sides():
+    """A flattened sphere (a slice 0.2 thick) bends smoothly everywhere, so it is one smooth
+    region holding both faces; with three or more fragments either face may be the break, so
+    each side (normals within 60 degrees of +z or -z) is a candidate of its own, beside the whole.
+    With two fragments the sides are not offered."""
+    sheet = trimesh.creation.icosphere(subdivisions=4)
+    sheet.apply_scale([0.5, 0.4, 0.1])
+    v, f = np.asarray(sheet.vertices), np.asarray(sheet.faces)
+    frag = fragment(v, f, 1.0, np.random.default_rng(0), keep_whole=True)
+    shares = sorted((round(r.area / frag.mesh.area, 2), round(float(r.normal[2]), 2)) for r in frag.regions)
+    assert shares[-1][0] == 1.0
+    sides = [(share, nz) for share, nz in shares if 0.3 < share < 0.6]
+    assert sorted(np.sign([nz for _, nz in sides])) == [-1, 1]
+    assert all(abs(nz) > 0.95 for _, nz in sides)
+    two = fragment(v, f, 1.0, np.random.default_rng(0))
+    assert not any(0.3 < r.area / two.mesh.area < 0.6 for r in two.regions)
