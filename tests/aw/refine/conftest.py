@@ -19,12 +19,15 @@ def fracture_suite(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def break_suite(tmp_path_factory) -> Path:
-    """Objects of the refiners' break families: two planar cuts, a 3-piece break, and two rough
-    breaks of the seeded fracture block whose sides the segmentation cuts unlike each other."""
+    """Objects of the refiners' break families: two planar cuts, a 3-piece break, a rough break
+    with scan noise, a planar cut with chipped rims, and two rough breaks of the seeded fracture
+    block whose sides the segmentation cuts unlike each other."""
     objects = (
         ("breaks_planar/0", 0),
         ("breaks_planar/2", 0),
         ("breaks_pieces/0", 0),
+        ("breaks_noisy/11", 0),
+        ("breaks_eroded/10", 0),
         ("fantastic_breaks/8", 0),
         ("fantastic_breaks/14", 0),
     )

@@ -69,6 +69,17 @@ def test_a_rough_break_whose_sides_are_segmented_unlike_each_other_is_found(brea
     assert m.pa == 1.0 and m.re < 2.0 and m.te < 0.01, (m.re, m.te, m.pa)
 
 
+@pytest.mark.parametrize("tid", ["frac_breaks_noisy_11_0", "frac_breaks_eroded_10_0"])
+def test_a_noisy_rough_break_and_an_eroded_planar_cut_are_assembled_within_2_degrees(break_suite, tid):
+    """A cylinder's rough break with scan noise on both sides (every vertex moved along its
+    normal), and a blob's planar cut with chips taken out of one side's rim and the rims rounded:
+    the two sides no longer match exactly, and the true contact must still win."""
+    task, target = _task(break_suite, tid)
+    request = build_request(task, break_suite, None)
+    m = _metrics(request, refine(request), target)
+    assert m.pa == 1.0 and m.re < 2.0 and m.te < 0.01, (m.re, m.te, m.pa)
+
+
 def test_a_three_piece_break_has_every_piece_placed(break_suite):
     task, target = _task(break_suite, "frac_breaks_pieces_0_0")
     request = build_request(task, break_suite, None)
