@@ -110,14 +110,12 @@ def _outline_fit(ra: Region, rb: Region, rot: np.ndarray, shift: np.ndarray, tol
     more fragments), a cut face may hold parts of two fragments' faces, so the outlines are also
     judged on the part of the smaller one that lies on the larger, the score scaled by that
     part's share, and the better of the two judgements counts."""
-    moved = rb.outline @ rot.T + shift
-    misfit = 1.0 / (1.0 + (chamfer_rms(ra.outline, moved) / (OUTLINE_SHARE * tol.eps)) ** 2)
+    moved, moved_walls = rb.outline @ rot.T + shift, rb.rim_normals @ rot.T
     j = cKDTree(moved).query(ra.outline)[1]
-    walls = float(np.mean(np.einsum("ij,ij->i", ra.rim_normals, rb.rim_normals[j] @ rot.T)))
-    whole = misfit * max(0.0, walls) ** 2
+    whole = _seam(chamfer_rms(ra.outline, moved), np.einsum("ij,ij->i", ra.rim_normals, moved_walls[j]), tol)
     if not partial:
         return whole
-    small, small_walls, big, big_walls = (ra.outline, ra.rim_normals, moved, rb.rim_normals @ rot.T)
+    small, small_walls, big, big_walls = ra.outline, ra.rim_normals, moved, moved_walls
     if rb.area < ra.area:
         small, small_walls, big, big_walls = big, big_walls, small, small_walls
     dist, found = cKDTree(big).query(small)
@@ -125,9 +123,15 @@ def _outline_fit(ra: Region, rb: Region, rot: np.ndarray, shift: np.ndarray, tol
     on = d < OUTLINE_SHARE * tol.eps * 2
     if not on.any():
         return whole
-    misfit = 1.0 / (1.0 + (np.sqrt(np.mean(d[on] ** 2)) / (OUTLINE_SHARE * tol.eps)) ** 2)
-    walls = float(np.mean(np.einsum("ij,ij->i", small_walls[on], big_walls[j[on]])))
-    return max(whole, float(on.mean()) * misfit * max(0.0, walls) ** 2)
+    walls = np.einsum("ij,ij->i", small_walls[on], big_walls[j[on]])
+    return max(whole, _seam(float(np.sqrt(np.mean(d[on] ** 2))), walls, tol, share=float(on.mean())))
+
+
+def _seam(misfit: float, walls: np.ndarray, tol: Tolerance, share: float = 1.0) -> float:
+    """``share`` times ``1 / (1 + (misfit / (OUTLINE_SHARE * eps))^2)`` times the square of the mean
+    of ``walls (k,)`` (the cosines of the walls met across the outline samples), at least 0."""
+    closeness = 1.0 / (1.0 + (misfit / (OUTLINE_SHARE * tol.eps)) ** 2)
+    return share * closeness * max(0.0, float(np.mean(walls))) ** 2
 
 
 def _meets_part(ra: Region, rb: Region, partial: bool) -> bool:

@@ -295,6 +295,7 @@ def fragment(
         axes = np.linalg.eigh((centred * w[:, None]).T @ centred)[1]
         rms = np.sqrt(np.average((centred @ axes[:, 0]) ** 2, weights=w))
         mean = np.average(normals[f], axis=0, weights=w)
+        normal = mean / max(np.linalg.norm(mean), 1e-12)
         fine = sample(mesh, normals, f, REGION_POINTS, rng)
         spread = fine.points - fine.points.mean(0)
         extents = np.sort(np.ptp(spread @ np.linalg.eigh(spread.T @ spread)[1], axis=0))[::-1]
@@ -304,7 +305,7 @@ def fragment(
             Region(
                 faces=f,
                 area=area,
-                normal=mean / max(np.linalg.norm(mean), 1e-12),
+                normal=normal,
                 centroid=centroid,
                 planar=planar,
                 extents=extents,
@@ -312,7 +313,7 @@ def fragment(
                 coarse=sample(mesh, normals, f, COARSE_POINTS, rng),
                 outline=rim,
                 rim_normals=rim_normals,
-                sag=_sag(fine, mean / max(np.linalg.norm(mean), 1e-12), extents),
+                sag=_sag(fine, normal, extents),
             )
         )
     spacing = float(np.sqrt(mesh.area / BODY_POINTS))
