@@ -13,6 +13,10 @@ the interrupt as that input's failure and go on. So:
 - :func:`check` before anything lasting is written (a cache entry, an output), and
   :func:`deferred` around a commit that must not stop halfway: a signal inside it is recorded and
   raised when the commit is done;
+- a signal that lands in a callback whose exceptions Python cannot raise (a garbage-collector
+  callback such as JAX's, a ``__del__``, a weakref callback) is still recorded; inside
+  :func:`handled` Python's "Exception ignored in" report of it is not printed, and the command
+  stops at its next :func:`check` (or the next exception it classifies);
 - :func:`ignore_in_worker` in worker processes: a terminal's Ctrl-C reaches the whole process
   group, and the parent, not each worker, decides (it ends its workers); workers are started
   inside :func:`blocked_for_children`, so that one signalled while it still imports does not
@@ -25,6 +29,7 @@ The exit status of an interrupted command is ``128 + signal`` (:attr:`Interrupte
 from __future__ import annotations
 
 import signal
+import sys
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -83,6 +88,13 @@ def handled(signals: tuple[int, ...] = SIGNALS) -> Iterator[None]:
         yield
         return
     _requested = None
+    unraisable_hook = sys.unraisablehook
+
+    def quiet_about_interrupts(unraisable: sys.UnraisableHookArgs) -> None:
+        if unraisable.exc_value is None or not _carries_interrupt(unraisable.exc_value):
+            unraisable_hook(unraisable)
+
+    sys.unraisablehook = quiet_about_interrupts
     before = {s: signal.signal(s, _on_signal) for s in signals}
     try:
         yield
@@ -93,14 +105,17 @@ def handled(signals: tuple[int, ...] = SIGNALS) -> Iterator[None]:
                 signal.signal(s, h)
         finally:
             _defer_depth -= 1
+        sys.unraisablehook = unraisable_hook
         _requested = None
 
 
 def is_interrupt(exc: BaseException) -> bool:
     """Whether ``exc`` is, or was raised while handling, an interrupt (a KeyboardInterrupt in its
     cause or context chain, as numba's SystemError carries it), or arrived while one is recorded."""
-    if _requested is not None:
-        return True
+    return _requested is not None or _carries_interrupt(exc)
+
+
+def _carries_interrupt(exc: BaseException) -> bool:
     seen: set[int] = set()
     e: BaseException | None = exc
     while e is not None and id(e) not in seen:
