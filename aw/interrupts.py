@@ -115,24 +115,22 @@ def is_interrupt(exc: BaseException) -> bool:
     return _requested is not None or _carries_interrupt(exc)
 
 
-def _carries_interrupt(exc: BaseException) -> bool:
+def _chain(exc: BaseException) -> Iterator[BaseException]:
+    """``exc``, then what it was raised from or while handling, each exception once."""
     seen: set[int] = set()
     e: BaseException | None = exc
     while e is not None and id(e) not in seen:
-        if isinstance(e, KeyboardInterrupt):
-            return True
         seen.add(id(e))
+        yield e
         e = e.__cause__ or e.__context__
-    return False
+
+
+def _carries_interrupt(exc: BaseException) -> bool:
+    return any(isinstance(e, KeyboardInterrupt) for e in _chain(exc))
 
 
 def _signum_of(exc: BaseException) -> int:
-    e: BaseException | None = exc
-    while e is not None:
-        if isinstance(e, Interrupted):
-            return e.signum
-        e = e.__cause__ or e.__context__
-    return _requested or signal.SIGINT
+    return next((e.signum for e in _chain(exc) if isinstance(e, Interrupted)), _requested or signal.SIGINT)
 
 
 def reraise_if_interrupted(exc: BaseException) -> None:
